@@ -1,0 +1,1 @@
+"""Subcommands of the ``iloci`` CLI, one module each (see :mod:`iloci.cli`)."""

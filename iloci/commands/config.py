@@ -1,0 +1,31 @@
+"""``iloci config show|check``: the resolved configuration."""
+
+from __future__ import annotations
+
+import argparse
+
+from iloci.config import load_config, to_toml
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("config", help="show or check a configuration file")
+    csub = p.add_subparsers(dest="config_command", metavar="ACTION", required=True)
+    show = csub.add_parser("show", help="print the resolved config (defaults filled in) as TOML")
+    show.add_argument("file", nargs="?", help="TOML config (default: the built-in defaults)")
+    show.set_defaults(func=run_show)
+    check = csub.add_parser("check", help="validate a config file")
+    check.add_argument("file", help="TOML config")
+    check.set_defaults(func=run_check)
+
+
+def run_show(args: argparse.Namespace) -> int:
+    print(to_toml(load_config(args.file)), end="")
+    return 0
+
+
+def run_check(args: argparse.Namespace) -> int:
+    cfg = load_config(args.file)
+    names = ", ".join(f"{sec}={getattr(cfg, sec).name}" for sec in
+                      ("perceptual_model", "clusterer", "teacher", "ik", "simulator"))
+    print(f"{args.file}: ok ({names})")
+    return 0

@@ -1,0 +1,50 @@
+"""``iloci plugins``: every registered component and whether it can be built."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from iloci.plugins import get_plugin_manager, get_registry, plugin_infos
+from iloci.registry import LABELS
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plugins", help="list registered components and their back ends")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=run)
+
+
+def rows() -> tuple[list[dict], list[dict]]:
+    """(component rows, plugins that failed to load)."""
+    pm = get_plugin_manager()
+    registry = get_registry(pm)
+    out = []
+    for spec in registry.specs():
+        missing = spec.missing()
+        out.append({
+            "kind": LABELS[spec.kind], "name": spec.name,
+            "distribution": spec.distribution or "-", "version": spec.version or "-",
+            "status": "available" if not missing else
+            f"missing {', '.join(missing)}: {spec.install or 'pip install ' + ' '.join(missing)}",
+            "summary": spec.summary,
+        })
+    broken = [{"plugin": i.name, "distribution": i.distribution, "error": i.error}
+              for i in plugin_infos(pm).values() if i.error]
+    return out, broken
+
+
+def run(args: argparse.Namespace) -> int:
+    table, broken = rows()
+    if args.json:
+        print(json.dumps({"components": table, "failed_plugins": broken}, indent=2))
+        return 0
+    cols = ("kind", "name", "distribution", "version", "status")
+    widths = {c: max(len(c), *(len(str(r[c])) for r in table)) if table else len(c)
+              for c in cols}
+    print("  ".join(c.upper().ljust(widths[c]) for c in cols).rstrip())
+    for r in table:
+        print("  ".join(str(r[c]).ljust(widths[c]) for c in cols).rstrip())
+    for b in broken:
+        print(f"plugin {b['plugin']!r} ({b['distribution']}) failed to load: {b['error']}")
+    return 0

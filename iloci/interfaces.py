@@ -1,0 +1,375 @@
+"""The five interfaces every back end implements, and the values they exchange.
+
+Back ends are plain classes that satisfy these :class:`typing.Protocol` s
+structurally; they never subclass anything from iloci. Arrays crossing an
+interface are numpy ``float64`` unless stated; a back end never leaks its own
+tensors. Shapes use these letters:
+
+``N``  points of a pen trajectory, ``T`` steps of a sequence or joint path,
+``D``  features per step of an encoded sequence (6 in the paper: dy, dz and
+four joint deltas), ``P`` size of a parametric-bias (PB) vector (4),
+``J``  actuated joints of the arm (4), ``B`` sequences in a batch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from iloci.errors import InvalidDemonstrationError
+
+__all__ = [
+    "Demonstration",
+    "Response",
+    "Execution",
+    "PerceptualModel",
+    "Clusterer",
+    "Teacher",
+    "IKSolver",
+    "Simulator",
+    "KINDS",
+]
+
+#: Component kinds, as used in config sections and the registry.
+KINDS = ("perceptual_model", "clusterer", "teacher", "ik_solver", "simulator")
+
+
+def _check_finite_2d(name: str, arr: Any, width: int) -> np.ndarray:
+    try:
+        a = np.asarray(arr, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidDemonstrationError(
+            f"{name} must be a numeric array of shape (N, {width}); could not "
+            f"convert it ({exc})."
+        ) from None
+    if a.ndim != 2 or a.shape[1] != width:
+        raise InvalidDemonstrationError(
+            f"{name} must have shape (N, {width}), got {a.shape}. Pass one row "
+            f"per sample with {width} columns."
+        )
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Demonstration:
+    """One pen trajectory shown by the teacher, validated on creation.
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, 2)
+        Pen positions in the teacher's frame (any unit; only the shape
+        matters, it is scaled into the robot's drawing plane). ``N >= 3``.
+    times : array_like, shape (N,), optional
+        Time stamps (s), strictly increasing. Defaults to ``0, 1, ..., N-1``.
+    shape : str
+        Name of the drawn shape (e.g. ``"GShape"``), or a file name.
+    index : int
+        Index of this demonstration among those of its shape.
+    concept : str or None
+        The true concept, known to an oracle teacher and to evaluation;
+        ``None`` for a live demonstration.
+
+    Raises
+    ------
+    InvalidDemonstrationError
+        Wrong shape, NaN or inf, fewer than 3 points, zero extent, or
+        non-increasing times.
+    """
+
+    positions: np.ndarray
+    times: np.ndarray | None = None
+    shape: str = "demo"
+    index: int = 0
+    concept: str | None = None
+
+    def __post_init__(self) -> None:
+        label = f"demonstration {self.key!r}"
+        pos = _check_finite_2d(f"positions of {label}", self.positions, 2)
+        if len(pos) < 3:
+            raise InvalidDemonstrationError(
+                f"{label} has {len(pos)} point(s); at least 3 are needed to "
+                "define a motion."
+            )
+        bad = ~np.isfinite(pos)
+        if bad.any():
+            row = int(np.argwhere(bad)[0, 0])
+            raise InvalidDemonstrationError(
+                f"{label} contains NaN or inf (first at row {row}); remove or "
+                "interpolate missing samples before teaching."
+            )
+        extent = np.ptp(pos, axis=0)
+        if not np.any(extent > 1e-12 * max(1.0, float(np.abs(pos).max()))):
+            raise InvalidDemonstrationError(
+                f"{label} has zero extent: all {len(pos)} points are equal, so "
+                "there is no motion to imitate."
+            )
+        if self.times is None:
+            t = np.arange(len(pos), dtype=np.float64)
+        else:
+            try:
+                t = np.asarray(self.times, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise InvalidDemonstrationError(
+                    f"times of {label} must be numeric.") from None
+            if t.shape != (len(pos),):
+                raise InvalidDemonstrationError(
+                    f"times of {label} must have shape ({len(pos)},) to match "
+                    f"the positions, got {t.shape}."
+                )
+            if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+                raise InvalidDemonstrationError(
+                    f"times of {label} must be finite and strictly increasing."
+                )
+        pos = pos.copy()
+        t = t.copy()
+        pos.flags.writeable = False
+        t.flags.writeable = False
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "times", t)
+
+    @property
+    def key(self) -> str:
+        """Stable identifier, ``"SHAPE/INDEX"``."""
+        return f"{self.shape}/{self.index}"
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    def __repr__(self) -> str:
+        return (f"Demonstration({self.key!r}, N={len(self.positions)}, "
+                f"concept={self.concept!r})")
+
+
+@dataclass(frozen=True)
+class Execution:
+    """What a simulated (or real) arm actually did.
+
+    Attributes
+    ----------
+    joint_path : ndarray, shape (T, J)
+        Joint angles reached (rad).
+    end_effector : ndarray, shape (T, 3)
+        Pen-tip positions reached (m, torso frame).
+    dt : float
+        Time step (s).
+    """
+
+    joint_path: np.ndarray
+    end_effector: np.ndarray
+    dt: float
+
+
+@dataclass(frozen=True)
+class Response:
+    """The robot's answer to a demonstration, as the teacher sees it.
+
+    Attributes
+    ----------
+    concept : str
+        The concept the robot guessed (its own label, e.g. ``"c3"``).
+    motion : ndarray, shape (T, 2)
+        The pen path the robot drew in the drawing plane (m, y-z).
+    joint_path : ndarray, shape (T, J), optional
+        The joint path it performed.
+    source : str, optional
+        Key of the demonstration the answering memory entry stands for
+        (a prototype's medoid). Lets an oracle teacher judge the answer.
+    sources : tuple of str
+        Keys of every demonstration the answering entry stands for.
+    execution : Execution, optional
+        What the simulator executed, when one is configured.
+    attempt : int
+        1 for the first guess on this demonstration, 2 for the second, ...
+    """
+
+    concept: str
+    motion: np.ndarray
+    joint_path: np.ndarray | None = None
+    source: str | None = None
+    sources: tuple[str, ...] = ()
+    execution: Execution | None = None
+    attempt: int = 1
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+@runtime_checkable
+class PerceptualModel(Protocol):
+    """A recurrent neural network with parametric bias (RNNPB).
+
+    One set of shared weights and one PB vector per sequence. A sequence is
+    an array of shape ``(T, D)``; the network predicts step ``t+1`` from step
+    ``t``, its context and the PB. Sequences in a list may differ in length.
+    """
+
+    #: Features per step, ``D``.
+    input_size: int
+    #: Size of a PB vector, ``P``.
+    pb_size: int
+
+    def train(self, sequences: Sequence[np.ndarray],
+              pbs_init: np.ndarray | None = None,
+              epochs: int | None = None) -> np.ndarray:
+        """Train weights and one PB per sequence, continuing from current weights.
+
+        Parameters
+        ----------
+        sequences : list of ndarray, each (T_i, D)
+        pbs_init : ndarray, shape (B, P), optional
+            Starting PBs (e.g. the stored PBs of rehearsed entries); zeros
+            when omitted.
+        epochs : int, optional
+            Defaults to the model's configured number.
+
+        Returns
+        -------
+        ndarray, shape (B, P)
+            The learned PB of each sequence.
+        """
+        ...
+
+    def recognize(self, sequences: Sequence[np.ndarray],
+                  candidate_pbs: np.ndarray | None = None) -> np.ndarray:
+        """Find the PB of each sequence with the weights frozen.
+
+        Parameters
+        ----------
+        sequences : list of ndarray, each (T_i, D)
+        candidate_pbs : ndarray, shape (K, P), optional
+            Known PBs to start the search from (multi-start).
+
+        Returns
+        -------
+        ndarray, shape (B, P)
+        """
+        ...
+
+    def generate(self, pbs: np.ndarray, initial_inputs: np.ndarray,
+                 lengths: Sequence[int]) -> list[np.ndarray]:
+        """Run the network closed-loop from each PB.
+
+        Parameters
+        ----------
+        pbs : ndarray, shape (B, P)
+        initial_inputs : ndarray, shape (B, D)
+            First step of each sequence (the paper's initialInfo).
+        lengths : sequence of int, length B
+            Number of steps ``T_i`` to produce, the first being the initial
+            input itself.
+
+        Returns
+        -------
+        list of ndarray, each (T_i, D)
+        """
+        ...
+
+    def prediction_error(self, sequences: Sequence[np.ndarray],
+                         pbs: np.ndarray) -> np.ndarray:
+        """Mean squared closed-loop prediction error of each sequence.
+
+        Parameters
+        ----------
+        sequences : list of ndarray, each (T_i, D)
+        pbs : ndarray, shape (B, P)
+
+        Returns
+        -------
+        ndarray, shape (B,)
+        """
+        ...
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Weights and settings as a flat dict of numpy arrays (no pickle)."""
+        ...
+
+    def load_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore what :meth:`state` returned (from either back end)."""
+        ...
+
+
+@runtime_checkable
+class Clusterer(Protocol):
+    """Complete-link agglomerative clustering cut at a distance."""
+
+    def cluster(self, points: np.ndarray, distance_threshold: float) -> np.ndarray:
+        """Cluster points so that no cluster's diameter reaches the threshold.
+
+        Parameters
+        ----------
+        points : ndarray, shape (M, P)
+        distance_threshold : float
+            Clusters are merged while their complete-link distance is
+            ``<= distance_threshold``.
+
+        Returns
+        -------
+        ndarray of int, shape (M,)
+            Labels ``0..K-1`` numbered in order of first appearance, so two
+            back ends giving the same partition give the same labels.
+        """
+        ...
+
+
+@runtime_checkable
+class Teacher(Protocol):
+    """Judges the robot's response to a demonstration."""
+
+    def feedback(self, demo: Demonstration, response: Response) -> int:
+        """Return +1 (reward) or -1 (punishment)."""
+        ...
+
+
+@runtime_checkable
+class IKSolver(Protocol):
+    """Inverse and forward kinematics of the drawing arm."""
+
+    #: Names of the ``J`` actuated joints, in column order.
+    joint_names: tuple[str, ...]
+    #: Joint limits (rad), each shape (J,).
+    lower: np.ndarray
+    upper: np.ndarray
+
+    def solve(self, points: np.ndarray, q0: np.ndarray | None = None) -> np.ndarray:
+        """Joint path reaching each target, warm-started point to point.
+
+        Parameters
+        ----------
+        points : ndarray, shape (T, 3)
+            Pen-tip targets (m, torso frame).
+        q0 : ndarray, shape (J,), optional
+            Start configuration.
+
+        Returns
+        -------
+        ndarray, shape (T, J)
+
+        Raises
+        ------
+        UnreachableTargetError
+            A target cannot be reached within tolerance (names the point).
+        """
+        ...
+
+    def forward(self, q: np.ndarray) -> np.ndarray:
+        """Pen-tip positions, shape (T, 3), of joint configurations (T, J)."""
+        ...
+
+
+@runtime_checkable
+class Simulator(Protocol):
+    """A physics engine executing the arm's joint path."""
+
+    def execute(self, joint_path: np.ndarray, dt: float) -> Execution:
+        """Track ``joint_path`` (T, J) under position control at step ``dt``."""
+        ...
+
+    def render(self, execution: Execution, width: int = 480,
+               height: int = 360) -> np.ndarray:
+        """Image of the arm and its drawn path, shape (height, width, 3) uint8."""
+        ...
+
+    def close(self) -> None:
+        """Release the engine."""
+        ...

@@ -1,0 +1,64 @@
+"""Parameter schemas shared by several back ends (light: no heavy imports).
+
+A component's schema is a dataclass with a default for every field; its
+fields are the keys of the component's config section. Back ends of the
+same kind share a schema so a config can switch back end by changing only
+``name``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["RNNPBParams"]
+
+
+@dataclass(frozen=True)
+class RNNPBParams:
+    """Settings of an RNNPB (section ``[perceptual_model]``).
+
+    Sizes are the paper's: 6 inputs/outputs (dy, dz, four joint deltas),
+    25 context units, 4 PB units, 60 hidden units.
+    """
+
+    #: Features per step (paper: 6 = 2 sensory + 4 motor).
+    input_size: int = 6
+    #: Hidden units (paper: 60).
+    hidden: int = 60
+    #: Context units fed back from step to step (paper: 25).
+    context: int = 25
+    #: PB units (paper: 4).
+    pb: int = 4
+    #: Training epochs of a fresh network or of a rehearsal (full batch).
+    epochs: int = 1500
+    #: Adam learning rate for weights.
+    learning_rate: float = 0.01
+    #: Adam learning rate for PB vectors during training.
+    pb_learning_rate: float = 0.05
+    #: Global gradient-norm clip (closed-loop BPTT diverges without it).
+    grad_clip: float = 1.0
+    #: PB values are kept in [-pb_bound, pb_bound] (tanh reparametrisation).
+    pb_bound: float = 1.0
+    #: Fraction of steps fed with the network's own output during training
+    #: (1.0 = fully closed loop; 0.0 = teacher forced).
+    closed_loop: float = 1.0
+    #: Recognition: gradient steps per start.
+    recognition_steps: int = 200
+    #: Recognition: learning rate on the PB.
+    recognition_learning_rate: float = 0.05
+    #: Recognition: number of starts taken from the best-fitting known PBs.
+    recognition_starts: int = 3
+    #: Weight initialisation scale multiplier.
+    init_scale: float = 1.0
+
+    def validate(self) -> None:
+        for name in ("input_size", "hidden", "context", "pb", "epochs",
+                     "recognition_steps", "recognition_starts"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("learning_rate", "pb_learning_rate", "grad_clip", "pb_bound",
+                     "recognition_learning_rate", "init_scale"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not 0.0 <= self.closed_loop <= 1.0:
+            raise ValueError(f"closed_loop must be in [0, 1], got {self.closed_loop}")

@@ -1,0 +1,391 @@
+"""Registry of components: (kind, name) -> lazy factory.
+
+A plugin registers a component by *name* with a factory given as a
+``"module:attribute"`` string (imported only when the component is built) or
+a callable, an optional parameter schema (a dataclass with a default for
+every field, defined in a light module), the importable modules it needs and
+the pip command that installs them. Nothing heavy is imported until
+:meth:`Registry.build`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+import dataclasses
+from dataclasses import dataclass
+import importlib
+import importlib.util
+import inspect
+import types
+import typing
+from typing import Any, Union
+
+from iloci.errors import ConfigError, MissingBackendError, PluginError, UnknownComponentError
+from iloci.interfaces import KINDS
+
+__all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
+
+#: Config section of each kind.
+SECTIONS = {
+    "perceptual_model": "perceptual_model",
+    "clusterer": "clusterer",
+    "teacher": "teacher",
+    "ik_solver": "ik",
+    "simulator": "simulator",
+}
+
+#: Human-readable kind names used in messages.
+LABELS = {
+    "perceptual_model": "perceptual model",
+    "clusterer": "clusterer",
+    "teacher": "teacher",
+    "ik_solver": "IK solver",
+    "simulator": "simulator",
+}
+
+#: First-party components and the plugin distribution that provides each, so
+#: a config naming one that is not installed gets the install command rather
+#: than "unknown name". The distributions live under ``plugins/`` in iloci's
+#: source tree.
+FIRST_PARTY = {
+    ("perceptual_model", "torch-rnnpb"): "iloci-torch",
+    ("perceptual_model", "jax-rnnpb"): "iloci-jax",
+    ("clusterer", "scipy"): "iloci-scipy",
+    ("clusterer", "sklearn"): "iloci-sklearn",
+    ("ik_solver", "pinocchio"): "iloci-pinocchio",
+    ("simulator", "pybullet"): "iloci-pybullet",
+    ("simulator", "mujoco"): "iloci-mujoco",
+}
+
+
+def install_command(distribution: str) -> str:
+    """pip command installing a first-party plugin from an iloci checkout."""
+    return f"pip install ./plugins/{distribution}  (from a checkout of iloci)"
+
+
+@dataclass(frozen=True)
+class ComponentSpec:
+    """How to build one named component.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`iloci.interfaces.KINDS`.
+    name : str
+        The name a config uses.
+    factory : str or callable
+        ``"package.module:Class"`` (imported lazily) or a callable. It is
+        called with the fields of ``params`` as keyword arguments, plus
+        ``seed=`` when it accepts one.
+    params : type or None
+        A dataclass whose fields (all with defaults) are the component's
+        configuration keys. ``None``: the component takes no parameters.
+    requires : tuple of str
+        Top-level modules that must be importable (e.g. ``("torch",)``).
+    install : str
+        Command that installs what is missing.
+    summary : str
+        One line for ``iloci plugins``.
+    plugin : str
+        Name of the plugin that registered it.
+    distribution, version : str or None
+        The distribution that ships the plugin.
+    """
+
+    kind: str
+    name: str
+    factory: str | Callable[..., Any]
+    params: type | None = None
+    requires: tuple[str, ...] = ()
+    install: str = ""
+    summary: str = ""
+    plugin: str = ""
+    distribution: str | None = None
+    version: str | None = None
+
+    def missing(self) -> list[str]:
+        """Modules in :attr:`requires` that cannot be imported."""
+        out = []
+        for mod in self.requires:
+            try:
+                found = importlib.util.find_spec(mod) is not None
+            except (ImportError, ValueError):
+                found = False
+            if not found:
+                out.append(mod)
+        return out
+
+    @property
+    def available(self) -> bool:
+        return not self.missing()
+
+    def default_params(self) -> Any:
+        return self.params() if self.params is not None else None
+
+
+class Registry:
+    """All registered components, by kind and name."""
+
+    def __init__(self) -> None:
+        self._specs: dict[str, dict[str, ComponentSpec]] = {k: {} for k in KINDS}
+
+    def add(self, kind: str, name: str, factory: str | Callable[..., Any], *,
+            params: type | None = None, requires: Iterable[str] = (),
+            install: str = "", summary: str = "", plugin: str = "",
+            distribution: str | None = None, version: str | None = None) -> ComponentSpec:
+        """Register a component. See :class:`ComponentSpec` for the arguments."""
+        if kind not in self._specs:
+            raise PluginError(f"plugin {plugin!r} registers unknown kind {kind!r}; "
+                              f"kinds are {', '.join(KINDS)}.")
+        if not isinstance(name, str) or not name or name == "none":
+            raise PluginError(f"plugin {plugin!r} registers an invalid {kind} "
+                              f"name {name!r} (non-empty string, not 'none').")
+        if isinstance(factory, str) and ":" not in factory:
+            raise PluginError(f"plugin {plugin!r}: factory of {kind} {name!r} must be "
+                              f"'module:attribute', got {factory!r}.")
+        if params is not None and not dataclasses.is_dataclass(params):
+            raise PluginError(f"plugin {plugin!r}: params of {kind} {name!r} must be "
+                              "a dataclass type.")
+        old = self._specs[kind].get(name)
+        if old is not None:
+            raise PluginError(
+                f"{LABELS[kind]} {name!r} is registered twice: by plugin "
+                f"{old.plugin!r} and by plugin {plugin!r}. Uninstall one, or block "
+                "one with ILOCI_BLOCK_PLUGINS."
+            )
+        spec = ComponentSpec(kind, name, factory, params, tuple(requires),
+                             install or "", summary, plugin, distribution, version)
+        self._specs[kind][name] = spec
+        return spec
+
+    def view(self, kind: str, *, plugin: str = "", distribution: str | None = None,
+             version: str | None = None) -> KindRegistry:
+        return KindRegistry(self, kind, plugin, distribution, version)
+
+    def names(self, kind: str) -> list[str]:
+        return sorted(self._specs[kind])
+
+    def specs(self, kind: str | None = None) -> list[ComponentSpec]:
+        kinds = KINDS if kind is None else (kind,)
+        return [self._specs[k][n] for k in kinds for n in sorted(self._specs[k])]
+
+    def get(self, kind: str, name: str) -> ComponentSpec:
+        """The spec of ``name``; :class:`UnknownComponentError` if none."""
+        try:
+            return self._specs[kind][name]
+        except KeyError:
+            dist = FIRST_PARTY.get((kind, name))
+            if dist is not None:
+                raise MissingBackendError(LABELS[kind], name, [dist],
+                                          install_command(dist)) from None
+            raise UnknownComponentError(LABELS.get(kind, kind), name,
+                                        list(self._specs.get(kind, {}))) from None
+
+    def __contains__(self, item: tuple[str, str]) -> bool:
+        kind, name = item
+        return name in self._specs.get(kind, {})
+
+    def load_factory(self, spec: ComponentSpec) -> Callable[..., Any]:
+        """Import the factory of ``spec`` (the heavy import happens here)."""
+        missing = spec.missing()
+        if missing:
+            raise MissingBackendError(LABELS[spec.kind], spec.name, missing,
+                                      spec.install or f"pip install {' '.join(missing)}")
+        if callable(spec.factory):
+            return spec.factory
+        mod_name, _, attr = spec.factory.partition(":")
+        try:
+            module = importlib.import_module(mod_name)
+        except ImportError as exc:
+            missing_mod = getattr(exc, "name", None) or mod_name
+            raise MissingBackendError(
+                LABELS[spec.kind], spec.name, [missing_mod],
+                spec.install or f"pip install {missing_mod}") from exc
+        try:
+            obj: Any = module
+            for part in attr.split("."):
+                obj = getattr(obj, part)
+        except AttributeError:
+            raise PluginError(f"{LABELS[spec.kind]} {spec.name!r}: {spec.factory!r} "
+                              f"does not exist (registered by plugin {spec.plugin!r}).") from None
+        return obj
+
+    def build(self, kind: str, name: str, params: Any = None, *, seed: int | None = None,
+              **context: Any) -> Any:
+        """Construct component ``name`` of ``kind``.
+
+        Parameters
+        ----------
+        params : dataclass instance, mapping or None
+            Validated parameters (a mapping is validated here).
+        seed : int, optional
+            Passed when the factory accepts ``seed``.
+        **context
+            Extra keyword arguments passed when the factory accepts them.
+        """
+        spec = self.get(kind, name)
+        if params is None or isinstance(params, Mapping):
+            params = validate_params(spec, dict(params or {}))
+        factory = self.load_factory(spec)
+        kwargs: dict[str, Any] = {}
+        if params is not None:
+            kwargs.update({f.name: getattr(params, f.name)
+                           for f in dataclasses.fields(params)})
+        extra = dict(context)
+        if seed is not None:
+            extra["seed"] = seed
+        if extra:
+            try:
+                sig = inspect.signature(factory)
+                takes_all = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
+                accepted = set(sig.parameters)
+            except (TypeError, ValueError):
+                takes_all, accepted = True, set()
+            kwargs.update({k: v for k, v in extra.items() if takes_all or k in accepted})
+        return factory(**kwargs)
+
+
+class KindRegistry:
+    """The view of a :class:`Registry` that a registration hook receives.
+
+    Bound to one kind and to the plugin calling it, so a plugin writes
+    ``registry.add("name", "pkg.mod:Class", params=Params, requires=("lib",),
+    install="pip install iloci-x")``.
+    """
+
+    def __init__(self, registry: Registry, kind: str, plugin: str,
+                 distribution: str | None, version: str | None) -> None:
+        self._registry = registry
+        self.kind = kind
+        self._plugin = plugin
+        self._distribution = distribution
+        self._version = version
+
+    def add(self, name: str, factory: str | Callable[..., Any], *,
+            params: type | None = None, requires: Iterable[str] = (),
+            install: str = "", summary: str = "") -> ComponentSpec:
+        """Register component ``name`` of this kind (see :class:`ComponentSpec`)."""
+        return self._registry.add(self.kind, name, factory, params=params,
+                                  requires=requires, install=install, summary=summary,
+                                  plugin=self._plugin, distribution=self._distribution,
+                                  version=self._version)
+
+    def names(self) -> list[str]:
+        return self._registry.names(self.kind)
+
+
+# -- parameter validation ----------------------------------------------------
+
+def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
+    """Check ``value`` against a simple annotation; return (ok, coerced)."""
+    if tp is Any:
+        return True, value
+    origin = typing.get_origin(tp)
+    if origin in (Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            ok, v = _type_ok(value, arg)
+            if ok:
+                return True, v
+        return False, value
+    if tp is type(None):
+        return value is None, value
+    if tp is bool:
+        return isinstance(value, bool), value
+    if tp is int:
+        return isinstance(value, int) and not isinstance(value, bool), value
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return True, float(value)
+        return False, value
+    if tp is str:
+        return isinstance(value, str), value
+    if origin in (tuple, list) or tp in (tuple, list):
+        if not isinstance(value, (list, tuple)):
+            return False, value
+        args = typing.get_args(tp)
+        if args and not (len(args) == 2 and args[1] is Ellipsis) and origin is tuple:
+            if len(args) != len(value):
+                return False, value
+            out = []
+            for v, a in zip(value, args):
+                ok, c = _type_ok(v, a)
+                if not ok:
+                    return False, value
+                out.append(c)
+            return True, tuple(out)
+        elem = args[0] if args else Any
+        out = []
+        for v in value:
+            ok, c = _type_ok(v, elem)
+            if not ok:
+                return False, value
+            out.append(c)
+        return True, tuple(out)
+    if isinstance(tp, type):
+        return isinstance(value, tp), value
+    return True, value
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
+                       source: str | None = None) -> Any:
+    """Build dataclass ``cls`` from ``values``, checking keys and types.
+
+    Unknown keys and wrongly typed values raise :class:`ConfigError` naming
+    the key (``section.key``) and the source. After construction the
+    instance's ``validate()`` method, when it has one, may raise
+    ``ValueError`` for out-of-range values; that becomes a ConfigError too.
+    """
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for key, value in values.items():
+        if key not in fields:
+            from iloci.errors import did_you_mean
+            raise ConfigError(
+                f"unknown key {section + '.' + key!r}; valid keys in [{section}] are "
+                f"{', '.join(sorted(fields)) or '(none)'}.{did_you_mean(key, fields)}",
+                source=source, key=f"{section}.{key}")
+        ok, coerced = _type_ok(value, hints.get(key, Any))
+        if not ok:
+            raise ConfigError(
+                f"{section}.{key} must be {_type_name(hints.get(key))}, got "
+                f"{value!r} ({type(value).__name__}).", source=source, key=f"{section}.{key}")
+        kwargs[key] = coerced
+    try:
+        obj = cls(**kwargs)
+        check = getattr(obj, "validate", None)
+        if callable(check):
+            check()
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
+    return obj
+
+
+def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,
+                    source: str | None = None) -> Any:
+    """Validate a component's config keys against its schema (no heavy import)."""
+    section = SECTIONS[spec.kind]
+    if spec.params is None:
+        if values:
+            key = next(iter(values))
+            raise ConfigError(
+                f"unknown key {section + '.' + key!r}: {LABELS[spec.kind]} "
+                f"{spec.name!r} takes no parameters.", source=source, key=f"{section}.{key}")
+        return None
+    return validate_dataclass(spec.params, values, section=section, source=source)
+
+
+def params_to_dict(params: Any) -> dict[str, Any]:
+    """A params dataclass as a plain dict (tuples kept as lists for TOML)."""
+    if params is None:
+        return {}
+    out = {}
+    for f in dataclasses.fields(params):
+        v = getattr(params, f.name)
+        out[f.name] = list(v) if isinstance(v, tuple) else v
+    return out
+
