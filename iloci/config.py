@@ -26,7 +26,7 @@ import re
 import tomllib
 from typing import Any
 
-from iloci.errors import ConfigError, UnknownComponentError
+from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError
 from iloci.registry import LABELS, Registry, params_to_dict, validate_dataclass, validate_params
 
 __all__ = [
@@ -310,6 +310,8 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
                               source=origin, key=key)
 
     kwargs: dict[str, Any] = {"source": origin}
+    # A typo is reported before a missing back end: it is what the user can fix here.
+    missing: MissingBackendError | None = None
     for sec, kind in COMPONENT_SECTIONS.items():
         values = dict(data.get(sec, {}))
         name = values.pop("name", DEFAULT_NAMES[sec])
@@ -331,10 +333,15 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
         except UnknownComponentError as exc:
             exc.args = (f"{origin}: [{sec}] name: {exc.args[0]}",)
             raise
+        except MissingBackendError as exc:
+            missing = missing or exc
+            continue
         kwargs[sec] = ComponentConfig(name, validate_params(spec, values, source=origin))
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
+    if missing is not None:
+        raise missing
     return Config(**kwargs)
 
 

@@ -1,0 +1,1 @@
+"""The paper's high-level module: memory, learner, rehearsal, clustering."""

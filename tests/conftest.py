@@ -1,0 +1,26 @@
+"""Shared fixtures. Tests use real components and small slices of real data."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_cli(*args: str, env: dict | None = None, input: str | None = None,
+            cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+    """Run ``python -m iloci ARGS`` in a subprocess; return the completed process."""
+    full_env = dict(os.environ)
+    full_env.update(env or {})
+    return subprocess.run([sys.executable, "-m", "iloci", *args], capture_output=True,
+                          text=True, env=full_env, input=input, cwd=cwd, timeout=600)
+
+
+@pytest.fixture
+def cli():
+    return run_cli
