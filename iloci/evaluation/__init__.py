@@ -1,0 +1,1 @@
+"""Cross-validation, metrics, figures and the report (the paper's experiment)."""

@@ -1,0 +1,187 @@
+"""Figures of the evaluation report (matplotlib, Agg backend, PNG).
+
+Each function takes plain arrays, writes one PNG and returns its path.
+matplotlib is imported when a figure is drawn, not when iloci is imported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from iloci.evaluation.metrics import backward_moving_average
+
+__all__ = [
+    "plot_matrix",
+    "plot_reinforcement",
+    "plot_first_guess",
+    "plot_pb_space",
+    "plot_shapes",
+]
+
+
+def _plt():
+    try:
+        import matplotlib
+    except ImportError as exc:
+        from iloci.errors import MissingBackendError
+        raise MissingBackendError("report", "figures", ["matplotlib"],
+                                  "pip install matplotlib") from exc
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+    return path
+
+
+def plot_matrix(matrix: np.ndarray, concepts: Sequence[str], path: str | Path, *,
+                title: str, cbar_label: str, annotate: bool = True) -> Path:
+    """Heat map of a (C, C) matrix, rows = true concept, columns = predicted."""
+    plt = _plt()
+    n = len(concepts)
+    fig, ax = plt.subplots(figsize=(0.42 * n + 2.5, 0.42 * n + 1.5))
+    shown = np.ma.masked_invalid(matrix)
+    im = ax.imshow(shown, vmin=0.0, vmax=1.0, cmap="viridis")
+    ax.set_xticks(range(n), concepts, rotation=90, fontsize=7)
+    ax.set_yticks(range(n), concepts, fontsize=7)
+    ax.set_xlabel("predicted concept")
+    ax.set_ylabel("true concept")
+    ax.set_title(title)
+    if annotate:
+        for i in range(n):
+            for j in range(n):
+                v = matrix[i, j]
+                if np.isfinite(v) and v >= 0.005:
+                    ax.text(j, i, f"{100 * v:.0f}", ha="center", va="center", fontsize=5,
+                            color="white" if v < 0.6 else "black")
+    fig.colorbar(im, ax=ax, label=cbar_label, fraction=0.046, pad=0.04)
+    return _save(fig, path)
+
+
+def _pad(rows: Sequence[Sequence[float]]) -> np.ndarray:
+    width = max((len(r) for r in rows), default=0)
+    out = np.full((len(rows), width), np.nan)
+    for i, r in enumerate(rows):
+        out[i, :len(r)] = r
+    return out
+
+
+def plot_reinforcement(signals: Sequence[Sequence[int]], path: str | Path, *,
+                       window: int = 7) -> Path:
+    """Reinforcement signal per interaction: backward moving average, mean over folds.
+
+    Parameters
+    ----------
+    signals : list of sequences of +1/-1, one per fold (lengths may differ)
+    """
+    plt = _plt()
+    smoothed = _pad([backward_moving_average(s, window) for s in signals])
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for row in smoothed:
+        ax.plot(np.arange(1, len(row) + 1), row, color="0.8", lw=0.8)
+    with np.errstate(all="ignore"):
+        mean = np.nanmean(smoothed, axis=0)
+    ax.plot(np.arange(1, len(mean) + 1), mean, color="C0", lw=2, label="mean over folds")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_ylim(-1.05, 1.05)
+    ax.set_xlabel("interaction (teacher feedback)")
+    ax.set_ylabel(f"reinforcement (moving avg, w={window})")
+    ax.legend(loc="lower right")
+    return _save(fig, path)
+
+
+def plot_first_guess(first_guess: Sequence[Sequence[bool]], path: str | Path, *,
+                     window: int = 7) -> Path:
+    """Whether the first guess was right, per learning demonstration, as memory grows.
+
+    Parameters
+    ----------
+    first_guess : list of sequences of bool, one per fold
+        Entry ``k`` is true when the first guess for the ``k``-th learning
+        demonstration was rewarded (a demonstration shown to an empty
+        memory, with no guess, counts as wrong).
+    """
+    plt = _plt()
+    rows = _pad([backward_moving_average(np.asarray(f, float), window) for f in first_guess])
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    with np.errstate(all="ignore"):
+        mean = np.nanmean(rows, axis=0)
+    x = np.arange(1, rows.shape[1] + 1)
+    for row in rows:
+        ax.plot(x, 100 * row, color="0.8", lw=0.8)
+    ax.plot(x, 100 * mean, color="C1", lw=2, label="mean over folds")
+    ax.set_ylim(-2, 102)
+    ax.set_xlabel("learning demonstrations seen")
+    ax.set_ylabel(f"first guess right, % (moving avg, w={window})")
+    ax.legend(loc="lower right")
+    return _save(fig, path)
+
+
+def plot_pb_space(pbs: np.ndarray, concepts: Sequence[str], path: str | Path, *,
+                  kinds: Sequence[str] | None = None, seed: int = 0) -> Path:
+    """PB vectors in 2-D by non-metric MDS, one marker per concept.
+
+    Parameters
+    ----------
+    pbs : ndarray, shape (M, P)
+    concepts : sequence of str, length M
+    kinds : sequence of str, optional
+        ``"prototype"``, ``"exemplar"`` or ``"test"`` per point (drawn large,
+        medium and small).
+    """
+    plt = _plt()
+    try:
+        from sklearn.manifold import MDS
+    except ImportError as exc:
+        from iloci.errors import MissingBackendError
+        raise MissingBackendError("report", "PB-space figure", ["scikit-learn"],
+                                  "pip install scikit-learn") from exc
+    pbs = np.asarray(pbs, dtype=np.float64)
+    d = np.linalg.norm(pbs[:, None] - pbs[None], axis=-1)
+    mds = MDS(n_components=2, metric_mds=False, metric="precomputed", init="random",
+              random_state=seed, n_init=4, max_iter=300)
+    xy = mds.fit_transform(d)
+    names = sorted(set(concepts))
+    markers = "o^sDvP*Xh<>p"
+    cmap = plt.get_cmap("tab20")
+    sizes = {"prototype": 90, "exemplar": 40, "test": 12}
+    fig, ax = plt.subplots(figsize=(7.5, 6))
+    for k, name in enumerate(names):
+        idx = [i for i, c in enumerate(concepts) if c == name]
+        s = [sizes.get(kinds[i], 30) if kinds else 30 for i in idx]
+        ax.scatter(xy[idx, 0], xy[idx, 1], s=s, marker=markers[k % len(markers)],
+                   color=cmap(k % 20), label=name, alpha=0.8, edgecolors="none")
+    ax.set_title("PB space (non-metric MDS)")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.legend(fontsize=6, ncol=2, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    return _save(fig, path)
+
+
+def plot_shapes(shapes: Mapping[str, np.ndarray], path: str | Path, *,
+                title: str = "one regenerated shape per concept") -> Path:
+    """A grid of drawings, start point marked; ``shapes`` maps concept -> (T, 2)."""
+    plt = _plt()
+    names = list(shapes)
+    cols = min(6, max(1, len(names)))
+    rows = int(np.ceil(len(names) / cols)) or 1
+    fig, axes = plt.subplots(rows, cols, figsize=(1.8 * cols, 1.8 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, name in zip(axes.ravel(), names):
+        p = np.asarray(shapes[name])
+        ax.plot(p[:, 0], p[:, 1], "-", color="C0", lw=1.5)
+        ax.plot(p[0, 0], p[0, 1], "o", color="C2", ms=5)
+        ax.set_title(name, fontsize=8)
+        ax.set_aspect("equal", adjustable="datalim")
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
