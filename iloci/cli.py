@@ -24,6 +24,7 @@ __all__ = ["main"]
 COMMAND_MODULES = (
     "iloci.commands.plugins",
     "iloci.commands.config",
+    "iloci.commands.show",
 )
 
 

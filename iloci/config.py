@@ -128,8 +128,10 @@ class SensorimotorConfig:
             raise ValueError(f"steps must be >= 3, got {self.steps}")
         if self.resample not in ("time", "arc_length"):
             raise ValueError(f"resample must be 'time' or 'arc_length', got {self.resample!r}")
-        if self.smoothing_window < 0:
-            raise ValueError(f"smoothing_window must be >= 0, got {self.smoothing_window}")
+        if self.smoothing_window < 0 or (self.smoothing_window > 1
+                                         and self.smoothing_window % 2 == 0):
+            raise ValueError("smoothing_window must be 0, 1 or an odd number of points, "
+                             f"got {self.smoothing_window}")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,170 @@
+"""``iloci show SHAPE``: one demonstration through the sensorimotor path, as a figure.
+
+Three panels: the raw pen path (teacher's frame), the path fitted into the
+robot's drawing plane with the forward kinematics of the IK solution over
+it, and the joint angles over time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from iloci.errors import InvalidInputError, MissingBackendError
+
+__all__ = ["plot_motion", "register", "run"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "show", help="plot one demonstration: pen path, fitted path + FK of the IK, joints",
+        description="Plot a LASA demonstration (or a .npy/.csv trajectory file) as the robot "
+                    "sees it: the raw pen path, the path fitted into the drawing plane with "
+                    "the forward kinematics of the IK solution over it, and the joint "
+                    "angles over time.")
+    p.add_argument("shape", metavar="SHAPE",
+                   help="LASA shape name (e.g. GShape) or a .npy/.csv trajectory file")
+    p.add_argument("--demo", type=int, default=0, metavar="I",
+                   help="demonstration index of a LASA shape, 0..6 (default 0)")
+    p.add_argument("--out", metavar="FILE.png",
+                   help="image to write (default: SHAPE-I.png in the current directory)")
+    p.add_argument("--config", metavar="FILE",
+                   help="TOML config whose [ik] and [sensorimotor] sections are used "
+                        "(default: the pinocchio IK solver and default settings)")
+    p.set_defaults(func=run)
+
+
+def _load_demo(shape: str, demo: int):
+    from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa, load_trajectory
+    from iloci.data.lasa import DEMOS_PER_SHAPE
+
+    if shape in LASA_SHAPES or shape in MULTI_MODEL_SHAPES:
+        if not 0 <= demo < DEMOS_PER_SHAPE:
+            raise InvalidInputError(f"--demo must be 0..{DEMOS_PER_SHAPE - 1} for a LASA "
+                                    f"shape, got {demo}.")
+        return load_lasa([shape])[demo]
+    if Path(shape).suffix.lower() in (".npy", ".csv") or Path(shape).is_file():
+        return load_trajectory(shape)
+    load_lasa([shape])  # raises the unknown-shape error with "did you mean"
+    raise AssertionError("unreachable")
+
+
+def _components(config_file: str | None):
+    from iloci.config import SensorimotorConfig, load_config
+    from iloci.plugins import get_registry
+
+    registry = get_registry()
+    if config_file is None:
+        return registry.build("ik_solver", "pinocchio"), SensorimotorConfig()
+    cfg = load_config(config_file, registry=registry)
+    return (registry.build("ik_solver", cfg.ik.name, cfg.ik.params, seed=cfg.seed),
+            cfg.sensorimotor)
+
+
+def run(args: argparse.Namespace) -> int:
+    from iloci.sensorimotor.pipeline import to_motion
+
+    demo = _load_demo(args.shape, args.demo)
+    ik, sm = _components(args.config)
+    motion = to_motion(demo, sm, ik)
+    out = Path(args.out) if args.out else Path(f"{demo.shape}-{demo.index}.png")
+    reached = np.asarray(ik.forward(motion.joint_path))
+    err = np.linalg.norm(reached - motion.targets, axis=1)
+    plot_motion(demo, motion, reached, sm.robot, out)
+    q = motion.joint_path
+    inside = bool(np.all((q >= ik.lower) & (q <= ik.upper)))
+    print(f"{demo.key}: {len(demo)} pen points -> {len(motion)} steps, dt {motion.dt:.3f} s; "
+          f"FK error max {err.max() * 1000:.4f} mm; joints within limits: "
+          f"{'yes' if inside else 'NO'}")
+    print(f"wrote {out}")
+    return 0
+
+
+def plot_motion(demo, motion, reached: np.ndarray, robot_name: str, out: str | Path) -> Path:
+    """Draw the three panels of ``iloci show`` and write them atomically to ``out``.
+
+    Parameters
+    ----------
+    demo : Demonstration
+    motion : Motion
+    reached : ndarray, shape (T, 3)
+        Forward kinematics of ``motion.joint_path``.
+    robot_name : str
+    out : path
+        Image file; the format follows its suffix (``.png`` by default).
+
+    Returns
+    -------
+    Path
+    """
+    try:
+        import matplotlib
+    except ImportError as exc:
+        raise MissingBackendError("command", "show", ["matplotlib"],
+                                  "pip install matplotlib") from exc
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    from iloci.sensorimotor.robots import get_robot
+
+    robot = get_robot(robot_name)
+    plane = robot.plane
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.3))
+
+    ax = axes[0]
+    p = demo.positions
+    ax.plot(p[:, 0], p[:, 1], "-", color="0.3", lw=1.2)
+    ax.plot(*p[0], "o", color="tab:green", label="start")
+    ax.plot(*p[-1], "s", color="tab:red", label="end")
+    ax.set_title(f"pen path {demo.key} ({len(p)} points)")
+    ax.set_xlabel("x (teacher)")
+    ax.set_ylabel("y (teacher)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+
+    ax = axes[1]
+    mm = 1000.0
+    y0, z0 = plane.corners[0]
+    ax.add_patch(Rectangle((y0 * mm, z0 * mm), plane.width * mm, plane.height * mm,
+                           fill=False, ls="--", color="0.6", label="drawing plane"))
+    pp = motion.plane_points * mm
+    fk = plane.to_2d(reached) * mm
+    ax.plot(pp[:, 0], pp[:, 1], "-", color="tab:blue", lw=1.5, label="fitted path (targets)")
+    ax.plot(fk[:, 0], fk[:, 1], "x", color="tab:orange", ms=5, label="FK of IK solution")
+    ax.plot(*pp[0], "o", color="tab:green")
+    err = np.linalg.norm(reached - motion.targets, axis=1).max()
+    ax.set_title(f"robot plane x = {plane.x * mm:.0f} mm (max FK error {err * 1e6:.2f} µm)",
+                 fontsize=10)
+    ax.set_xlabel("y (mm, torso frame)")
+    ax.set_ylabel("z (mm, torso frame)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3)
+
+    ax = axes[2]
+    t = np.arange(len(motion)) * motion.dt
+    for j, name in enumerate(robot.joint_names):
+        ax.plot(t, np.rad2deg(motion.joint_path[:, j]), label=name)
+    ax.set_title("joint angles")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("angle (deg)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fmt = out.suffix.lstrip(".").lower() or "png"
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, format=fmt, dpi=110)
+        os.replace(tmp, out)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return out

@@ -1,0 +1,186 @@
+"""Motions <-> the RNNPB's sequences of relative sensorimotor displacements.
+
+The paper feeds the network relative displacements of the sensory and motor
+data rather than absolute values, so that what is learned does not depend
+on where the shape was drawn. Per step ``t`` of a motion with plane points
+``(y, z)`` and joint angles ``q1..q4``::
+
+    row t = ([y, z, q1, q2, q3, q4][t + 1] - [y, z, q1, q2, q3, q4][t]) / scale
+
+a sequence of ``T - 1`` rows of ``D = 6`` features. ``scale`` (one value per
+channel) is fitted on the learning data so that the largest displacement of
+each channel maps to ``limit`` (default 0.9): inside the range of a tanh or
+sigmoid-like output layer with headroom for unseen demonstrations. The
+absolute first sample ``start = [y0, z0, q1_0..q4_0]`` is kept beside the
+sequence (the paper's initialInfo), and :meth:`SensorimotorEncoder.decode`
+inverts the encoding exactly (a cumulative sum).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+
+import numpy as np
+
+from iloci.errors import InvalidInputError, NotFittedError
+from iloci.sensorimotor.pipeline import Motion
+
+__all__ = ["FEATURES", "SensorimotorEncoder"]
+
+#: Names of the ``D = 6`` features of a sequence row.
+FEATURES = ("dy", "dz", "dq1", "dq2", "dq3", "dq4")
+
+
+class SensorimotorEncoder:
+    """Scaled relative displacements ``[dy, dz, dq1..dq4]`` of a motion.
+
+    Parameters
+    ----------
+    limit : float
+        After :meth:`fit`, the largest absolute displacement of each channel
+        in the learning data encodes to ``limit``.
+
+    Attributes
+    ----------
+    scale_ : ndarray, shape (6,)
+        Per-channel divisor (m for dy, dz; rad for dq), set by :meth:`fit`.
+    """
+
+    def __init__(self, limit: float = 0.9) -> None:
+        if not (np.isfinite(limit) and limit > 0):
+            raise InvalidInputError(f"limit must be a positive number, got {limit}.")
+        self.limit = float(limit)
+        self.scale_: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        fitted = "unfitted" if self.scale_ is None else f"scale={np.round(self.scale_, 6).tolist()}"
+        return f"SensorimotorEncoder(limit={self.limit}, {fitted})"
+
+    @staticmethod
+    def _raw(motion: Motion) -> np.ndarray:
+        if not isinstance(motion, Motion):
+            raise InvalidInputError(f"expected a Motion, got {type(motion).__name__}; build one "
+                                    "with iloci.sensorimotor.pipeline.to_motion.")
+        if motion.joint_path.shape[1] != 4:
+            raise InvalidInputError(f"motion {motion.demo_key!r} has "
+                                    f"{motion.joint_path.shape[1]} joints; the encoding "
+                                    "needs 4.")
+        if len(motion) < 2:
+            raise InvalidInputError(f"motion {motion.demo_key!r} has {len(motion)} step(s); "
+                                    "at least 2 are needed for a displacement.")
+        return np.hstack([motion.plane_points, motion.joint_path])
+
+    def fit(self, motions: Iterable[Motion]) -> SensorimotorEncoder:
+        """Fit the per-channel scale on learning data.
+
+        Parameters
+        ----------
+        motions : iterable of Motion
+            At least one.
+
+        Returns
+        -------
+        self
+        """
+        deltas = [np.diff(self._raw(m), axis=0) for m in motions]
+        if not deltas:
+            raise InvalidInputError("fit needs at least one motion.")
+        peak = np.abs(np.vstack(deltas)).max(axis=0)
+        # a channel that never moves in the learning data keeps unit scale
+        # rather than dividing by zero
+        self.scale_ = np.where(peak > 0, peak / self.limit, 1.0)
+        return self
+
+    def _check_fitted(self) -> np.ndarray:
+        if self.scale_ is None:
+            raise NotFittedError("the SensorimotorEncoder is not fitted: call fit(motions) on "
+                                 "the learning data, or restore it with from_state().")
+        return self.scale_
+
+    def encode(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+        """Encode one motion.
+
+        Parameters
+        ----------
+        motion : Motion
+            ``T`` steps.
+
+        Returns
+        -------
+        sequence : ndarray, shape (T - 1, 6)
+            Scaled ``[dy, dz, dq1..dq4]`` per step.
+        start : ndarray, shape (6,)
+            Absolute first sample ``[y, z, q1..q4]`` (m, rad).
+        """
+        scale = self._check_fitted()
+        raw = self._raw(motion)
+        return np.diff(raw, axis=0) / scale, raw[0].copy()
+
+    def encode_all(self, motions: Iterable[Motion]) -> tuple[list[np.ndarray], np.ndarray]:
+        """:meth:`encode` each motion.
+
+        Returns
+        -------
+        sequences : list of ndarray, each (T_i - 1, 6)
+        starts : ndarray, shape (B, 6)
+        """
+        pairs = [self.encode(m) for m in motions]
+        return [s for s, _ in pairs], np.array([st for _, st in pairs]).reshape(-1, 6)
+
+    def decode(self, sequence: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Invert :meth:`encode`.
+
+        Parameters
+        ----------
+        sequence : ndarray, shape (T - 1, 6)
+            Scaled displacements (e.g. generated by the RNNPB).
+        start : ndarray, shape (6,)
+            Absolute first sample ``[y, z, q1..q4]``.
+
+        Returns
+        -------
+        plane_points : ndarray, shape (T, 2)
+            ``(y, z)`` (m).
+        joint_path : ndarray, shape (T, 4)
+            Joint angles (rad). Not clipped to the joint limits: a generated
+            sequence may leave them, which the caller can check.
+        """
+        scale = self._check_fitted()
+        seq = _finite(sequence, "sequence", (None, 6))
+        st = _finite(start, "start", (6,))
+        raw = np.vstack([st, st + np.cumsum(seq * scale, axis=0)])
+        return raw[:, :2], raw[:, 2:]
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The fitted encoder as a flat dict of arrays (no pickle)."""
+        return {"scale": self._check_fitted().copy(), "limit": np.array(self.limit)}
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, np.ndarray]) -> SensorimotorEncoder:
+        """Rebuild an encoder from :meth:`state`."""
+        try:
+            scale = np.asarray(state["scale"], dtype=np.float64)
+            limit = float(np.asarray(state["limit"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InvalidInputError(f"encoder state needs 'scale' (6,) and 'limit' (a number); "
+                                    f"{exc!r}.") from None
+        if scale.shape != (6,) or not np.all(np.isfinite(scale)) or np.any(scale <= 0):
+            raise InvalidInputError(f"encoder state 'scale' must be 6 positive numbers, got "
+                                    f"{scale!r}.")
+        enc = cls(limit)
+        enc.scale_ = scale.copy()
+        return enc
+
+
+def _finite(a: np.ndarray, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    want = "(" + ", ".join("T" if s is None else str(s) for s in shape) + ("," if len(shape) == 1
+                                                                            else "") + ")"
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name} must be a numeric array of shape {want}.") from None
+    if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
+        raise InvalidInputError(f"{name} must have shape {want}, got {arr.shape}.")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError(f"{name} contains NaN or inf.")
+    return arr

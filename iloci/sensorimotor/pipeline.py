@@ -1,0 +1,118 @@
+"""Demonstration -> :class:`Motion`: the pen path in the robot's plane and the joint path.
+
+::
+
+    Demonstration (N x 2)  -- preprocess -->  plane points (T x 2, y-z in m)
+                           -- plane.to_3d -->  pen-tip targets (T x 3, torso frame)
+                           -- IKSolver.solve (from the robot's q_home) --> joints (T x 4)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from iloci.config import Config, SensorimotorConfig
+from iloci.errors import InvalidInputError
+from iloci.interfaces import Demonstration, IKSolver
+from iloci.sensorimotor.preprocess import preprocess
+from iloci.sensorimotor.robots import get_robot
+
+__all__ = ["Motion", "to_motion", "to_motions"]
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """One demonstration as the robot would perform it.
+
+    Attributes
+    ----------
+    demo_key : str
+        Key ``"SHAPE/INDEX"`` of the source demonstration.
+    plane_points : ndarray, shape (T, 2)
+        Pen path ``(y, z)`` in the drawing plane (m, torso frame).
+    targets : ndarray, shape (T, 3)
+        The same path in 3-D, the IK targets (m, torso frame).
+    joint_path : ndarray, shape (T, J)
+        Joint angles reaching the targets (rad), ``J = 4``.
+    dt : float
+        Time between two steps (s): the demonstration's duration over
+        ``T - 1``.
+    """
+
+    demo_key: str
+    plane_points: np.ndarray
+    targets: np.ndarray
+    joint_path: np.ndarray
+    dt: float
+
+    def __post_init__(self) -> None:
+        for name in ("plane_points", "targets", "joint_path"):
+            a = np.array(getattr(self, name), dtype=np.float64)
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
+        T = len(self.plane_points)
+        if (self.plane_points.shape != (T, 2) or self.targets.shape != (T, 3)
+                or self.joint_path.ndim != 2 or len(self.joint_path) != T):
+            raise InvalidInputError(
+                f"motion {self.demo_key!r}: plane_points (T, 2), targets (T, 3) and "
+                f"joint_path (T, J) must share T; got {self.plane_points.shape}, "
+                f"{self.targets.shape}, {self.joint_path.shape}.")
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise InvalidInputError(f"motion {self.demo_key!r}: dt must be > 0, got {self.dt}.")
+
+    def __len__(self) -> int:
+        return len(self.plane_points)
+
+    def __repr__(self) -> str:
+        return f"Motion({self.demo_key!r}, T={len(self)}, dt={self.dt:.4g})"
+
+
+def _sensorimotor(config: SensorimotorConfig | Config | None) -> SensorimotorConfig:
+    if config is None:
+        return SensorimotorConfig()
+    if isinstance(config, Config):
+        return config.sensorimotor
+    if isinstance(config, SensorimotorConfig):
+        return config
+    raise InvalidInputError(f"expected a SensorimotorConfig or Config, got "
+                            f"{type(config).__name__}.")
+
+
+def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
+              ik: IKSolver) -> Motion:
+    """Preprocess a demonstration and solve IK along it.
+
+    Parameters
+    ----------
+    demo : Demonstration
+    config : SensorimotorConfig or Config or None
+        Steps, resampling, smoothing and robot (``None``: defaults).
+    ik : IKSolver
+        Solves the path, warm-started from the robot's ``q_home``.
+
+    Returns
+    -------
+    Motion
+
+    Raises
+    ------
+    InvalidDemonstrationError, UnreachableTargetError
+    """
+    cfg = _sensorimotor(config)
+    robot = get_robot(cfg.robot)
+    plane_points = preprocess(demo, steps=cfg.steps, resample_by=cfg.resample,
+                              smoothing_window=cfg.smoothing_window, plane=robot.plane)
+    targets = robot.plane.to_3d(plane_points)
+    joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
+    times = demo.times
+    dt = float(times[-1] - times[0]) / (cfg.steps - 1)
+    return Motion(demo.key, plane_points, targets, joint_path, dt)
+
+
+def to_motions(demos: Iterable[Demonstration], config: SensorimotorConfig | Config | None,
+               ik: IKSolver) -> list[Motion]:
+    """:func:`to_motion` of each demonstration, in order."""
+    return [to_motion(d, config, ik) for d in demos]

@@ -1,0 +1,33 @@
+"""Settings of the ``pinocchio`` IK solver (section ``[ik]``); light, no Pinocchio import."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["PinocchioIKParams"]
+
+
+@dataclass(frozen=True)
+class PinocchioIKParams:
+    """Settings of :class:`iloci_pinocchio.ik.PinocchioIK`."""
+
+    #: Robot (a name of :mod:`iloci.sensorimotor.robots`).
+    robot: str = "nao-v32-right-arm"
+    #: Stop iterating on a point once its position error is below this (m).
+    tolerance: float = 1e-7
+    #: A point whose error stays above this after every start is unreachable (m).
+    max_error: float = 1e-4
+    #: Damped-least-squares iterations per point and start.
+    max_iterations: int = 100
+    #: Damping lambda of the least-squares step (m); keeps steps bounded near
+    #: singular (stretched-arm) configurations.
+    damping: float = 1e-3
+
+    def validate(self) -> None:
+        if not 0 < self.tolerance <= self.max_error:
+            raise ValueError("need 0 < tolerance <= max_error, got tolerance="
+                             f"{self.tolerance}, max_error={self.max_error}")
+        if self.max_iterations < 1:
+            raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if self.damping < 0:
+            raise ValueError(f"damping must be >= 0, got {self.damping}")
