@@ -1,16 +1,75 @@
-"""The Agent: assembled components plus the robot's memory; the library's face."""
+"""The Agent: assembled components plus the robot's memory; the library's face.
+
+::
+
+    agent = iloci.build("my.toml")
+    report = agent.teach(iloci.data.load_lasa(["GShape", "Angle"]))  # with feedback
+    answers = agent.recognize(test_demos)                           # batched inference
+    agent.save("memory.npz")
+    agent = iloci.Agent.load("memory.npz")                          # and keep teaching
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+import os
+from pathlib import Path
+import time
 from typing import Any
+import warnings
 
+import numpy as np
 import pluggy
 
 from iloci.config import Config, load_config
+from iloci.errors import (InvalidDemonstrationError, InvalidInputError, MemoryFileError,
+                          NotFittedError)
+from iloci.interfaces import Demonstration
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.registry import Registry
 
-__all__ = ["Agent", "build"]
+__all__ = ["Agent", "build", "TeachReport", "SkippedDemonstrationWarning",
+           "learn_and_recognize"]
+
+
+class SkippedDemonstrationWarning(UserWarning):
+    """A demonstration in a learning stream could not be used and was skipped."""
+
+
+@dataclass(frozen=True)
+class TeachReport:
+    """What :meth:`Agent.teach` did with a stream of demonstrations.
+
+    Attributes
+    ----------
+    outcomes : tuple of LearnOutcome
+        One per demonstration learned, in stream order.
+    skipped : tuple of (str, str)
+        ``(demonstration, reason)`` for each one that failed validation,
+        preprocessing or IK; the memory was left untouched by it.
+    seconds : float
+        Wall time.
+    """
+
+    outcomes: tuple[Any, ...]
+    skipped: tuple[tuple[str, str], ...]
+    seconds: float
+
+    @property
+    def feedbacks(self) -> list[int]:
+        """Every teacher feedback (+1/-1) in order: the reinforcement signal."""
+        return [f for o in self.outcomes for f in o.feedbacks]
+
+    @property
+    def first_guess_correct(self) -> list[bool | None]:
+        """Per learned demonstration: was the first guess rewarded (None: no guess)."""
+        return [o.first_guess_correct for o in self.outcomes]
+
+    @property
+    def rehearsals(self) -> list[Any]:
+        """Every RehearsalEvent, in order."""
+        return [r for o in self.outcomes for r in o.rehearsals]
 
 
 class Agent:
@@ -29,6 +88,9 @@ class Agent:
     simulator : Simulator or None
     plugin_manager : pluggy.PluginManager
         Observer hooks (``iloci_on_*``) are called through it.
+    memory : Memory
+        The robot's Mem (entries, encoder); the network is
+        ``perceptual_model``. Empty until the first :meth:`learn`.
     """
 
     def __init__(self, config: Config, components: dict[str, Any],
@@ -41,12 +103,235 @@ class Agent:
         self.teacher = components["teacher"]
         self.ik_solver = components["ik"]
         self.simulator = components.get("simulator")
+        from iloci.concepts.memory import Memory
+        self.memory = Memory()
 
     def __repr__(self) -> str:
         c = self.config
         return (f"Agent(perceptual_model={c.perceptual_model.name!r}, "
                 f"clusterer={c.clusterer.name!r}, teacher={c.teacher.name!r}, "
-                f"ik={c.ik.name!r}, simulator={c.simulator.name!r})")
+                f"ik={c.ik.name!r}, simulator={c.simulator.name!r}, "
+                f"entries={len(self.memory)})")
+
+    # -- plumbing ------------------------------------------------------------------
+    @property
+    def learner(self):
+        """A :class:`~iloci.concepts.learner.Learner` over this agent's memory and components.
+
+        Built on each access, so it always sees the current ``teacher``,
+        ``simulator`` and ``memory`` attributes.
+        """
+        from iloci.concepts.learner import Learner
+        limits = None
+        if self.ik_solver is not None and hasattr(self.ik_solver, "lower"):
+            limits = (np.asarray(self.ik_solver.lower), np.asarray(self.ik_solver.upper))
+        return Learner(self.memory, self.perceptual_model, self.clusterer, self.teacher,
+                       self.config.learner, simulator=self.simulator,
+                       hook=self.plugin_manager.hook, joint_limits=limits)
+
+    def motion(self, demo: Demonstration):
+        """The demonstration as the robot performs it (preprocessing + IK).
+
+        Returns
+        -------
+        Motion
+        """
+        from iloci.sensorimotor.pipeline import to_motion
+        if not isinstance(demo, Demonstration):
+            raise InvalidInputError(f"expected a Demonstration, got {type(demo).__name__}; "
+                                    "wrap an (N, 2) array with iloci.Demonstration(positions).")
+        return to_motion(demo, self.config.sensorimotor, self.ik_solver)
+
+    def fit_encoder(self, motions: Iterable[Any]) -> None:
+        """Fit the sensorimotor encoding scales on learning data (once, before learning).
+
+        :meth:`teach` calls this with its whole stream, :meth:`learn` with
+        its one demonstration, when the memory has no encoder yet. The
+        scales are then kept for good (they are part of the memory), since
+        every stored pattern is expressed in them.
+        """
+        from iloci.sensorimotor.encoding import SensorimotorEncoder
+        if self.memory.encoder is not None:
+            raise InvalidInputError("the memory's encoder is already fitted; its scales are "
+                                    "fixed once learning has started.")
+        self.memory.encoder = SensorimotorEncoder().fit(list(motions))
+
+    def _encode(self, motion) -> tuple[np.ndarray, np.ndarray]:
+        if self.memory.encoder is None:
+            raise NotFittedError("the robot has learned nothing yet: teach it at least one "
+                                 "demonstration (Agent.learn / `iloci teach`) first.")
+        return self.memory.encoder.encode(motion)
+
+    # -- learning phase ------------------------------------------------------------
+    def learn(self, demo: Demonstration):
+        """Learn from one demonstration with the teacher's feedback.
+
+        Parameters
+        ----------
+        demo : Demonstration
+
+        Returns
+        -------
+        LearnOutcome
+
+        Raises
+        ------
+        InvalidDemonstrationError, UnreachableTargetError
+            The demonstration cannot be preprocessed or reached; the memory
+            is untouched.
+        FeedbackError
+            The teacher answered something other than +1 or -1; the memory
+            is untouched.
+        """
+        motion = self.motion(demo)
+        if self.memory.encoder is None:
+            self.fit_encoder([motion])
+        seq, start = self._encode(motion)
+        return self.learner.learn(demo, seq, start, motion.dt)
+
+    def teach(self, demos: Iterable[Any], *,
+              on_change: Callable[[Any], None] | None = None) -> TeachReport:
+        """Learn from a stream of demonstrations, one at a time, with feedback.
+
+        Parameters
+        ----------
+        demos : iterable
+            Each a :class:`~iloci.interfaces.Demonstration`, a path to a
+            ``.npy`` / ``.csv`` trajectory, or an (N, 2) array.
+        on_change : callable, optional
+            Called with each :class:`~iloci.concepts.learner.LearnOutcome`
+            after the memory changed (e.g. to save it).
+
+        Returns
+        -------
+        TeachReport
+
+        Notes
+        -----
+        A demonstration that fails validation, preprocessing or IK is
+        skipped with a :class:`SkippedDemonstrationWarning` naming it and
+        the reason; the memory is untouched by it and the stream goes on.
+        When the memory has no encoder yet, its scales are fitted on every
+        usable demonstration of the stream first.
+        """
+        t0 = time.perf_counter()
+        skipped: list[tuple[str, str]] = []
+
+        def prepared(items: Iterable[Any]):
+            for i, item in enumerate(items):
+                name = _describe(item, i)
+                try:
+                    demo = _as_demonstration(item, i)
+                    yield demo, self.motion(demo)
+                except InvalidInputError as exc:
+                    skipped.append((name, str(exc)))
+                    warnings.warn(f"skipped demonstration {name}: {exc}",
+                                  SkippedDemonstrationWarning, stacklevel=3)
+
+        stream: Iterable[tuple[Demonstration, Any]] = prepared(demos)
+        if self.memory.encoder is None:
+            # the scales are fitted on the whole stream, so it is read first;
+            # with an encoder, a live stream is consumed one demonstration at a time
+            stream = list(stream)
+            if stream:
+                self.fit_encoder([m for _, m in stream])
+        outcomes = []
+        for demo, motion in stream:
+            seq, start = self._encode(motion)
+            outcome = self.learner.learn(demo, seq, start, motion.dt)
+            outcomes.append(outcome)
+            if on_change is not None:
+                on_change(outcome)
+        return TeachReport(tuple(outcomes), tuple(skipped), time.perf_counter() - t0)
+
+    # -- inference phase -------------------------------------------------------------
+    def recognize(self, demos: Demonstration | Sequence[Demonstration]):
+        """Recognize demonstrations without feedback (batched; memory unchanged).
+
+        Parameters
+        ----------
+        demos : Demonstration or sequence of Demonstration
+
+        Returns
+        -------
+        Recognition or list of Recognition
+            One per demonstration (a single one for a single demonstration):
+            concept, confidence (see
+            :class:`~iloci.concepts.learner.Recognition`), nearest entry.
+
+        Raises
+        ------
+        NotFittedError
+            Nothing has been learned yet.
+        InvalidDemonstrationError, UnreachableTargetError
+            A demonstration cannot be preprocessed (the error names it).
+        """
+        single = isinstance(demos, Demonstration)
+        items = [demos] if single else list(demos)
+        if not self.memory.entries:
+            raise NotFittedError("the robot has learned nothing yet: teach it at least one "
+                                 "demonstration (Agent.learn / `iloci teach`) before "
+                                 "recognizing.")
+        seqs = [self._encode(self.motion(d))[0] for d in items]
+        out = self.learner.recognize(seqs, [d.key for d in items])
+        return out[0] if single else out
+
+    def respond(self, concept: str):
+        """Perform ``concept``: its entry of lowest generation error, as a Response."""
+        idx = self.memory.indices_of(concept)
+        if not idx:
+            raise InvalidInputError(f"the memory holds no concept {concept!r}; known: "
+                                    f"{', '.join(self.memory.concepts()) or '(none)'}.")
+        best = min(idx, key=lambda i: self.memory.entries[i].generation_error)
+        return self.learner.respond(best)
+
+    # -- persistence --------------------------------------------------------------------
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Save the memory, the network and the config to one ``.npz`` file, atomically.
+
+        See :mod:`iloci.concepts.memory` for the format. Returns the path.
+        """
+        from iloci.concepts.memory import save_memory
+        return save_memory(path, self.memory, self.perceptual_model.state(),
+                           extra={"config": self.config.to_dict()})
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], config: Any = None, *,
+             plugin_manager: pluggy.PluginManager | None = None, **overrides: Any) -> Agent:
+        """An agent with a saved memory, ready to recognize and to keep learning.
+
+        Parameters
+        ----------
+        path : path-like
+            A file written by :meth:`save`.
+        config : Config, path, mapping, optional
+            Config to build the components from; by default the one saved
+            with the memory. Its perceptual model must have the saved
+            network's sizes.
+        plugin_manager : pluggy.PluginManager, optional
+        **overrides
+            Component instances, as for :func:`build`.
+
+        Raises
+        ------
+        MemoryFileError
+            Missing, truncated, tampered with or written by a newer iloci.
+        """
+        from iloci.concepts.memory import load_memory
+        memory, net_state, header = load_memory(path)
+        if config is None:
+            config = header.get("config")
+            if not isinstance(config, dict):
+                raise MemoryFileError(f"{path} holds no config; pass config= to load it.")
+        agent = build(config, plugin_manager=plugin_manager, **overrides)
+        if net_state:
+            try:
+                agent.perceptual_model.load_state(net_state)
+            except (ValueError, KeyError, InvalidInputError) as exc:
+                raise MemoryFileError(f"the network saved in {path} does not fit the "
+                                      f"configured perceptual model: {exc}") from None
+        agent.memory = memory
+        return agent
 
 
 def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = None,
@@ -92,3 +377,48 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
             continue
         components[sec] = registry.build(kind, cc.name, cc.params, seed=cfg.seed)
     return Agent(cfg, components, pm, registry)
+
+
+def _describe(item: Any, i: int) -> str:
+    if isinstance(item, Demonstration):
+        return repr(item.key)
+    if isinstance(item, (str, os.PathLike)):
+        return repr(str(item))
+    return f"#{i} of the stream"
+
+
+def _as_demonstration(item: Any, i: int) -> Demonstration:
+    """A stream item as a Demonstration (validation errors propagate)."""
+    if isinstance(item, Demonstration):
+        return item
+    if isinstance(item, (str, os.PathLike)):
+        from iloci.data import load_trajectory
+        return load_trajectory(item)
+    try:
+        return Demonstration(np.asarray(item, dtype=np.float64), shape="stream", index=i)
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, InvalidInputError):
+            raise
+        raise InvalidDemonstrationError(f"stream item {i} is not a Demonstration, a "
+                                        f"trajectory file or an (N, 2) array ({exc}).") from None
+
+
+def learn_and_recognize(config: Any, learn: Iterable[Demonstration],
+                        test: Sequence[Demonstration], *,
+                        plugin_manager: pluggy.PluginManager | None = None,
+                        **overrides: Any) -> tuple[Agent, TeachReport, list[Any]]:
+    """One learning phase then one batched inference phase, on a fresh agent.
+
+    What an evaluation fold does: build an agent from ``config``, teach it
+    ``learn`` in order with the configured teacher, then recognize ``test``.
+
+    Returns
+    -------
+    agent : Agent
+    report : TeachReport
+    recognitions : list of Recognition
+        One per test demonstration, in order.
+    """
+    agent = build(config, plugin_manager=plugin_manager, **overrides)
+    report = agent.teach(learn)
+    return agent, report, (agent.recognize(list(test)) if len(test) else [])

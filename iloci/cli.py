@@ -25,6 +25,10 @@ COMMAND_MODULES = (
     "iloci.commands.plugins",
     "iloci.commands.config",
     "iloci.commands.show",
+    "iloci.commands.teach",
+    "iloci.commands.recognize",
+    "iloci.commands.evaluate",
+    "iloci.commands.draw",
 )
 
 

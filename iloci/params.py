@@ -35,6 +35,15 @@ class RNNPBParams:
     learning_rate: float = 0.01
     #: Adam learning rate for PB vectors during training.
     pb_learning_rate: float = 0.05
+    #: Both learning rates decay exponentially to this fraction of their
+    #: value over one ``train`` call (1.0: constant). Settles the weights at
+    #: the end of a training instead of leaving them on an Adam oscillation.
+    learning_rate_decay: float = 1.0
+    #: The weights' learning rate ramps up linearly over this many epochs
+    #: of each ``train`` call (0: none). Adam's first steps move every weight
+    #: by about the full learning rate whatever its gradient; at the start
+    #: of a rehearsal that shakes the trained weights and what they hold.
+    warmup_epochs: int = 50
     #: Global gradient-norm clip (closed-loop BPTT diverges without it).
     grad_clip: float = 1.0
     #: PB values are kept in [-pb_bound, pb_bound] (tanh reparametrisation).
@@ -50,15 +59,26 @@ class RNNPBParams:
     recognition_starts: int = 3
     #: Weight initialisation scale multiplier.
     init_scale: float = 1.0
+    #: Floating-point type of training and recognition: ``"float32"`` (fast)
+    #: or ``"float64"``. ``generate`` and ``prediction_error`` always run in
+    #: float64, so both back ends agree on them.
+    dtype: str = "float32"
 
     def validate(self) -> None:
         for name in ("input_size", "hidden", "context", "pb", "epochs",
                      "recognition_steps", "recognition_starts"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.warmup_epochs < 0:
+            raise ValueError(f"warmup_epochs must be >= 0, got {self.warmup_epochs}")
+        if not 0.0 < self.learning_rate_decay <= 1.0:
+            raise ValueError("learning_rate_decay must be in (0, 1], got "
+                             f"{self.learning_rate_decay}")
         for name in ("learning_rate", "pb_learning_rate", "grad_clip", "pb_bound",
                      "recognition_learning_rate", "init_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.dtype not in ("float32", "float64"):
+            raise ValueError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
         if not 0.0 <= self.closed_loop <= 1.0:
             raise ValueError(f"closed_loop must be in [0, 1], got {self.closed_loop}")

@@ -159,7 +159,7 @@ def plot_pb_space(pbs: np.ndarray, concepts: Sequence[str], path: str | Path, *,
         idx = [i for i, c in enumerate(concepts) if c == name]
         s = [sizes.get(kinds[i], 30) if kinds else 30 for i in idx]
         ax.scatter(xy[idx, 0], xy[idx, 1], s=s, marker=markers[k % len(markers)],
-                   color=cmap(k % 20), label=name, alpha=0.8, edgecolors="none")
+                   color=cmap((2 * k) % 20 + (k // 10) % 2), label=name, alpha=0.8, edgecolors="none")
     ax.set_title("PB space (non-metric MDS)")
     ax.set_xticks([])
     ax.set_yticks([])
@@ -174,7 +174,8 @@ def plot_shapes(shapes: Mapping[str, np.ndarray], path: str | Path, *,
     names = list(shapes)
     cols = min(6, max(1, len(names)))
     rows = int(np.ceil(len(names) / cols)) or 1
-    fig, axes = plt.subplots(rows, cols, figsize=(1.8 * cols, 1.8 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(1.8 * cols, 1.9 * rows + 0.5),
+                             squeeze=False)
     for ax in axes.ravel():
         ax.axis("off")
     for ax, name in zip(axes.ravel(), names):
@@ -184,4 +185,5 @@ def plot_shapes(shapes: Mapping[str, np.ndarray], path: str | Path, *,
         ax.set_title(name, fontsize=8)
         ax.set_aspect("equal", adjustable="datalim")
     fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
     return _save(fig, path)

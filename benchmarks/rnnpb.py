@@ -1,0 +1,307 @@
+"""RNNPB benchmark: speed of both back ends against a naive PyTorch RNNPB, and offline accuracy.
+
+Writes ``benchmarks/results/rnnpb.json``::
+
+    step_ms              median ms of one full-batch training step (forward, BPTT,
+                         clipping, Adam) at paper size: 36 sequences x 50 steps x 6,
+                         H60 C25 PB4, float32 -> {torch, jax, naive}
+    speedup_vs_naive     naive step time / back-end step time
+    step_ms_grid         the same for 36/146/584 sequences x 50/100/200 steps
+                         ("BxT" keys), per back end and for the naive reference
+    recognize_146_s      seconds to recognize 146 sequences with the default
+                         settings (candidates: the 36 stored PBs + zero; best 3
+                         refined), median of 3 warm calls, per back end
+    recognize_146_first_call_s   the first call (includes JAX's compilation)
+    offline_ccr          per back end: correct classification rate per fold of
+                         DESIGN.md section 6 and mean +- std; each test demo is
+                         classified by its nearest PB_rec (PB_rec = recognize() of
+                         the learning sequences); also the rate of the
+                         lowest-prediction-error classifier (the stored PB that
+                         predicts the test sequence best). ``jax_teacher_forced``
+                         repeats the JAX folds with closed_loop = 0 to show why the
+                         default trains closed loop.
+    targets              the issue's targets and whether this run met them
+
+The naive reference is how a user would first write the model: ``nn.Linear``
+layers, a Python loop over the steps, autograd and ``torch.optim.Adam``; it
+is timed at 1 and at the default number of torch threads and the faster is
+used. Sequences come from the real pipeline (LASA -> preprocess -> Pinocchio
+IK -> SensorimotorEncoder); the 584-sequence rows repeat the data 4 times.
+
+Run: ``python benchmarks/rnnpb.py`` (needs iloci-torch, iloci-jax and
+iloci-pinocchio; about 5 minutes on 2 cores). ``--quick`` skips the grid's
+largest shapes and runs 2 folds, for a smoke test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
+
+
+# -- data ----------------------------------------------------------------------
+
+def lasa_sequences(steps: int = 50):
+    """Motions of all 182 LASA demonstrations through the real pipeline."""
+    from iloci.config import SensorimotorConfig
+    from iloci.data import load_lasa
+    from iloci.sensorimotor.pipeline import to_motions
+    from iloci_pinocchio.ik import PinocchioIK
+
+    demos = load_lasa()
+    motions = to_motions(demos, SensorimotorConfig(steps=steps), PinocchioIK())
+    return demos, motions
+
+
+def encoded(motions, learn_idx):
+    """Sequences of all motions, scaled by an encoder fitted on the learning set."""
+    from iloci.sensorimotor.encoding import SensorimotorEncoder
+
+    enc = SensorimotorEncoder().fit([motions[i] for i in learn_idx])
+    seqs, _ = enc.encode_all(motions)
+    return seqs
+
+
+# -- the naive reference -----------------------------------------------------------
+
+def naive_step_fn(seqs, seed: int = 0):
+    """One training step of an RNNPB written the obvious way (nn.Linear, loop, autograd)."""
+    import torch
+    from torch import nn
+
+    torch.manual_seed(seed)
+    D, C, P, H = 6, 25, 4, 60
+    X = torch.tensor(np.stack(seqs, axis=1), dtype=torch.float32)  # (T, B, D), equal lengths
+
+    class NaiveRNNPB(nn.Module):
+        def __init__(self, n):
+            super().__init__()
+            self.i2h = nn.Linear(D + C + P, H)
+            self.h2o = nn.Linear(H, D + C)
+            self.pb = nn.Parameter(torch.zeros(n, P))
+
+        def forward(self, X):
+            c = torch.zeros(X.shape[1], C)
+            x = X[0]
+            loss = 0.0
+            for t in range(X.shape[0] - 1):
+                h = torch.tanh(self.i2h(torch.cat([x, c, torch.tanh(self.pb)], dim=1)))
+                o = torch.tanh(self.h2o(h))
+                x, c = o[:, :D], o[:, D:]          # closed loop: own output is next input
+                loss = loss + ((x - X[t + 1]) ** 2).mean()
+            return loss / (X.shape[0] - 1)
+
+    model = NaiveRNNPB(X.shape[1])
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+
+    def step():
+        opt.zero_grad()
+        loss = model(X)
+        loss.backward()
+        nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        return loss
+
+    return step
+
+
+def time_naive(seqs, reps: int, calls: int) -> float:
+    """Median ms per naive step, at 1 thread and at torch's default, the faster."""
+    import torch
+
+    default = torch.get_num_threads()
+    best = float("inf")
+    for threads in sorted({1, default}):
+        torch.set_num_threads(threads)
+        step = naive_step_fn(seqs)
+        step()
+        runs = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            for _ in range(calls):
+                step()
+            runs.append((time.perf_counter() - t0) / calls * 1e3)
+        best = min(best, statistics.median(runs))
+    torch.set_num_threads(default)
+    return best
+
+
+# -- the back ends -------------------------------------------------------------
+
+def model_class(backend: str):
+    if backend == "torch":
+        from iloci_torch.rnnpb import TorchRNNPB
+        return TorchRNNPB
+    from iloci_jax.rnnpb import JaxRNNPB
+    return JaxRNNPB
+
+
+def time_train(backend: str, seqs, reps: int, epochs: int) -> float:
+    """Median ms per training step of ``train(seqs, epochs=epochs)``."""
+    m = model_class(backend)(seed=0)
+    m.train(seqs, epochs=2)          # compile (JAX) and allocate (torch)
+    runs = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        m.train(seqs, epochs=epochs)
+        runs.append((time.perf_counter() - t0) / epochs * 1e3)
+    return statistics.median(runs)
+
+
+def time_recognize(backend: str, learn, test, reps: int = 3) -> tuple[float, float]:
+    m = model_class(backend)(seed=0)
+    m.train(learn)
+    t0 = time.perf_counter()
+    m.recognize(test)
+    first = time.perf_counter() - t0
+    runs = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        m.recognize(test)
+        runs.append(time.perf_counter() - t0)
+    return statistics.median(runs), first
+
+
+def offline_ccr(backend: str, demos, motions, folds, **params) -> dict:
+    """Train on each fold's learning set, classify its test set by nearest PB_rec."""
+    concepts = np.array([d.concept for d in demos])
+    per_fold, by_error, seconds, losses = [], [], [], []
+    for k, (learn, test) in enumerate(folds):
+        seqs = encoded(motions, learn)
+        L = [seqs[i] for i in learn]
+        T = [seqs[i] for i in test]
+        t0 = time.perf_counter()
+        m = model_class(backend)(seed=k, **params)
+        pbs = m.train(L)
+        pb_rec = m.recognize(L)
+        pb_obs = m.recognize(T)
+        seconds.append(time.perf_counter() - t0)
+        nearest = np.linalg.norm(pb_obs[:, None] - pb_rec[None], axis=-1).argmin(axis=1)
+        per_fold.append(float(np.mean(concepts[learn][nearest] == concepts[test])))
+        # the stored PB under which the network predicts the test sequence best
+        errors = np.stack([m.prediction_error(T, np.repeat(pb[None], len(T), axis=0))
+                           for pb in pbs], axis=1)
+        by_error.append(float(np.mean(concepts[learn][errors.argmin(axis=1)] == concepts[test])))
+        losses.append(m.train_loss_)
+        print(f"  {backend} fold {k}: ccr {per_fold[-1]:.3f} (lowest error {by_error[-1]:.3f}), "
+              f"loss {losses[-1]:.4f}, {seconds[-1]:.1f} s", flush=True)
+    return {
+        "folds": per_fold, "mean": float(np.mean(per_fold)), "std": float(np.std(per_fold)),
+        "by_lowest_error": {"folds": by_error, "mean": float(np.mean(by_error)),
+                            "std": float(np.std(by_error))},
+        "train_loss": losses, "seconds": seconds, "learning_set_sizes":
+            [int(len(f[0])) for f in folds], "params": params,
+    }
+
+
+def write(result: dict) -> None:
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=RESULTS.parent, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(result, fh, indent=2)
+            fh.write("\n")
+        os.replace(tmp, RESULTS)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smoke test: small grid, 2 folds")
+    args = ap.parse_args(argv)
+
+    import jax
+    import torch
+
+    from iloci.evaluation.folds import lasa_folds
+    from iloci.params import RNNPBParams
+
+    backends = ("torch", "jax")
+    t_start = time.perf_counter()
+    demos, motions = lasa_sequences(50)
+    folds = lasa_folds(demos, 5, seed=0)
+    learn, test = folds[0]
+    seqs = encoded(motions, learn)
+    paper = [seqs[i] for i in learn[:36]]
+    rest = [seqs[i] for i in test]                     # 146 sequences
+
+    print("step time at 36 x 50 ...", flush=True)
+    step_ms = {b: time_train(b, paper, reps=7, epochs=200) for b in backends}
+    step_ms["naive"] = time_naive(paper, reps=5, calls=10)
+    print("  ", step_ms, flush=True)
+
+    print("recognition of 146 sequences ...", flush=True)
+    rec, rec_first = {}, {}
+    for b in backends:
+        rec[b], rec_first[b] = time_recognize(b, [seqs[i] for i in learn], rest)
+    print("  ", rec, rec_first, flush=True)
+
+    print("step time grid ...", flush=True)
+    grid: dict[str, dict[str, float]] = {b: {} for b in (*backends, "naive")}
+    sizes = (36, 146) if args.quick else (36, 146, 584)
+    lengths = (50, 100) if args.quick else (50, 100, 200)
+    for steps in lengths:
+        _, mot = (demos, motions) if steps == 50 else lasa_sequences(steps)
+        all_seqs = encoded(mot, learn)
+        for n in sizes:
+            batch = (all_seqs * 4)[:n]
+            key = f"{n}x{steps}"
+            work = n * steps / (36 * 50)
+            for b in backends:
+                grid[b][key] = time_train(b, batch, reps=3, epochs=max(5, int(100 / work)))
+            grid["naive"][key] = time_naive(batch, reps=3, calls=max(1, int(5 / work)))
+            print(f"   {key}: " + ", ".join(f"{b} {grid[b][key]:.2f}" for b in grid), flush=True)
+
+    print("offline accuracy (5 folds) ...", flush=True)
+    run_folds = folds[:2] if args.quick else folds
+    ccr = {b: offline_ccr(b, demos, motions, run_folds) for b in backends}
+    ccr["jax_teacher_forced"] = offline_ccr("jax", demos, motions, run_folds, closed_loop=0.0)
+
+    fastest = min(backends, key=lambda b: step_ms[b])
+    speedup = {b: step_ms["naive"] / step_ms[b] for b in backends}
+    result = {
+        "command": "python benchmarks/rnnpb.py" + (" --quick" if args.quick else ""),
+        "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
+                    "cpus": os.cpu_count(), "torch": torch.__version__,
+                    "jax": jax.__version__, "load_average": os.getloadavg()},
+        "settings": RNNPBParams().__dict__,
+        "step_ms": step_ms,
+        "speedup_vs_naive": speedup,
+        "recognize_146_s": rec,
+        "recognize_146_first_call_s": rec_first,
+        "step_ms_grid": grid,
+        "offline_ccr": ccr,
+        "targets": {
+            "fastest_backend": fastest,
+            "fastest_step_le_1ms": step_ms[fastest] <= 1.0,
+            "fastest_ge_15x_naive": speedup[fastest] >= 15.0,
+            "torch_ge_4x_naive": speedup["torch"] >= 4.0,
+            "recognize_146_le_1s": {b: rec[b] <= 1.0 for b in backends},
+            "offline_ccr_mean_ge_90pct": {b: ccr[b]["mean"] >= 0.9 for b in backends},
+        },
+        "seconds": time.perf_counter() - t_start,
+    }
+    write(result)
+    print(json.dumps({k: result[k] for k in ("step_ms", "speedup_vs_naive", "recognize_146_s",
+                                             "targets")}, indent=2))
+    for b, r in ccr.items():
+        print(f"offline_ccr {b}: {100 * r['mean']:.1f} +- {100 * r['std']:.1f} %  (lowest error: "
+              f"{100 * r['by_lowest_error']['mean']:.1f} %)")
+    return result
+
+
+if __name__ == "__main__":
+    main()

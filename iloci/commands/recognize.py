@@ -1,0 +1,41 @@
+"""``iloci recognize``: the inference phase on demonstrations, with a saved memory."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+__all__ = ["register", "run"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "recognize", help="recognize the concept of demonstrations with a taught memory",
+        description="Recognize each demonstration's concept (no feedback, the memory is not "
+                    "changed): the concept of the memory entry whose PB_rec is nearest to the "
+                    "demonstration's PB. Confidence is 1 - d_best / d_other, the margin to "
+                    "the nearest entry of another concept (0: ambiguous, 1: clear).")
+    p.add_argument("files", nargs="+", metavar="FILE",
+                   help=".npy/.csv trajectory files, or LASA demonstrations as SHAPE/INDEX")
+    p.add_argument("--memory", metavar="FILE", required=True,
+                   help="memory file written by `iloci teach`")
+    p.add_argument("--json", action="store_true", help="print one JSON object per line")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from iloci.agent import Agent
+    from iloci.commands.teach import resolve_demos
+    from iloci.data import load_trajectory
+
+    agent = Agent.load(args.memory)
+    demos = [load_trajectory(d) if isinstance(d, str) else d for d in resolve_demos(args.files)]
+    for r in agent.recognize(demos):
+        if args.json:
+            print(json.dumps({"demo": r.demo, "concept": r.concept,
+                              "confidence": r.confidence, "distance": r.distance,
+                              "source": r.source, "sources": list(r.sources)}))
+        else:
+            print(f"{r.demo}: concept {r.concept} (confidence {r.confidence:.2f}, PB distance "
+                  f"{r.distance:.3f}; nearest entry stands for {r.source})")
+    return 0

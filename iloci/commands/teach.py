@@ -1,0 +1,150 @@
+"""``iloci teach``: learn concepts from a stream of demonstrations with feedback.
+
+The memory is saved after every demonstration that changed it, so an
+interrupted session loses at most the demonstration being taught.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+import sys
+import warnings
+
+import numpy as np
+
+from iloci.errors import InvalidInputError
+
+__all__ = ["register", "run", "resolve_demos", "default_stream"]
+
+#: Memory file used when ``--memory`` is not given.
+DEFAULT_MEMORY = "iloci-memory.npz"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "teach", help="teach the robot concepts from demonstrations, with feedback",
+        description="Show demonstrations to the robot one at a time. For each one it guesses "
+                    "a concept and performs it; the teacher rewards (+1) or punishes (-1) the "
+                    "answer and the robot updates its memory, which is saved after every "
+                    "change. With an existing --memory file, learning continues from it.")
+    p.add_argument("demos", nargs="*", metavar="DEMO",
+                   help="LASA demonstrations as SHAPE/INDEX (e.g. GShape/3) or SHAPE (all 7), "
+                        "or .npy/.csv trajectory files; default: a seeded stream of "
+                        "[evaluation] train_fraction of each [data] shape's demonstrations")
+    p.add_argument("--config", metavar="FILE",
+                   help="TOML config (default: the one saved in --memory, else the defaults)")
+    p.add_argument("--teacher", metavar="NAME",
+                   help="teacher to use: console (asks you), oracle or noisy (default: the "
+                        "config's)")
+    p.add_argument("--memory", metavar="FILE", default=DEFAULT_MEMORY,
+                   help=f"memory file to continue from and save to (default {DEFAULT_MEMORY})")
+    p.set_defaults(func=run)
+
+
+def default_stream(config) -> list:
+    """A seeded LASA learning stream: part of each shape's demonstrations, shuffled.
+
+    ``round(train_fraction * 7)`` (at least 1) demonstrations of each of the
+    config's ``[data] shapes`` (all 26 when empty), chosen and ordered at
+    random with ``[evaluation] seed``.
+    """
+    from iloci.data import LASA_SHAPES, load_lasa
+    from iloci.data.lasa import DEMOS_PER_SHAPE
+
+    shapes = list(config.data.shapes) or list(LASA_SHAPES)
+    rng = np.random.default_rng(config.evaluation.seed)
+    per_shape = max(1, round(config.evaluation.train_fraction * DEMOS_PER_SHAPE))
+    demos = []
+    for shape in shapes:
+        own = load_lasa([shape])
+        demos.extend(own[i] for i in sorted(rng.choice(len(own), per_shape, replace=False)))
+    return [demos[i] for i in rng.permutation(len(demos))]
+
+
+def resolve_demos(tokens: Sequence[str]) -> list:
+    """Stream items for the command-line tokens.
+
+    ``SHAPE/INDEX`` and ``SHAPE`` name LASA demonstrations (checked now:
+    a misspelt name is an error); anything else is a trajectory file,
+    passed on as a path so a bad file is skipped when its turn comes.
+    """
+    from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa
+    from iloci.data.lasa import DEMOS_PER_SHAPE
+
+    items: list = []
+    for tok in tokens:
+        path = Path(tok)
+        if path.suffix.lower() in (".npy", ".csv") or path.is_file():
+            items.append(tok)
+            continue
+        shape, sep, index = tok.partition("/")
+        if shape not in LASA_SHAPES + MULTI_MODEL_SHAPES:
+            load_lasa([shape])  # raises the unknown-shape error with "did you mean"
+        demos = load_lasa([shape])
+        if not sep:
+            items.extend(demos)
+            continue
+        if not index.isdigit() or not 0 <= int(index) < DEMOS_PER_SHAPE:
+            raise InvalidInputError(f"{tok!r}: the demonstration index must be 0.."
+                                    f"{DEMOS_PER_SHAPE - 1}, as in {shape}/3.")
+        items.append(demos[int(index)])
+    return items
+
+
+def _describe(outcome) -> str:
+    steps = []
+    for ev in outcome.events:
+        if ev.guessed is not None:
+            steps.append(f"{ev.guessed} ({'+1' if ev.feedback == 1 else '-1'})")
+    guesses = "guessed " + ", ".join(steps) if steps else "no concept to guess"
+    what = {"strengthen": f"strengthened an entry of {outcome.concept}",
+            "new_exemplar": f"new exemplar of {outcome.concept}",
+            "new_concept": f"new concept {outcome.concept}"}[outcome.action]
+    if outcome.clustered:
+        what += f", {outcome.clustered} cluster(s) replaced by their medoid"
+    secs = sum(r.seconds for r in outcome.rehearsals)
+    tail = f" [rehearsal {secs:.1f} s]" if outcome.rehearsals else ""
+    return f"{outcome.demo}: {guesses} -> {what}{tail}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from iloci.agent import Agent, SkippedDemonstrationWarning, build
+    from iloci.concepts.memory import load_memory
+    from iloci.config import load_config
+
+    memory_path = Path(args.memory)
+    header = load_memory(memory_path)[2] if memory_path.exists() else None
+    if args.config:
+        cfg = load_config(args.config)
+    elif header is not None and isinstance(header.get("config"), dict):
+        cfg = load_config(header["config"])
+    else:
+        cfg = load_config(None)
+    if args.teacher:
+        cfg = cfg.replace(teacher={"name": args.teacher})
+    items = resolve_demos(args.demos) if args.demos else default_stream(cfg)
+    agent = Agent.load(memory_path, cfg) if header is not None else build(cfg)
+    if header is not None:
+        print(f"continuing from {memory_path}: {agent.memory.summary().splitlines()[0]}")
+
+    def save(outcome) -> None:
+        agent.save(memory_path)
+        print(_describe(outcome), flush=True)
+
+    def show_skip(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"warning: {message}", file=sys.stderr, flush=True)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", SkippedDemonstrationWarning)
+        warnings.showwarning = show_skip
+        report = agent.teach(items, on_change=save)
+    fb = report.feedbacks
+    rewarded = sum(f == 1 for f in fb)
+    print(f"learned {len(report.outcomes)} demonstration(s) in {report.seconds:.1f} s, "
+          f"{len(report.skipped)} skipped; {rewarded}/{len(fb)} answers rewarded.")
+    print(agent.memory.summary())
+    print(f"memory saved to {memory_path}" if report.outcomes else
+          f"memory unchanged ({memory_path})")
+    return 0 if report.outcomes or not report.skipped else 2

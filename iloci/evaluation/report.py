@@ -1,0 +1,191 @@
+"""Write an evaluation's outputs: metrics.json, folds.json, figures and report.md."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import json
+import os
+from pathlib import Path
+import tempfile
+from typing import Any
+
+import numpy as np
+
+from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
+
+__all__ = ["write_outputs", "write_json_atomic", "headline"]
+
+
+def write_json_atomic(path: str | Path, data: Any) -> Path:
+    """Write JSON to a temporary file in the same directory, then rename it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(data, f, indent=2, allow_nan=True)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.2f}"
+
+
+def headline(metrics: dict[str, Any]) -> str:
+    """The headline table (Markdown), also printed by ``iloci evaluate``."""
+    rows = [
+        "| method | CCR (mean ± std, %) | folds |",
+        "|---|---|---|",
+        f"| iloci (ILoCI) | {_pct(metrics['ccr_mean'])} ± {_pct(metrics['ccr_std'])} | "
+        + ", ".join(_pct(c) for c in metrics["ccr_folds"]) + " |",
+        "| paper (Alibeigi et al.) | 91.35 ± 3.51 | |",
+    ]
+    b = metrics.get("baseline")
+    if b:
+        rows.append(f"| DTW 1-NN baseline | {_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])} | "
+                    + ", ".join(_pct(c) for c in b["ccr_folds"]) + " |")
+    m = metrics
+    rows += [
+        "",
+        f"interactions per learning demo {m['interactions_per_demo']['mean']:.2f}; memory "
+        f"{m['entries']['mean']:.1f} entries ({m['exemplars']['mean']:.1f} exemplars, "
+        f"{m['prototypes']['mean']:.1f} prototypes), {m['concepts']['mean']:.1f} concepts; "
+        f"generation error {m['generation_error']['mean']:.4f}; wall "
+        f"{m['wall_seconds']:.1f} s ({m['jobs']} job(s))",
+    ]
+    return "\n".join(rows)
+
+
+def _sparse_table(concepts: Sequence[str], conf: np.ndarray, cmat: np.ndarray) -> list[str]:
+    rows = ["| true concept | predicted concept (confusion %, mean confidence) |",
+            "|---|---|"]
+    for i, c in enumerate(concepts):
+        cells = []
+        for j in np.argsort(-np.nan_to_num(conf[i])):
+            if np.isfinite(conf[i, j]) and conf[i, j] > 0:
+                cells.append(f"{concepts[j]} ({100 * conf[i, j]:.1f}, {cmat[i, j]:.2f})")
+        rows.append(f"| {c} | {'; '.join(cells) or '-'} |")
+    return rows
+
+
+def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[dict]) -> Path:
+    """Write everything to ``out_dir``; return the path of report.md."""
+    from iloci.evaluation import figures
+
+    out = Path(out_dir)
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "metrics.json", metrics)
+    write_json_atomic(out / "folds.json", results)
+
+    true = [t for r in results for t in r["true"]]
+    pred = [p for r in results for p in r["predicted"]]
+    confs = [c for r in results for c in r["confidence"]]
+    concepts = sorted(set(true) | set(pred))
+    conf_m = confusion_matrix(true, pred, concepts)
+    conf_c = confidence_matrix(true, pred, confs, concepts)
+    figures.plot_matrix(conf_m, concepts, fig_dir / "confusion.png",
+                        title="normalised confusion (all folds)", cbar_label="fraction of row")
+    figures.plot_matrix(conf_c, concepts, fig_dir / "confidence.png",
+                        title="mean confidence (all folds)", cbar_label="confidence")
+    figures.plot_reinforcement([r["feedbacks"] for r in results], fig_dir / "reinforcement.png")
+    figures.plot_first_guess([r["first_guess"] for r in results], fig_dir / "first_guess.png")
+    first = results[0]
+    have_pb = bool(first.get("pb_points"))
+    if have_pb:
+        figures.plot_pb_space(np.asarray(first["pb_points"]), first["pb_concepts"],
+                              fig_dir / "pb_space.png", kinds=first["pb_kinds"])
+    if first.get("shapes"):
+        shapes = {k: np.asarray(v) for k, v in sorted(first["shapes"].items())}
+        figures.plot_shapes(shapes, fig_dir / "shapes.png",
+                            title=f"one regenerated shape per concept (fold {first['fold']})")
+    baseline_rows = []
+    if metrics.get("baseline"):
+        bpred = [p for r in results for p in r["baseline_predicted"]]
+        figures.plot_matrix(confusion_matrix(true, bpred, concepts), concepts,
+                            fig_dir / "baseline_confusion.png",
+                            title="DTW 1-NN baseline: normalised confusion",
+                            cbar_label="fraction of row")
+        baseline_rows = ["", "![baseline confusion](figures/baseline_confusion.png)"]
+
+    m = metrics
+    lines = [
+        "# iloci evaluation report",
+        "",
+        f"{len(results)}-fold LASA evaluation (DESIGN.md §6): per fold the learning set is "
+        "shown one demonstration at a time with teacher feedback, then the test set is "
+        "recognized without feedback. Seed "
+        f"{m['seed']}; back ends: "
+        + ", ".join(f"{k} = {v['name']}" for k, v in m["config"].items() if "name" in v)
+        + ".",
+        "",
+        "## Headline",
+        "",
+        headline(m),
+        "",
+        "## Per fold",
+        "",
+        "| fold | learn | test | CCR % | DTW 1-NN % | interactions/demo | exemplars | "
+        "prototypes | concepts | generation error | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for f in m["folds"]:
+        lines.append(
+            f"| {f['fold']} | {f['learn']} | {f['test']} | {_pct(f['ccr'])} | "
+            f"{_pct(f['baseline_ccr']) if np.isfinite(f['baseline_ccr']) else '-'} | "
+            f"{f['interactions_per_demo']:.2f} | {f['exemplars']} | {f['prototypes']} | "
+            f"{f['concepts']} | {f['generation_error']:.4f} | {f['wall_seconds']:.1f} |")
+    lines += [
+        "",
+        "A test demonstration counts as correct when the memory entry nearest to its "
+        "PB_obs stands for a demonstration of the same concept (what the oracle teacher "
+        "would reward). Confidence is the margin `1 - d_best / d_other` (see "
+        "`iloci.concepts.learner.Recognition`).",
+        "",
+        "## Confusion and confidence",
+        "",
+        "![confusion](figures/confusion.png)",
+        "",
+        "![confidence](figures/confidence.png)",
+        "",
+        "Per concept, as in the paper's table (all folds pooled):",
+        "",
+        *_sparse_table(concepts, conf_m, conf_c),
+        "",
+        "## Learning",
+        "",
+        "Reinforcement signal per interaction (backward moving average, window 7; grey: "
+        "folds, blue: mean):",
+        "",
+        "![reinforcement](figures/reinforcement.png)",
+        "",
+        "First-guess accuracy as the memory grows:",
+        "",
+        "![first guess](figures/first_guess.png)",
+        "",
+    ]
+    if have_pb:
+        lines += [f"## PB space (fold {first['fold']})", "",
+                  "Memory PB_rec (large: prototypes, medium: exemplars) and test PB_obs "
+                  "(small), by non-metric MDS; one marker per concept.", "",
+                  "![PB space](figures/pb_space.png)", ""]
+    if first.get("shapes"):
+        lines += ["## Regenerated shapes", "",
+                  "Each concept's lowest-generation-error entry, generated closed-loop from "
+                  "its PB and decoded to the drawing plane (green: start).", "",
+                  "![shapes](figures/shapes.png)", ""]
+    if baseline_rows:
+        lines += ["## Baseline", "", m["baseline"]["method"] + " on the same folds: "
+                  f"{_pct(m['baseline']['ccr_mean'])} ± {_pct(m['baseline']['ccr_std'])} %."]
+        lines += baseline_rows
+    report = out / "report.md"
+    tmp = report.with_suffix(".md.tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, report)
+    return report

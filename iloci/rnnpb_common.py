@@ -1,0 +1,782 @@
+"""What the RNNPB back ends share: the model's definition, input checks, state format.
+
+Numpy only; the torch and JAX back ends (plugins ``iloci-torch`` and
+``iloci-jax``) compute with their own libraries but agree on everything
+here, so a state saved by one loads into the other and both give the same
+``generate`` and ``prediction_error``.
+
+The network (a Jordan-type RNN with parametric bias, Tani's RNNPB at the
+paper's sizes ``D = 6`` inputs, ``C = 25`` context, ``P = 4`` PB, ``H = 60``
+hidden units)::
+
+    h_t     = tanh([x_t, c_t, pb] @ w_in + b_hidden)           (H,)
+    o_t     = tanh(h_t @ w_out + b_out)                        (D + C,)
+    y_t     = o_t[:D]          prediction of step t + 1 of the sequence
+    c_{t+1} = o_t[D:]          next context;  c_0 = 0
+
+A sequence ``s`` of ``T`` rows gives ``T - 1`` predictions ``y_0..y_{T-2}``
+of ``s[1..T-1]``. The input is ``x_0 = s[0]`` and, for ``t >= 1``,
+``x_t = a * y_{t-1} + (1 - a) * s[t]`` with ``a = closed_loop``: ``a = 1``
+runs the network on its own output (closed loop), ``a = 0`` feeds it the
+true previous step (teacher forcing). The *prediction error* of a sequence
+is the mean over its ``T - 1`` steps and ``D`` features of the squared
+difference between ``y_t`` and ``s[t + 1]``, always closed loop (``a = 1``).
+
+Why closed loop: trained teacher-forced, the next delta of a smooth motion
+is almost the current one, so the network predicts well without looking at
+its PB and the PB carries no shape (PB nearest-neighbour accuracy ~17 % on
+LASA). Fed its own output, the network can only reproduce a sequence from
+the initial step, the context and the PB, so the PB must encode the shape.
+
+PB vectors are kept bounded by a reparametrisation: the optimisers move an
+unconstrained ``u`` and ``pb = pb_bound * tanh(u)``, so every PB lies in
+``(-pb_bound, pb_bound)`` without clipping (which would stall gradients).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, fields
+from typing import Any
+
+import numpy as np
+
+from iloci.errors import InvalidInputError
+from iloci.params import RNNPBParams
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "WEIGHT_NAMES",
+    "make_params",
+    "weight_shapes",
+    "init_weights",
+    "check_sequences",
+    "pad_sequences",
+    "bucket",
+    "check_pbs",
+    "check_generate_args",
+    "pb_to_u",
+    "u_to_pb",
+    "make_state",
+    "read_state",
+    "best_starts",
+    "reference_outputs",
+    "reference_prediction_error",
+    "reference_generate",
+]
+
+#: Value of ``state()["format"]``.
+FORMAT = "iloci-rnnpb"
+#: Version of the state layout; bumped when keys or their meaning change.
+FORMAT_VERSION = 1
+#: Weight arrays of a state, in this order.
+WEIGHT_NAMES = ("w_in", "b_hidden", "w_out", "b_out")
+#: Hyper-parameters that must match for a state to be loadable (sizes).
+_SIZE_KEYS = ("input_size", "hidden", "context", "pb")
+
+
+def make_params(**kwargs: Any) -> RNNPBParams:
+    """An :class:`RNNPBParams` from keyword arguments, checked.
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown name or an out-of-range value.
+    """
+    known = {f.name for f in fields(RNNPBParams)}
+    unknown = sorted(set(kwargs) - known)
+    if unknown:
+        raise InvalidInputError(f"unknown RNNPB parameter(s) {', '.join(unknown)}; valid "
+                                f"ones are {', '.join(sorted(known))}.")
+    try:
+        params = RNNPBParams(**kwargs)
+        params.validate()
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(f"invalid RNNPB parameters: {exc}.") from None
+    return params
+
+
+def weight_shapes(input_size: int, hidden: int, context: int, pb: int) -> dict[str, tuple]:
+    """Shapes of the weight arrays.
+
+    Returns
+    -------
+    dict
+        ``w_in`` (D + C + P, H) with rows ordered [input, context, PB];
+        ``b_hidden`` (H,); ``w_out`` (H, D + C) with columns ordered
+        [output, next context]; ``b_out`` (D + C,).
+    """
+    d, h, c, p = input_size, hidden, context, pb
+    return {"w_in": (d + c + p, h), "b_hidden": (h,), "w_out": (h, d + c), "b_out": (d + c,)}
+
+
+def init_weights(params: RNNPBParams, seed: int) -> dict[str, np.ndarray]:
+    """Fresh weights, the same for every back end given the same seed.
+
+    Uniform in ``+-init_scale / sqrt(fan_in)`` (the usual scale for dense
+    layers), biases included.
+
+    Returns
+    -------
+    dict of str to ndarray (float64)
+    """
+    rng = np.random.default_rng(np.random.SeedSequence(int(seed)))
+    shapes = weight_shapes(params.input_size, params.hidden, params.context, params.pb)
+    fan_in = {"w_in": shapes["w_in"][0], "b_hidden": shapes["w_in"][0],
+              "w_out": params.hidden, "b_out": params.hidden}
+    out = {}
+    for name in WEIGHT_NAMES:
+        k = params.init_scale / np.sqrt(fan_in[name])
+        out[name] = rng.uniform(-k, k, size=shapes[name])
+    return out
+
+
+# -- inputs ------------------------------------------------------------------
+
+def check_sequences(sequences: Any, input_size: int, what: str = "sequences",
+                    min_length: int = 2) -> list[np.ndarray]:
+    """Validate a list of sequences and return them as float64 arrays.
+
+    Parameters
+    ----------
+    sequences : sequence of array_like, each (T_i, D)
+    input_size : int
+        ``D``.
+    min_length : int
+        Fewest rows a sequence may have (2: one step to predict).
+
+    Returns
+    -------
+    list of ndarray, each (T_i, D) float64
+
+    Raises
+    ------
+    InvalidInputError
+        Not a list, empty, a sequence not 2-D, of the wrong width, too short,
+        or containing NaN or inf; the message names the sequence.
+    """
+    if isinstance(sequences, np.ndarray) and sequences.ndim == 2:
+        raise InvalidInputError(
+            f"{what} must be a list of (T, {input_size}) arrays, got one 2-D array of shape "
+            f"{sequences.shape}; wrap a single sequence in a list: [sequence].")
+    try:
+        items = list(sequences)
+    except TypeError:
+        raise InvalidInputError(f"{what} must be a list of (T, {input_size}) arrays, got "
+                                f"{type(sequences).__name__}.") from None
+    if not items:
+        raise InvalidInputError(f"{what} is empty; pass at least one (T, {input_size}) "
+                                "sequence.")
+    out = []
+    for i, s in enumerate(items):
+        try:
+            a = np.asarray(s, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"{what}[{i}] is not a numeric array.") from None
+        if a.ndim != 2 or a.shape[1] != input_size:
+            raise InvalidInputError(
+                f"{what}[{i}] has shape {a.shape}; every sequence must have shape "
+                f"(T, {input_size}): one row per step, {input_size} features (the model's "
+                "input_size).")
+        if len(a) < min_length:
+            raise InvalidInputError(
+                f"{what}[{i}] has {len(a)} step(s); at least {min_length} are needed (the "
+                "network predicts each step from the previous one).")
+        if not np.all(np.isfinite(a)):
+            row = int(np.argwhere(~np.isfinite(a))[0, 0])
+            raise InvalidInputError(f"{what}[{i}] contains NaN or inf (first at row {row}); "
+                                    "remove or interpolate missing samples.")
+        out.append(a)
+    return out
+
+
+def pad_sequences(sequences: Sequence[np.ndarray], rows: int | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Stack sequences of different lengths, time-major, with a mask.
+
+    Parameters
+    ----------
+    sequences : list of ndarray, each (T_i, D)
+        Checked sequences.
+    rows : int, optional
+        Batch size to pad to (``>= B``); extra rows are all-zero sequences
+        with an all-zero mask, which contribute nothing to any loss.
+
+    Returns
+    -------
+    X : ndarray, shape (T_max, rows, D)
+        Zero after the end of each sequence.
+    mask : ndarray, shape (T_max - 1, rows)
+        1.0 where step ``t + 1`` of the sequence exists (a prediction to
+        score), else 0.0.
+    """
+    b = len(sequences)
+    rows = b if rows is None else rows
+    t_max = max(len(s) for s in sequences)
+    d = sequences[0].shape[1]
+    X = np.zeros((t_max, rows, d))
+    mask = np.zeros((t_max - 1, rows))
+    for i, s in enumerate(sequences):
+        X[:len(s), i] = s
+        mask[:len(s) - 1, i] = 1.0
+    return X, mask
+
+
+def bucket(n: int, multiple: int = 4) -> int:
+    """``n`` rounded up to a multiple, so compiled back ends reuse their kernels."""
+    return -(-int(n) // multiple) * multiple
+
+
+def check_pbs(pbs: Any, rows: int | None, pb_size: int, what: str = "pbs") -> np.ndarray:
+    """Validate PB vectors.
+
+    Parameters
+    ----------
+    pbs : array_like, shape (B, P)
+    rows : int or None
+        Required ``B`` (None: any, including 0).
+
+    Returns
+    -------
+    ndarray, shape (B, P) float64
+    """
+    try:
+        a = np.asarray(pbs, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{what} must be a numeric array of shape (B, {pb_size}).") \
+            from None
+    if a.ndim == 1 and a.shape == (pb_size,) and rows in (None, 1):
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] != pb_size or (rows is not None and len(a) != rows):
+        want = f"({rows if rows is not None else 'K'}, {pb_size})"
+        raise InvalidInputError(f"{what} must have shape {want}, got {a.shape}: one PB "
+                                "vector per sequence.")
+    if not np.all(np.isfinite(a)):
+        raise InvalidInputError(f"{what} contains NaN or inf.")
+    return a
+
+
+def check_generate_args(pbs: Any, initial_inputs: Any, lengths: Any, input_size: int,
+                        pb_size: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Validate the arguments of ``generate``.
+
+    Returns
+    -------
+    pbs : ndarray, shape (B, P)
+    initial_inputs : ndarray, shape (B, D)
+    lengths : list of int, length B, each >= 1
+    """
+    p = check_pbs(pbs, None, pb_size)
+    if len(p) == 0:
+        raise InvalidInputError("generate needs at least one PB vector.")
+    try:
+        x0 = np.asarray(initial_inputs, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError("initial_inputs must be numeric, shape (B, D).") from None
+    if x0.ndim == 1 and len(p) == 1:
+        x0 = x0[None]
+    if x0.shape != (len(p), input_size):
+        raise InvalidInputError(f"initial_inputs must have shape ({len(p)}, {input_size}) "
+                                f"(one first step per PB), got {x0.shape}.")
+    if not np.all(np.isfinite(x0)):
+        raise InvalidInputError("initial_inputs contains NaN or inf.")
+    try:
+        lens = [int(n) for n in np.atleast_1d(np.asarray(lengths))]
+        if not np.all(np.asarray(lengths) == np.asarray(lens).reshape(np.shape(lengths))):
+            raise ValueError
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"lengths must be {len(p)} whole numbers.") from None
+    if len(lens) != len(p) or min(lens) < 1:
+        raise InvalidInputError(f"lengths must be {len(p)} integers >= 1 (steps to produce "
+                                f"per PB, the first being the initial input), got {lens}.")
+    return p, x0, lens
+
+
+# -- PB reparametrisation ----------------------------------------------------
+
+def pb_to_u(pbs: np.ndarray, bound: float) -> np.ndarray:
+    """Unconstrained parameters of PB vectors (inverse of :func:`u_to_pb`).
+
+    PBs at or beyond the bound are pulled just inside it, where ``atanh`` is
+    finite.
+    """
+    r = np.clip(np.asarray(pbs, dtype=np.float64) / bound, -0.999, 0.999)
+    return np.arctanh(r)
+
+
+def u_to_pb(u: np.ndarray, bound: float) -> np.ndarray:
+    """``pb = bound * tanh(u)``: every PB inside ``(-bound, bound)``."""
+    return bound * np.tanh(np.asarray(u, dtype=np.float64))
+
+
+# -- state ---------------------------------------------------------------------
+
+def make_state(params: RNNPBParams, weights: Mapping[str, np.ndarray], pbs: np.ndarray,
+               backend: str) -> dict[str, np.ndarray]:
+    """The state dict of a model: weights, stored PBs, settings, format tag.
+
+    Every value is a numpy array (strings as 0-d unicode arrays), so the
+    dict saves with ``np.savez`` and loads with ``allow_pickle=False``.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``format``, ``version``, ``backend``; the weights (float64);
+        ``pbs`` (K, P), the PBs learned by the last training (the default
+        starts of recognition); ``param.NAME`` for every hyper-parameter.
+    """
+    out: dict[str, np.ndarray] = {
+        "format": np.array(FORMAT),
+        "version": np.array(FORMAT_VERSION),
+        "backend": np.array(backend),
+        "pbs": np.array(pbs, dtype=np.float64).reshape(-1, params.pb),
+    }
+    for name in WEIGHT_NAMES:
+        out[name] = np.array(weights[name], dtype=np.float64)
+    for key, value in asdict(params).items():
+        out[f"param.{key}"] = np.array(value)
+    return out
+
+
+def read_state(state: Mapping[str, Any], params: RNNPBParams
+               ) -> tuple[dict[str, np.ndarray], np.ndarray, RNNPBParams]:
+    """Check a state dict and take it apart.
+
+    The sizes (``input_size``, ``hidden``, ``context``, ``pb``) of the state
+    replace those of ``params``; so do the other stored hyper-parameters,
+    so a loaded model trains and recognizes as the saved one did. ``dtype``
+    stays the loading model's (a float64 state runs in float32 and back).
+
+    Returns
+    -------
+    weights : dict of str to ndarray (float64)
+    pbs : ndarray, shape (K, P)
+    params : RNNPBParams
+
+    Raises
+    ------
+    InvalidInputError
+        Not a mapping, not an RNNPB state, a newer format version, missing
+        keys, or arrays whose shapes do not match the stored sizes.
+    """
+    if not isinstance(state, Mapping):
+        raise InvalidInputError(f"state must be a dict of arrays as returned by state(), got "
+                                f"{type(state).__name__}.")
+    fmt = str(np.asarray(state.get("format", "")))
+    if fmt != FORMAT:
+        raise InvalidInputError(f"not an RNNPB state (format {fmt!r}, expected {FORMAT!r}); "
+                                "pass the dict returned by state() of torch-rnnpb or "
+                                "jax-rnnpb.")
+    try:
+        version = int(np.asarray(state["version"]))
+    except (KeyError, TypeError, ValueError):
+        raise InvalidInputError("RNNPB state has no integer 'version'.") from None
+    if version > FORMAT_VERSION:
+        raise InvalidInputError(f"RNNPB state version {version} is newer than this iloci "
+                                f"reads ({FORMAT_VERSION}); upgrade iloci.")
+    values = asdict(params)
+    for f in fields(RNNPBParams):
+        key = f"param.{f.name}"
+        if key in state and f.name != "dtype":
+            v = np.asarray(state[key])
+            values[f.name] = type(values[f.name])(v.item() if v.ndim == 0 else v)
+    try:
+        new = RNNPBParams(**values)
+        new.validate()
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(f"RNNPB state holds invalid settings: {exc}.") from None
+    shapes = weight_shapes(new.input_size, new.hidden, new.context, new.pb)
+    weights = {}
+    for name in WEIGHT_NAMES:
+        if name not in state:
+            raise InvalidInputError(f"RNNPB state lacks {name!r}.")
+        a = np.array(state[name], dtype=np.float64)
+        if a.shape != shapes[name]:
+            raise InvalidInputError(f"RNNPB state {name!r} has shape {a.shape}, expected "
+                                    f"{shapes[name]} for sizes input_size={new.input_size}, "
+                                    f"hidden={new.hidden}, context={new.context}, pb={new.pb}.")
+        if not np.all(np.isfinite(a)):
+            raise InvalidInputError(f"RNNPB state {name!r} contains NaN or inf.")
+        weights[name] = a
+    pbs = check_pbs(state.get("pbs", np.zeros((0, new.pb))), None, new.pb, "state 'pbs'")
+    return weights, pbs, new
+
+
+# -- recognition -------------------------------------------------------------
+
+def best_starts(errors: np.ndarray, n: int) -> np.ndarray:
+    """Indices of the ``n`` lowest errors per row (ties: lower index first).
+
+    Parameters
+    ----------
+    errors : ndarray, shape (B, K)
+        Prediction error of each sequence under each candidate PB.
+
+    Returns
+    -------
+    ndarray of int, shape (B, min(n, K))
+    """
+    return np.argsort(errors, axis=1, kind="stable")[:, :min(n, errors.shape[1])]
+
+
+# -- the reference forward pass (numpy, float64) --------------------------------
+
+def reference_outputs(weights: Mapping[str, np.ndarray], pbs: np.ndarray, X: np.ndarray,
+                      closed_loop: float = 1.0) -> np.ndarray:
+    """Predictions of the network, plain numpy: the model's definition in code.
+
+    Parameters
+    ----------
+    weights : dict of ndarray
+        As :func:`init_weights` returns.
+    pbs : ndarray, shape (B, P)
+    X : ndarray, shape (T, B, D)
+        Padded sequences (time-major).
+    closed_loop : float
+        ``a`` of the module docstring.
+
+    Returns
+    -------
+    ndarray, shape (T - 1, B, D)
+        ``y_t``, the prediction of ``X[t + 1]``.
+    """
+    d = X.shape[2]
+    w_in, w_out = weights["w_in"], weights["w_out"]
+    c = np.zeros((X.shape[1], w_out.shape[1] - d))
+    pre = pbs @ w_in[d + c.shape[1]:] + weights["b_hidden"]
+    x = X[0]
+    ys = []
+    for t in range(X.shape[0] - 1):
+        h = np.tanh(np.hstack([x, c]) @ w_in[:d + c.shape[1]] + pre)
+        o = np.tanh(h @ w_out + weights["b_out"])
+        y, c = o[:, :d], o[:, d:]
+        ys.append(y)
+        x = closed_loop * y + (1.0 - closed_loop) * X[t + 1]
+    return np.stack(ys)
+
+
+def reference_prediction_error(weights: Mapping[str, np.ndarray],
+                               sequences: Sequence[np.ndarray], pbs: np.ndarray) -> np.ndarray:
+    """Closed-loop prediction error per sequence (numpy reference), shape (B,)."""
+    X, mask = pad_sequences(sequences)
+    Y = reference_outputs(weights, pbs, X)
+    se = ((Y - X[1:]) ** 2).mean(axis=2) * mask
+    return se.sum(axis=0) / mask.sum(axis=0)
+
+
+def reference_generate(weights: Mapping[str, np.ndarray], pbs: np.ndarray,
+                       initial_inputs: np.ndarray, lengths: Sequence[int]) -> list[np.ndarray]:
+    """Closed-loop generation (numpy reference); list of (T_i, D) arrays."""
+    t_max = max(lengths)
+    X = np.zeros((t_max, len(pbs), initial_inputs.shape[1]))
+    X[0] = initial_inputs
+    Y = reference_outputs(weights, pbs, X)
+    full = np.concatenate([X[:1], Y], axis=0)
+    return [full[:n, i].copy() for i, n in enumerate(lengths)]
+
+
+# -- the shared front end of both back ends ------------------------------------
+
+class RNNPBBase:
+    """The public side of an RNNPB back end: checks, batching, multi-start, state.
+
+    A back end (``TorchRNNPB``, ``JaxRNNPB``) inherits this and supplies the
+    numeric kernels below, working on padded, time-major numpy arrays; so
+    both back ends check inputs, pad, bucket, choose recognition starts and
+    save state in exactly the same way, and differ only in arithmetic.
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the initial weights (the same weights in every back end).
+        Training and recognition are full-batch and deterministic.
+    **params
+        Fields of :class:`iloci.params.RNNPBParams`.
+
+    Attributes
+    ----------
+    input_size : int
+        ``D``.
+    pb_size : int
+        ``P``.
+    params : RNNPBParams
+    pbs_ : ndarray, shape (K, P)
+        PBs learned by the last :meth:`train` (or restored by
+        :meth:`load_state`); the default starts of :meth:`recognize`.
+    train_loss_ : float
+        Training loss (mean squared error, at the training's ``closed_loop``)
+        after the last epoch of the last :meth:`train`.
+    """
+
+    #: Name of the back end, stored in ``state()["backend"]``.
+    backend = "numpy"
+    #: Sequences are padded to a multiple of this many rows so compiled
+    #: kernels are reused as the memory grows one entry at a time.
+    batch_multiple = 4
+    #: Most rows scored at once when ranking candidate PBs.
+    score_chunk = 8192
+
+    def __init__(self, *, seed: int = 0, **params: Any) -> None:
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise InvalidInputError(f"seed must be an integer, got {seed!r}.")
+        self.params = make_params(**params)
+        self.seed = int(seed)
+        self._setup()
+        self._set_weights(init_weights(self.params, self.seed))
+        self.pbs_ = np.zeros((0, self.params.pb))
+        self.train_loss_ = float("nan")
+
+    @property
+    def input_size(self) -> int:
+        return self.params.input_size
+
+    @property
+    def pb_size(self) -> int:
+        return self.params.pb
+
+    def __repr__(self) -> str:
+        p = self.params
+        return (f"{type(self).__name__}(D={p.input_size}, H={p.hidden}, C={p.context}, "
+                f"P={p.pb}, dtype={p.dtype}, seed={self.seed}, stored_pbs={len(self.pbs_)})")
+
+    # -- kernels a back end supplies -------------------------------------------
+
+    def _setup(self) -> None:
+        """(Re)build whatever depends on ``self.params`` (sizes, dtype)."""
+
+    def _set_weights(self, weights: Mapping[str, np.ndarray]) -> None:
+        raise NotImplementedError
+
+    def _get_weights(self) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _train_kernel(self, X: np.ndarray, mask: np.ndarray, weight: np.ndarray,
+                      u: np.ndarray, epochs: int) -> tuple[np.ndarray, float]:
+        """Full-batch Adam on weights and PBs; returns the new ``u`` and final loss.
+
+        ``X`` (T, R, D), ``mask`` (T - 1, R), ``weight`` (R,) per-sequence
+        factor of the loss (``1 / (T_i - 1) / B``, 0 for padding rows),
+        ``u`` (R, P). Updates the weights in place.
+        """
+        raise NotImplementedError
+
+    def _recognize_kernel(self, X: np.ndarray, mask: np.ndarray, weight: np.ndarray,
+                          u: np.ndarray) -> np.ndarray:
+        """Adam on ``u`` (R, P) alone, weights frozen; returns the new ``u``."""
+        raise NotImplementedError
+
+    def _error_kernel(self, X: np.ndarray, mask: np.ndarray, pbs: np.ndarray,
+                      exact: bool) -> np.ndarray:
+        """Closed-loop prediction error per row (R,); float64 when ``exact``."""
+        raise NotImplementedError
+
+    def _generate_kernel(self, pbs: np.ndarray, x0: np.ndarray, steps: int) -> np.ndarray:
+        """Closed-loop outputs ``y_0..y_{steps-1}``, shape (steps, B, D), float64."""
+        raise NotImplementedError
+
+    # -- public API ------------------------------------------------------------
+
+    def _padded(self, seqs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        rows = bucket(len(seqs), self.batch_multiple)
+        X, mask = pad_sequences(seqs, rows)
+        steps = mask.sum(axis=0)
+        per_seq = np.divide(1.0, steps, out=np.zeros(rows), where=steps > 0)
+        return X, mask, per_seq
+
+    def train(self, sequences: Sequence[np.ndarray], pbs_init: np.ndarray | None = None,
+              epochs: int | None = None) -> np.ndarray:
+        """Train the weights and one PB per sequence, continuing from the current weights.
+
+        Full-batch Adam (``learning_rate`` for weights, ``pb_learning_rate``
+        for PBs) on the mean over sequences of each sequence's mean squared
+        prediction error, run at ``closed_loop`` (1: the network's own
+        output is its next input), back-propagated through time over every
+        sequence at once (different lengths are masked). The weight
+        gradient's global norm is clipped to ``grad_clip``. Adam's moments
+        start afresh at each call; the weights do not.
+
+        Parameters
+        ----------
+        sequences : list of ndarray, each (T_i, D), T_i >= 2
+        pbs_init : ndarray, shape (B, P), optional
+            Starting PBs (e.g. the stored PBs of rehearsed entries); zeros
+            when omitted. Pulled inside ``(-pb_bound, pb_bound)``.
+        epochs : int, optional
+            Full-batch steps; defaults to ``params.epochs``. 0 leaves the
+            model unchanged.
+
+        Returns
+        -------
+        ndarray, shape (B, P)
+            The learned PB of each sequence (also kept as :attr:`pbs_`).
+
+        Raises
+        ------
+        InvalidInputError
+            Empty list, NaN or inf, wrong width, a sequence shorter than 2
+            steps, ``pbs_init`` of the wrong shape, negative ``epochs``.
+        """
+        seqs = check_sequences(sequences, self.input_size)
+        b = len(seqs)
+        if pbs_init is None:
+            pbs0 = np.zeros((b, self.pb_size))
+        else:
+            pbs0 = check_pbs(pbs_init, b, self.pb_size, "pbs_init")
+        n = self.params.epochs if epochs is None else epochs
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise InvalidInputError(f"epochs must be an integer >= 0, got {epochs!r}.")
+        X, mask, per_seq = self._padded(seqs)
+        u = np.zeros((X.shape[1], self.pb_size))
+        u[:b] = pb_to_u(pbs0, self.params.pb_bound)
+        if n > 0:
+            u, self.train_loss_ = self._train_kernel(X, mask, per_seq / b, u, int(n))
+        pbs = u_to_pb(u[:b], self.params.pb_bound)
+        self.pbs_ = pbs.copy()
+        return pbs
+
+    def _score(self, seqs: list[np.ndarray], cands: np.ndarray) -> np.ndarray:
+        """Prediction error (compute dtype) of every sequence under every candidate, (B, K)."""
+        b, k = len(seqs), len(cands)
+        out = np.empty((b, k))
+        per = max(1, self.score_chunk // k)
+        for lo in range(0, b, per):
+            part = seqs[lo:lo + per]
+            X, mask, _ = self._padded(part)
+            rows = bucket(len(part) * k, self.batch_multiple)
+            Xr = np.zeros((X.shape[0], rows, X.shape[2]))
+            mr = np.zeros((mask.shape[0], rows))
+            pr = np.zeros((rows, self.pb_size))
+            Xr[:, :len(part) * k] = np.repeat(X[:, :len(part)], k, axis=1)
+            mr[:, :len(part) * k] = np.repeat(mask[:, :len(part)], k, axis=1)
+            pr[:len(part) * k] = np.tile(cands, (len(part), 1))
+            err = self._error_kernel(Xr, mr, pr, exact=False)
+            out[lo:lo + len(part)] = err[:len(part) * k].reshape(len(part), k)
+        return out
+
+    def recognize(self, sequences: Sequence[np.ndarray],
+                  candidate_pbs: np.ndarray | None = None) -> np.ndarray:
+        """Find the PB of each sequence, the weights frozen (PB_obs / PB_rec).
+
+        Multi-start: every candidate PB (``candidate_pbs``, else the stored
+        :attr:`pbs_`, plus the zero PB) is scored by its closed-loop
+        prediction error on the sequence; the ``recognition_starts`` best
+        are refined by ``recognition_steps`` of Adam on the PB
+        (``recognition_learning_rate``), all sequences and starts in one
+        batch; each sequence gets the refined PB with the lowest prediction
+        error. Starting from zero alone stalls in local minima.
+
+        Parameters
+        ----------
+        sequences : list of ndarray, each (T_i, D), T_i >= 2
+        candidate_pbs : ndarray, shape (K, P), optional
+            Known PBs to start from (e.g. the PBs of the memory's entries).
+
+        Returns
+        -------
+        ndarray, shape (B, P)
+
+        Raises
+        ------
+        InvalidInputError
+            Bad sequences (see :meth:`train`) or candidates not (K, P).
+        """
+        seqs = check_sequences(sequences, self.input_size)
+        if candidate_pbs is None:
+            cands = self.pbs_
+        else:
+            cands = check_pbs(candidate_pbs, None, self.pb_size, "candidate_pbs")
+        bound = self.params.pb_bound
+        # candidates live in the bounded PB space; the zero PB is the
+        # neutral start and costs one column
+        cands = np.clip(np.vstack([cands, np.zeros((1, self.pb_size))]),
+                        -0.999 * bound, 0.999 * bound)
+        b = len(seqs)
+        idx = best_starts(self._score(seqs, cands), self.params.recognition_starts)
+        n = idx.shape[1]
+        starts = cands[idx].reshape(b * n, self.pb_size)
+        rep = [s for s in seqs for _ in range(n)]
+        X, mask, per_seq = self._padded(rep)
+        u = np.zeros((X.shape[1], self.pb_size))
+        u[:b * n] = pb_to_u(starts, bound)
+        if self.params.recognition_steps > 0:
+            u = self._recognize_kernel(X, mask, per_seq, u)
+        pbs = u_to_pb(u[:b * n], bound)
+        err = self._error_kernel(X, mask, np.vstack([pbs, np.zeros((len(u) - b * n,
+                                                                    self.pb_size))]),
+                                 exact=False)[:b * n].reshape(b, n)
+        best = np.argmin(err, axis=1)
+        return pbs.reshape(b, n, self.pb_size)[np.arange(b), best].copy()
+
+    def generate(self, pbs: np.ndarray, initial_inputs: np.ndarray,
+                 lengths: Sequence[int]) -> list[np.ndarray]:
+        """Run the network closed-loop from each PB (float64).
+
+        Parameters
+        ----------
+        pbs : ndarray, shape (B, P)
+        initial_inputs : ndarray, shape (B, D)
+            First step of each sequence (the paper's initialInfo).
+        lengths : sequence of int, length B
+            Steps ``T_i >= 1`` to produce, the first being the initial input.
+
+        Returns
+        -------
+        list of ndarray, each (T_i, D)
+        """
+        p, x0, lens = check_generate_args(pbs, initial_inputs, lengths, self.input_size,
+                                          self.pb_size)
+        steps = max(lens) - 1
+        if steps == 0:
+            return [x0[i:i + 1].copy() for i in range(len(p))]
+        Y = self._generate_kernel(p, x0, steps)
+        full = np.concatenate([x0[None], Y], axis=0)
+        return [np.ascontiguousarray(full[:n, i]) for i, n in enumerate(lens)]
+
+    def prediction_error(self, sequences: Sequence[np.ndarray], pbs: np.ndarray) -> np.ndarray:
+        """Closed-loop prediction error of each sequence under its PB (float64).
+
+        The network starts from the sequence's first step and runs on its
+        own output; the error is the mean over the ``T_i - 1`` predicted
+        steps and ``D`` features of the squared difference.
+
+        Parameters
+        ----------
+        sequences : list of ndarray, each (T_i, D), T_i >= 2
+        pbs : ndarray, shape (B, P)
+
+        Returns
+        -------
+        ndarray, shape (B,)
+        """
+        seqs = check_sequences(sequences, self.input_size)
+        p = check_pbs(pbs, len(seqs), self.pb_size)
+        X, mask, _ = self._padded(seqs)
+        pr = np.zeros((X.shape[1], self.pb_size))
+        pr[:len(p)] = p
+        return self._error_kernel(X, mask, pr, exact=True)[:len(seqs)].copy()
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Weights, stored PBs and settings as a flat dict of numpy arrays (no pickle).
+
+        Loads into either back end (see :func:`make_state` for the keys).
+        """
+        return make_state(self.params, self._get_weights(), self.pbs_, self.backend)
+
+    def load_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore what :meth:`state` returned, from this or the other back end.
+
+        The state's sizes and settings replace this model's (except
+        ``dtype``).
+
+        Raises
+        ------
+        InvalidInputError
+            Not an RNNPB state, a newer version, or inconsistent arrays.
+        """
+        weights, pbs, params = read_state(state, self.params)
+        if params != self.params:
+            self.params = params
+            self._setup()
+        self._set_weights(weights)
+        self.pbs_ = pbs.copy()

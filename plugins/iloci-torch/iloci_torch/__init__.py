@@ -1,0 +1,15 @@
+"""iloci plugin: the ``torch-rnnpb`` PerceptualModel (RNNPB in PyTorch).
+
+Light on import: torch is imported only when the model is built.
+"""
+
+from iloci import hookimpl
+from iloci.params import RNNPBParams
+
+
+@hookimpl
+def iloci_register_perceptual_models(registry) -> None:
+    registry.add("torch-rnnpb", "iloci_torch.rnnpb:TorchRNNPB", params=RNNPBParams,
+                 requires=("torch",), install="pip install ./plugins/iloci-torch",
+                 summary="RNNPB in PyTorch: hand-written batched closed-loop BPTT, "
+                         "multi-start recognition")

@@ -1,0 +1,321 @@
+"""The RNNPB in PyTorch: hand-written batched BPTT, no autograd.
+
+The model is defined in :mod:`iloci.rnnpb_common`. A training step runs
+every sequence at once over padded, time-major tensors: per time step the
+forward pass is two ``addmm`` + ``sigmoid`` and the backward pass two
+matrix products and two element-wise products, all written into buffers
+allocated once per batch shape; the weight gradients are then single
+matrix products over all steps. Autograd would record and replay ~20 nodes
+per step and allocate every intermediate, which is what makes a naive
+eager RNN slow on a CPU.
+
+Two details for speed, both exact algebra: ``tanh(z) = 2 sigmoid(2z) - 1``
+(PyTorch's CPU ``sigmoid`` is several times faster than its ``tanh``), with
+the ``2 q - 1`` folded into the next product's weights and bias; and the
+weights live in one flat tensor so Adam and gradient clipping are a handful
+of vector operations.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+
+import numpy as np
+import torch
+
+from iloci.errors import IlociError
+from iloci.rnnpb_common import WEIGHT_NAMES, RNNPBBase, weight_shapes
+
+__all__ = ["TorchRNNPB"]
+
+_B1, _B2, _EPS = 0.9, 0.999, 1e-8
+
+
+@contextmanager
+def _one_thread() -> Iterator[None]:
+    """Run torch single-threaded inside, restoring the caller's setting after.
+
+    The per-step matrices (tens of rows) are too small to split: extra
+    OpenMP threads only add synchronisation, and when the cores are busy
+    with other work their spin-waits slow a training step down a hundredfold.
+    """
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+class _Net:
+    """Flat weights of one dtype and the forward/backward passes over them.
+
+    Parameters
+    ----------
+    weights : dict of ndarray (float64)
+    sizes : (D, H, C, P)
+    dtype : torch.dtype
+    """
+
+    def __init__(self, weights: Mapping[str, np.ndarray], sizes: tuple[int, int, int, int],
+                 dtype: torch.dtype) -> None:
+        self.d, self.h, self.c, self.p = sizes
+        self.s = self.d + self.c
+        self.dtype = dtype
+        shapes = weight_shapes(*sizes)
+        n = sum(int(np.prod(shapes[k])) for k in WEIGHT_NAMES)
+        self.flat = torch.empty(n, dtype=dtype)
+        self.views = self.split(self.flat)
+        for k in WEIGHT_NAMES:
+            self.views[k].copy_(torch.from_numpy(np.asarray(weights[k], dtype=np.float64)))
+        self._work: OrderedDict = OrderedDict()
+
+    def split(self, flat: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Views of a flat vector shaped like the weights."""
+        shapes = weight_shapes(self.d, self.h, self.c, self.p)
+        out, i = {}, 0
+        for k in WEIGHT_NAMES:
+            n = int(np.prod(shapes[k]))
+            out[k] = flat[i:i + n].view(shapes[k])
+            i += n
+        return out
+
+    def numpy(self) -> dict[str, np.ndarray]:
+        return {k: v.detach().numpy().astype(np.float64) for k, v in self.views.items()}
+
+    def workspace(self, steps: int, rows: int) -> dict[str, torch.Tensor]:
+        """Buffers for ``steps`` predictions of ``rows`` sequences (reused)."""
+        key = (steps, rows)
+        ws = self._work.get(key)
+        if ws is None:
+            e = lambda *shape: torch.empty(*shape, dtype=self.dtype)  # noqa: E731
+            L, R, S, H = steps, rows, self.s, self.h
+            ws = {"H": e(L, R, H), "Q": e(L, R, H), "R": e(L, R, S), "O": e(L, R, S),
+                  "G": e(L, R, S), "DZ": e(L, R, H), "dtO": e(L, R, S), "dtH": e(L, R, H), "IN": e(L, R, S),
+                  "diff": e(L, R, self.d), "pre": e(R, H), "preR": e(R, H),
+                  "w_r": e(S, H), "w_o4": e(H, S), "b_o2": e(S), "w_oT": e(S, H),
+                  "w_sT": e(H, S), "sdz": e(R, H), "grad": torch.empty_like(self.flat)}
+            # per-step views, made once: indexing in the loop costs as much as the maths
+            for name in ("Q", "R", "G", "DZ", "dtO", "dtH"):
+                ws[name + "_t"] = ws[name].unbind(0)
+            self._work[key] = ws
+            while len(self._work) > 6:  # bound the memory held for past batch shapes
+                self._work.popitem(last=False)
+        else:
+            self._work.move_to_end(key)
+        return ws
+
+    def forward(self, pb: torch.Tensor, X: torch.Tensor, alpha: float,
+                ws: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Run the network; fills ``ws["Q"]``, ``ws["R"]``; returns ``O`` (L, R, S).
+
+        Both layers use ``tanh(z) = 2 sigmoid(2 z) - 1``: the buffers hold
+        ``q_t = sigmoid(2 z_h)`` (``h_t = 2 q_t - 1``) and ``r_t = sigmoid(2 z_o)``
+        (``o_t = 2 r_t - 1``), and the affine ``2 x - 1`` is folded into the
+        next product's weights and bias: with
+        ``s_{t+1} = o_t * mix + (1 - alpha) [X_{t+1}, 0]``,
+
+        - ``2 z_h = r_{t-1} @ (4 mix w_s) + 2 (pre - mix @ w_s + (1 - alpha) X_t @ w_s[:D])``
+        - ``2 z_o = q_t @ (4 w_out) + 2 (b_out - sum_rows(w_out))``
+        """
+        v, d = self.views, self.d
+        w_s = v["w_in"][:self.s]
+        L = X.shape[0] - 1
+        Qs, Rs = ws["Q_t"], ws["R_t"]
+        pre = torch.addmm(v["b_hidden"], pb, v["w_in"][self.s:], out=ws["pre"])
+        mix = torch.ones(self.s, dtype=self.dtype)
+        mix[:d] = alpha
+        torch.mul(w_s, (4.0 * mix)[:, None], out=ws["w_r"])
+        torch.sub(pre, mix @ w_s, out=ws["preR"]).mul_(2.0)
+        torch.mul(v["w_out"], 4.0, out=ws["w_o4"])
+        torch.sub(v["b_out"], v["w_out"].sum(dim=0), out=ws["b_o2"]).mul_(2.0)
+        if alpha != 1.0:
+            # teacher-forced share of every step's input, one product for all steps
+            forced = torch.matmul(X[1:L], w_s[:d]).mul_(2.0 * (1.0 - alpha)).add_(ws["preR"])
+            biases = forced.unbind(0)
+        else:
+            biases = [ws["preR"]] * max(L - 1, 0)
+        torch.addmm(pre, X[0], w_s[:d], beta=2.0, alpha=2.0, out=Qs[0]).sigmoid_()
+        w_r, w_o4, b_o2 = ws["w_r"], ws["w_o4"], ws["b_o2"]
+        torch.addmm(b_o2, Qs[0], w_o4, out=Rs[0]).sigmoid_()
+        for t in range(1, L):
+            torch.addmm(biases[t - 1], Rs[t - 1], w_r, out=Qs[t]).sigmoid_()
+            torch.addmm(b_o2, Qs[t], w_o4, out=Rs[t]).sigmoid_()
+        return torch.mul(ws["R"], 2.0, out=ws["O"]).sub_(1.0)
+
+    def errors(self, pb: torch.Tensor, X: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """Closed-loop mean squared prediction error per row, shape (R,)."""
+        ws = self.workspace(X.shape[0] - 1, X.shape[1])
+        O = self.forward(pb, X, 1.0, ws)
+        diff = torch.sub(O[:, :, :self.d], X[1:], out=ws["diff"])
+        se = diff.square_().mean(dim=2).mul_(mask)
+        return se.sum(dim=0) / mask.sum(dim=0).clamp_(min=1.0)
+
+    def loss_and_grads(self, pb: torch.Tensor, X: torch.Tensor, mask_w: torch.Tensor,
+                       alpha: float, weights_too: bool
+                       ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """Loss ``sum mask_w * mean_D (y - x)^2`` and its gradients (hand-written BPTT).
+
+        ``mask_w`` (L, R) is the mask times each row's loss weight. Returns
+        (loss, flat weight gradient or None, dL/dpb (R, P)).
+        """
+        L, R = X.shape[0] - 1, X.shape[1]
+        d, v = self.d, self.views
+        ws = self.workspace(L, R)
+        O = self.forward(pb, X, alpha, ws)
+        diff = torch.sub(O[:, :, :d], X[1:], out=ws["diff"])
+        mw = mask_w.unsqueeze(2)
+        loss = torch.sum(diff.square().mul_(mw)) / d
+        G = ws["G"]
+        G.zero_()
+        torch.mul(diff, mw, out=G[:, :, :d]).mul_(2.0 / d)
+        Rr, Q = ws["R"], ws["Q"]
+        # d tanh / d z = 1 - tanh^2 = 4 r (1 - r) for r = sigmoid(2 z)
+        torch.mul(Rr, Rr, out=ws["dtO"]).sub_(Rr).mul_(-4.0)
+        torch.mul(Q, Q, out=ws["dtH"]).sub_(Q).mul_(-4.0)
+        ws["w_oT"].copy_(v["w_out"].T)
+        mix = torch.ones(self.s, dtype=self.dtype)
+        mix[:d] = alpha
+        torch.mul(v["w_in"][:self.s].T, mix, out=ws["w_sT"])
+        Gt, DZt, dtO, dtH = ws["G_t"], ws["DZ_t"], ws["dtO_t"], ws["dtH_t"]
+        w_oT, w_sT = ws["w_oT"], ws["w_sT"]
+        for t in range(L - 1, -1, -1):
+            go = Gt[t].mul_(dtO[t])                       # G[t] becomes dL/dz_o
+            dz = torch.mm(go, w_oT, out=DZt[t]).mul_(dtH[t])
+            if t > 0:                                     # through s_t = o_{t-1} * mix + ...
+                Gt[t - 1].addmm_(dz, w_sT)
+        sdz = torch.sum(ws["DZ"], dim=0, out=ws["sdz"])
+        g_pb = sdz @ v["w_in"][self.s:].T
+        if not weights_too:
+            return loss, None, g_pb
+        grad = ws["grad"]
+        gv = self.split(grad)
+        S, H = self.s, self.h
+        Hh = torch.mul(Q, 2.0, out=ws["H"]).sub_(1.0)
+        torch.mm(Hh.view(-1, H).T, G.view(-1, S), out=gv["w_out"])
+        torch.sum(G.view(-1, S), dim=0, out=gv["b_out"])
+        IN = ws["IN"]
+        IN[0, :, :d] = X[0]
+        IN[0, :, d:] = 0.0
+        if L > 1:
+            torch.mul(O[:-1], mix, out=IN[1:])
+            if alpha != 1.0:
+                IN[1:, :, :d].add_(X[1:L], alpha=1.0 - alpha)
+        torch.mm(IN.view(-1, S).T, ws["DZ"].view(-1, H), out=gv["w_in"][:S])
+        torch.mm(pb.T, sdz, out=gv["w_in"][S:])
+        torch.sum(sdz, dim=0, out=gv["b_hidden"])
+        return loss, grad, g_pb
+
+
+def _adam(p: torch.Tensor, g: torch.Tensor, m: torch.Tensor, v: torch.Tensor,
+          den: torch.Tensor, t: int, lr: float) -> None:
+    m.mul_(_B1).add_(g, alpha=1.0 - _B1)
+    v.mul_(_B2).addcmul_(g, g, value=1.0 - _B2)
+    step = lr * (1.0 - _B2 ** t) ** 0.5 / (1.0 - _B1 ** t)
+    p.addcdiv_(m, torch.sqrt(v, out=den).add_(_EPS), value=-step)
+
+
+class TorchRNNPB(RNNPBBase):
+    """RNNPB (recurrent network with parametric bias) in PyTorch.
+
+    Implements :class:`iloci.interfaces.PerceptualModel`; the public
+    methods and their contract are documented in
+    :class:`iloci.rnnpb_common.RNNPBBase`, the network in
+    :mod:`iloci.rnnpb_common`. Runs on the CPU, single-threaded (the
+    caller's ``torch.set_num_threads`` is restored after each call).
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the initial weights (identical to the JAX back end's).
+    **params
+        Fields of :class:`iloci.params.RNNPBParams` (sizes, epochs, learning
+        rates, ``closed_loop``, ``dtype``, ...).
+
+    Examples
+    --------
+    >>> model = TorchRNNPB(seed=0, epochs=300)        # doctest: +SKIP
+    >>> pbs = model.train(sequences)                  # (B, 4)
+    >>> pb_obs = model.recognize([new_sequence])      # (1, 4)
+    """
+
+    backend = "torch"
+
+    def _setup(self) -> None:
+        self._dtype = torch.float64 if self.params.dtype == "float64" else torch.float32
+        p = self.params
+        self._sizes = (p.input_size, p.hidden, p.context, p.pb)
+
+    def _set_weights(self, weights: Mapping[str, np.ndarray]) -> None:
+        self._net = _Net(weights, self._sizes, self._dtype)
+        self._net64 = self._net if self._dtype == torch.float64 else None
+
+    def _get_weights(self) -> dict[str, np.ndarray]:
+        return self._net.numpy()
+
+    def _exact(self) -> _Net:
+        if self._net64 is None:
+            self._net64 = _Net(self._net.numpy(), self._sizes, torch.float64)
+        return self._net64
+
+    def _t(self, a: np.ndarray, dtype: torch.dtype | None = None) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a)).to(dtype or self._dtype)
+
+    def _train_kernel(self, X, mask, weight, u, epochs):
+        p = self.params
+        net = self._net
+        backup = net.flat.clone()
+        Xt, mw = self._t(X), self._t(mask * weight[None, :])
+        ut = self._t(u)
+        m, v, den = (torch.zeros_like(net.flat) for _ in range(3))
+        mu, vu, denu = (torch.zeros_like(ut) for _ in range(3))
+        bound, clip = p.pb_bound, p.grad_clip
+        with torch.no_grad(), _one_thread():
+            for t in range(1, epochs + 1):
+                th = torch.tanh(ut)
+                loss, g, gpb = net.loss_and_grads(th * bound, Xt, mw, p.closed_loop, True)
+                gu = gpb.mul_(th.square_().neg_().add_(1.0)).mul_(bound)
+                norm = torch.linalg.vector_norm(g)
+                g.mul_(torch.clamp(clip / (norm + 1e-12), max=1.0))
+                f = p.learning_rate_decay ** ((t - 1) / epochs)
+                ramp = min(1.0, t / p.warmup_epochs) if p.warmup_epochs else 1.0
+                _adam(net.flat, g, m, v, den, t, p.learning_rate * f * ramp)
+                _adam(ut, gu, mu, vu, denu, t, p.pb_learning_rate * f)
+        if not bool(torch.isfinite(net.flat).all()):
+            net.flat.copy_(backup)
+            raise IlociError("training diverged (non-finite weights); lower learning_rate "
+                             "or grad_clip. The model was left unchanged.")
+        self._net64 = net if self._dtype == torch.float64 else None
+        return ut.numpy().astype(np.float64), float(loss)
+
+    def _recognize_kernel(self, X, mask, weight, u):
+        p = self.params
+        net = self._net
+        Xt, mw, ut = self._t(X), self._t(mask * weight[None, :]), self._t(u)
+        m, v, den = (torch.zeros_like(ut) for _ in range(3))
+        bound = p.pb_bound
+        with torch.no_grad(), _one_thread():
+            for t in range(1, p.recognition_steps + 1):
+                th = torch.tanh(ut)
+                _, _, gpb = net.loss_and_grads(th * bound, Xt, mw, 1.0, False)
+                gu = gpb.mul_(th.square_().neg_().add_(1.0)).mul_(bound)
+                _adam(ut, gu, m, v, den, t, p.recognition_learning_rate)
+        return ut.numpy().astype(np.float64)
+
+    def _error_kernel(self, X, mask, pbs, exact):
+        net = self._exact() if exact else self._net
+        with torch.no_grad(), _one_thread():
+            err = net.errors(self._t(pbs, net.dtype), self._t(X, net.dtype),
+                             self._t(mask, net.dtype))
+        return err.numpy().astype(np.float64)
+
+    def _generate_kernel(self, pbs, x0, steps):
+        net = self._exact()
+        X = np.zeros((steps + 1,) + x0.shape)
+        X[0] = x0
+        with torch.no_grad(), _one_thread():
+            ws = net.workspace(steps, len(x0))
+            O = net.forward(self._t(pbs, net.dtype), self._t(X, net.dtype), 1.0, ws)
+            return O[:, :, :net.d].numpy().astype(np.float64)

@@ -1,0 +1,374 @@
+"""The ILoCI learning and inference phases on real LASA demonstrations.
+
+Each branch of DESIGN.md section 5 is driven with a real RNNPB
+(``torch-rnnpb``), the real IK and real clusterers, kept small: few
+demonstrations, few epochs (set through the config). Learner constants are
+set through the config to make a branch certain (e.g. a similarity
+threshold larger than any PB distance makes every rewarded guess a
+strengthening).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+import pytest
+
+import iloci
+from iloci import hookimpl
+from iloci.agent import SkippedDemonstrationWarning
+from iloci.concepts import rehearsal
+from iloci.concepts.memory import entries_equal
+from iloci.data import load_lasa
+from iloci.errors import FeedbackError, MissingBackendError, NotFittedError
+from iloci.interfaces import Response
+from iloci.plugins import get_plugin_manager
+
+#: The RNNPB back end under test (ILOCI_TEST_RNNPB=jax-rnnpb runs these on JAX).
+RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "torch-rnnpb")
+pytest.importorskip({"torch-rnnpb": "torch", "jax-rnnpb": "jax"}.get(RNNPB, "torch"))
+pytest.importorskip("pinocchio")
+
+EPOCHS = 30
+
+
+def small_config(**learner) -> dict:
+    return {"perceptual_model": {"name": RNNPB, "epochs": EPOCHS,
+                                 "recognition_steps": EPOCHS},
+            "learner": {"rehearsal_epochs": EPOCHS, **learner},
+            "evaluation": {"seed": 0}}
+
+
+class Recorder:
+    """An observer plugin keeping every event."""
+
+    def __init__(self) -> None:
+        self.interactions: list = []
+        self.rehearsals: list = []
+
+    @hookimpl
+    def iloci_on_interaction(self, event) -> None:
+        self.interactions.append(event)
+
+    @hookimpl
+    def iloci_on_rehearsal(self, event) -> None:
+        self.rehearsals.append(event)
+
+
+class ScriptedTeacher:
+    """A teacher replaying fixed feedback, like a recorded session."""
+
+    def __init__(self, feedback) -> None:
+        self.feedback_values = list(feedback)
+        self.responses: list[Response] = []
+
+    def feedback(self, demo, response):
+        self.responses.append(response)
+        return self.feedback_values.pop(0)
+
+
+def make_agent(recorder: Recorder | None = None, pm=None, **learner) -> iloci.Agent:
+    pm = pm or get_plugin_manager()
+    if recorder is not None:
+        pm.register(recorder)
+    try:
+        return iloci.build(small_config(**learner), plugin_manager=pm)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="module")
+def lasa():
+    demos = {d.key: d for d in load_lasa(["GShape", "Angle", "Sine"])}
+    return demos
+
+
+def net_state(agent) -> dict:
+    return {k: np.array(v, copy=True) for k, v in agent.perceptual_model.state().items()}
+
+
+def same_state(a: dict, b: dict) -> bool:
+    return set(a) == set(b) and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+# -- the learning phase, branch by branch -------------------------------------------
+
+def test_first_demonstration_becomes_the_first_concept_without_feedback(lasa):
+    rec = Recorder()
+    agent = make_agent(rec)
+    demo = lasa["GShape/0"]
+    outcome = agent.learn(demo)
+    assert (outcome.action, outcome.concept, outcome.feedbacks) == ("new_concept", "c1", ())
+    mem = agent.memory
+    assert len(mem) == 1 and mem.concepts() == ["c1"] and mem.demonstrations_seen == 1
+    e = mem.entries[0]
+    seq, start = mem.encoder.encode(agent.motion(demo))
+    assert (e.num_samples, e.num_steps, e.source, e.sources) == (1, 49, "GShape/0",
+                                                                 ("GShape/0",))
+    np.testing.assert_array_equal(e.initial_input, seq[0])
+    np.testing.assert_array_equal(e.start, start)
+    assert e.exemplar and e.pb.shape == e.pb_rec.shape == (4,)
+    assert np.isfinite(e.generation_error) and e.generation_error >= 0
+    assert [ev.action for ev in rec.interactions] == ["new_concept"]
+    assert rec.interactions[0].feedback == 0 and rec.interactions[0].guessed is None
+    (r,) = rec.rehearsals
+    assert (r.entries, r.epochs, r.reason) == (1, EPOCHS, "new_concept")
+    assert r.seconds > 0 and np.isfinite(r.loss)
+
+
+def test_punished_guesses_then_a_new_concept_when_all_are_tried(lasa):
+    rec = Recorder()
+    agent = make_agent(rec)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])       # oracle teacher
+    assert agent.memory.concepts() == ["c1", "c2"]
+    outcome = agent.learn(lasa["Sine/0"])
+    assert outcome.action == "new_concept" and outcome.concept == "c3"
+    assert outcome.feedbacks == (-1, -1)
+    guesses = [ev.guessed for ev in outcome.events[:2]]
+    assert sorted(guesses) == ["c1", "c2"]
+    assert [ev.action for ev in outcome.events] == ["next_guess", "next_guess", "new_concept"]
+    assert outcome.events[1].tried == (guesses[0],) and outcome.events[1].attempt == 2
+    assert set(outcome.events[2].tried) == {"c1", "c2"}
+    assert [e.concept for e in agent.memory.entries] == ["c1", "c2", "c3"]
+    assert agent.memory.entries[2].sources == ("Sine/0",)
+    # every interaction and rehearsal reached the observer
+    assert len(rec.interactions) == 1 + 2 + 3
+    assert [r.reason for r in rec.rehearsals] == ["new_concept"] * 3
+    assert [r.entries for r in rec.rehearsals] == [1, 2, 3]
+
+
+def test_punished_first_guess_then_rewarded_second_guess(lasa):
+    agent = make_agent(similarity_threshold=0.0)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    teacher = ScriptedTeacher([-1, 1])
+    agent.teacher = teacher
+    outcome = agent.learn(lasa["GShape/1"])
+    first, second = (r.concept for r in teacher.responses)
+    assert first != second and outcome.concept == second
+    assert [r.attempt for r in teacher.responses] == [1, 2]
+    assert outcome.feedbacks == (-1, 1) and outcome.action == "new_exemplar"
+    assert outcome.first_guess_correct is False
+    new = agent.memory.entries[-1]
+    assert (new.concept, new.source, new.num_samples) == (second, "GShape/1", 1)
+
+
+def test_response_is_the_guessed_concepts_lowest_error_entry(lasa):
+    agent = make_agent(similarity_threshold=0.0)
+    agent.teach([lasa["GShape/0"], lasa["GShape/1"]])    # two exemplars of c1
+    errors = [e.generation_error for e in agent.memory.entries]
+    best = int(np.argmin(errors))
+    best_entry = agent.memory.entries[best].copy()
+    teacher = ScriptedTeacher([1])
+    agent.teacher = teacher
+    agent.learn(lasa["GShape/2"])
+    (response,) = teacher.responses
+    assert response.extra["entry"] == best and response.source == best_entry.source
+    assert response.concept == "c1" and response.attempt == 1
+    assert response.motion.shape == (50, 2) and response.joint_path.shape == (50, 4)
+    # the motion is the entry regenerated from its start pose, not the demonstration
+    np.testing.assert_array_equal(response.motion[0], best_entry.start[:2])
+    np.testing.assert_array_equal(response.joint_path[0], best_entry.start[2:])
+    assert response.execution is None                       # no simulator configured
+
+
+def test_rewarded_similar_demonstration_strengthens_the_nearest_entry(lasa):
+    # PB values lie in [-1, 1]^4, so no distance reaches 10: every reward strengthens
+    agent = make_agent(similarity_threshold=10.0)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    before = net_state(agent)
+    outcome = agent.learn(lasa["GShape/1"])                # oracle: rewarded on c1
+    assert outcome.action == "strengthen" and outcome.concept == "c1"
+    assert outcome.rehearsals == ()                        # no retraining
+    assert same_state(before, net_state(agent))
+    e = agent.memory.entries[0]
+    assert (e.num_samples, e.sources) == (2, ("GShape/0", "GShape/1"))
+    assert len(agent.memory) == 2 and agent.memory.demonstrations_seen == 3
+
+
+def test_rewarded_dissimilar_demonstration_becomes_a_new_exemplar(lasa):
+    rec = Recorder()
+    agent = make_agent(rec, similarity_threshold=0.0)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    old = [e.copy() for e in agent.memory.entries]
+    outcome = agent.learn(lasa["GShape/1"])
+    assert outcome.action == "new_exemplar" and outcome.concept == "c1"
+    assert outcome.feedbacks[-1] == 1
+    mem = agent.memory
+    assert [e.concept for e in mem.entries] == ["c1", "c2", "c1"]
+    assert mem.num_samples_of("c1") == 2 and all(e.exemplar for e in mem.entries)
+    assert rec.rehearsals[-1].entries == 3 and rec.rehearsals[-1].reason == "new_exemplar"
+    # the rehearsal retrained everything: PBs, PB_recs and errors were recomputed
+    for e, o in zip(mem.entries[:2], old):
+        assert not np.array_equal(e.pb, o.pb)
+        assert not np.array_equal(e.pb_rec, o.pb_rec)
+        assert e.generation_error != o.generation_error
+    assert np.all(np.abs(mem.pbs) <= 1.0) and np.all(np.isfinite(mem.pbs_rec))
+
+
+def test_clustering_replaces_a_valid_cluster_by_its_medoid(lasa):
+    # K_cutoff = 0 puts D_cutoff at the mean distance mu of the concept's PBs. With
+    # three exemplars the closest pair lies below mu (unless all three distances are
+    # equal) and complete link cannot add the third one, so that pair is the one
+    # valid cluster once numSamples exceed num_threshold = 1.
+    rec = Recorder()
+    agent = make_agent(rec, similarity_threshold=0.0, k_cutoff=0.0, num_threshold=1)
+    report = agent.teach([lasa["GShape/0"], lasa["GShape/1"]])
+    assert [o.action for o in report.outcomes] == ["new_concept", "new_exemplar"]
+    assert report.outcomes[1].clustered == 0                # two entries: mean == D_cutoff
+    pbs = agent.memory.pbs
+    outcome = agent.learn(lasa["GShape/2"])
+    assert outcome.action == "new_exemplar" and outcome.clustered == 1
+    assert [r.reason for r in outcome.rehearsals] == ["new_exemplar", "clustering"]
+    assert rec.rehearsals[-1].entries == 2
+    mem = agent.memory
+    assert len(mem) == 2 and mem.num_samples_of("c1") == 3
+    (proto,) = [e for e in mem.entries if e.prototype]
+    (exemplar,) = [e for e in mem.entries if e.exemplar]
+    assert proto.num_samples == 2 and len(proto.sources) == 2
+    assert proto.source == proto.sources[0]                 # the medoid kept its pattern
+    assert exemplar.num_samples == 1 and exemplar.source not in proto.sources
+    assert set(proto.sources) | {exemplar.source} == {"GShape/0", "GShape/1", "GShape/2"}
+    d_cutoff = outcome.events[-1].extra["d_cutoff"]
+    assert d_cutoff > 0 and np.isfinite(d_cutoff)
+    assert pbs.shape == (2, 4)
+
+
+def test_rehearsal_regenerates_entries_and_retrains_from_current_weights(lasa):
+    agent = make_agent()
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    entries = agent.memory.entries
+    regenerated = rehearsal.regenerate(agent.perceptual_model, entries)
+    assert [r.shape for r in regenerated] == [(49, 6), (49, 6)]
+    np.testing.assert_allclose(regenerated[0][0], entries[0].initial_input)
+    before = net_state(agent)
+    seq, _ = agent.memory.encoder.encode(agent.motion(lasa["Sine/0"]))
+    result = rehearsal.rehearse(agent.perceptual_model, entries, seq, epochs=EPOCHS)
+    assert len(result.patterns) == 3
+    for got, want in zip(result.patterns[:2], regenerated):
+        np.testing.assert_array_equal(got, want)            # the temporal memory
+    np.testing.assert_array_equal(result.patterns[2], seq)
+    assert result.pbs.shape == result.pbs_rec.shape == (3, 4)
+    assert result.generation_errors.shape == (3,) and np.all(result.generation_errors >= 0)
+    assert np.isfinite(result.loss) and result.loss >= 0
+    assert not same_state(before, net_state(agent))
+    assert len(agent.memory) == 2                           # rehearse() alone changes no entry
+
+
+# -- inference ----------------------------------------------------------------------
+
+def test_recognize_before_learning_is_a_not_fitted_error(lasa):
+    agent = make_agent()
+    with pytest.raises(NotFittedError, match="learned nothing yet"):
+        agent.recognize([lasa["GShape/0"]])
+
+
+def test_batched_recognition(lasa):
+    agent = make_agent()
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    snapshot = [e.copy() for e in agent.memory.entries]
+    test = [lasa["GShape/4"], lasa["Angle/4"], lasa["Sine/4"], lasa["Sine/5"]]
+    answers = agent.recognize(test)
+    assert [a.demo for a in answers] == [d.key for d in test]
+    for a in answers:
+        assert a.concept in agent.memory.concepts()
+        assert 0.0 <= a.confidence <= 1.0 and a.distance >= 0
+        assert agent.memory.entries[a.entry].concept == a.concept
+        assert a.source == agent.memory.entries[a.entry].source
+        assert a.pb_obs.shape == (4,)
+    single = agent.recognize(lasa["Sine/5"])
+    assert single.concept == answers[3].concept
+    # batch composition may change float32 rounding, not the answer
+    assert single.distance == pytest.approx(answers[3].distance, abs=1e-4)
+    assert entries_equal(agent.memory.entries, snapshot)    # inference changes nothing
+
+
+# -- bad input ----------------------------------------------------------------------
+
+def test_invalid_demonstration_mid_stream_is_skipped_and_changes_nothing(lasa, tmp_path):
+    bad = np.ones((20, 2))
+    bad[7, 1] = np.nan
+    empty_csv = tmp_path / "empty.csv"
+    empty_csv.write_text("x,y\n")
+    stream = [lasa["GShape/0"], bad, str(empty_csv), lasa["Angle/0"]]
+    agent = make_agent()
+    with pytest.warns(SkippedDemonstrationWarning) as caught:
+        report = agent.teach(stream)
+    messages = [str(w.message) for w in caught]
+    assert any("#1 of the stream" in m and "NaN" in m for m in messages)
+    assert any("empty.csv" in m for m in messages)
+    assert [s[0] for s in report.skipped] == ["#1 of the stream", repr(str(empty_csv))]
+    assert [o.demo for o in report.outcomes] == ["GShape/0", "Angle/0"]
+    # the same stream without the bad items gives exactly the same memory (seeded)
+    clean = make_agent()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        clean.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert entries_equal(agent.memory.entries, clean.memory.entries)
+    assert same_state(net_state(agent), net_state(clean))
+
+
+def test_learn_raises_for_a_non_demonstration(lasa):
+    agent = make_agent()
+    with pytest.raises(iloci.errors.InvalidInputError, match="expected a Demonstration"):
+        agent.learn(np.zeros((5, 2)))
+    assert len(agent.memory) == 0
+
+
+class BadTeacherPlugin:
+    """A third-party teacher plugin whose feedback is not +1/-1."""
+
+    class Teacher:
+        def __init__(self, value: int = 0) -> None:
+            self.value = value
+
+        def feedback(self, demo, response):
+            return self.value
+
+    @hookimpl
+    def iloci_register_teachers(self, registry) -> None:
+        registry.add("says-zero", BadTeacherPlugin.Teacher, summary="broken on purpose")
+
+
+@pytest.mark.parametrize("value", [0, 2, True, "yes", 1.0])
+def test_feedback_other_than_plus_minus_one_is_an_error_and_changes_nothing(lasa, value):
+    pm = get_plugin_manager()
+    pm.register(BadTeacherPlugin(), name="bad-teacher")
+    cfg = small_config()
+    cfg["teacher"] = {"name": "says-zero"}
+    try:
+        agent = iloci.build(cfg, plugin_manager=pm)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    agent.teacher.value = value
+    agent.learn(lasa["GShape/0"])                           # first: no feedback asked
+    snapshot = agent.memory.copy()
+    state = net_state(agent)
+    with pytest.raises(FeedbackError, match=r"must be\s+\+1 \(reward\) or -1"):
+        agent.learn(lasa["Angle/0"])
+    assert entries_equal(agent.memory.entries, snapshot.entries)
+    assert agent.memory.demonstrations_seen == 1 and agent.memory.concept_count == 1
+    assert same_state(state, net_state(agent))
+
+
+def test_response_is_performed_in_the_simulator(lasa):
+    pytest.importorskip("pybullet")
+    pm = get_plugin_manager()
+    cfg = small_config(similarity_threshold=0.0)
+    cfg["simulator"] = {"name": "pybullet"}
+    try:
+        agent = iloci.build(cfg, plugin_manager=pm)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    agent.learn(lasa["GShape/0"])
+    teacher = ScriptedTeacher([1])
+    agent.teacher = teacher
+    agent.learn(lasa["GShape/1"])
+    (response,) = teacher.responses
+    ex = response.execution
+    assert ex is not None and ex.end_effector.shape == (50, 3) and ex.joint_path.shape == (50, 4)
+    lower, upper = np.asarray(agent.ik_solver.lower), np.asarray(agent.ik_solver.upper)
+    assert np.all(response.joint_path >= lower) and np.all(response.joint_path <= upper)
+    # the arm starts where the entry's pattern starts
+    np.testing.assert_allclose(ex.joint_path[0], response.joint_path[0], atol=1e-6)

@@ -1,0 +1,190 @@
+"""Mem, D_cutoff / cluster validity / medoids, and the inference confidence.
+
+These use the real clusterer plugins on PB vectors given directly; the
+learner tests drive the same code through a real network on LASA data.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from iloci.concepts.clustering import d_cutoff, medoid, plan_clusters
+from iloci.concepts.learner import confidence
+from iloci.concepts.memory import Entry, Memory, entries_equal
+from iloci.errors import InvalidInputError, MemoryFileError
+from iloci.plugins import get_registry
+
+
+@pytest.fixture(scope="module", params=["scipy", "sklearn"])
+def clusterer(request):
+    registry = get_registry()
+    if ("clusterer", request.param) not in registry:
+        pytest.skip(f"clusterer {request.param!r} is not installed")
+    try:
+        return registry.build("clusterer", request.param)
+    except ImportError:
+        pytest.skip(f"back end of clusterer {request.param!r} is not installed")
+
+
+def entry(pb, concept="c1", num_samples=1, prototype=False, key="S/0") -> Entry:
+    pb = np.asarray(pb, dtype=np.float64)
+    return Entry(pb=pb, pb_rec=pb + 0.01, num_samples=num_samples, num_steps=49,
+                 initial_input=np.arange(6.0), start=np.ones(6), dt=0.1, concept=concept,
+                 generation_error=0.5, source=key, sources=(key,), prototype=prototype)
+
+
+# -- D_cutoff and medoid ------------------------------------------------------------
+
+def test_d_cutoff_is_mean_minus_k_std_of_pairwise_distances():
+    pbs = np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 4.0]])  # distances 3, 4, 5
+    assert d_cutoff(pbs, 0.0) == pytest.approx(4.0)
+    assert d_cutoff(pbs, 0.5) == pytest.approx(4.0 - 0.5 * np.std([3.0, 4.0, 5.0]))
+    assert np.isnan(d_cutoff(pbs[:1], 0.5))
+
+
+def test_medoid_minimises_summed_distance_and_ties_go_to_the_oldest():
+    pbs = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0], [3.0, 3.0]])
+    # summed distances 7.24, 6.84, 7.40, 11.01
+    assert medoid(pbs) == 1
+    assert medoid(np.array([[0.0], [1.0]])) == 0
+
+
+# -- cluster validity -------------------------------------------------------------------
+
+def test_close_pair_of_exemplars_is_a_valid_cluster(clusterer):
+    # two tight pairs and a far point: cut = mu - 0.5 sigma falls between scales
+    pbs = np.array([[0.0, 0.0], [0.05, 0.0], [1.0, 1.0], [1.0, 1.05], [-1.0, 1.0]])
+    plan = plan_clusters(pbs, [2, 2, 2, 2, 1], [True] * 5, clusterer=clusterer,
+                         k_cutoff=0.5, num_threshold=3)
+    assert plan.valid == ((0, 1), (2, 3))
+    assert plan.medoids == (0, 2)
+    assert list(plan.labels) == [0, 0, 1, 1, 2]
+    assert 0.05 < plan.d_cutoff < 1.4
+
+
+def test_cluster_needs_num_samples_above_threshold(clusterer):
+    pbs = np.array([[0.0, 0.0], [0.05, 0.0], [1.0, 1.0], [1.0, 1.05], [-1.0, 1.0]])
+    plan = plan_clusters(pbs, [1, 2, 2, 2, 1], [True] * 5, clusterer=clusterer,
+                         k_cutoff=0.5, num_threshold=3)
+    assert plan.valid == ((2, 3),)          # 1 + 2 = 3 does not exceed 3
+
+
+def test_cluster_of_prototypes_only_is_not_valid(clusterer):
+    pbs = np.array([[0.0, 0.0], [0.05, 0.0], [1.0, 1.0], [1.0, 1.05], [-1.0, 1.0]])
+    plan = plan_clusters(pbs, [2, 2, 2, 2, 1], [False, False, True, False, True],
+                         clusterer=clusterer, k_cutoff=0.5, num_threshold=3)
+    assert plan.valid == ((2, 3),)
+    assert plan.medoids == (2,)
+
+
+def test_cluster_with_mean_distance_not_below_cutoff_is_not_valid(clusterer):
+    # two points: the cut equals their distance, so they merge, but their
+    # mean pairwise distance is not *below* D_cutoff
+    pbs = np.array([[0.0, 0.0], [0.3, 0.0]])
+    plan = plan_clusters(pbs, [3, 3], [True, True], clusterer=clusterer, k_cutoff=0.0,
+                         num_threshold=3)
+    assert plan.d_cutoff == pytest.approx(0.3)
+    assert list(plan.labels) == [0, 0]
+    assert plan.valid == ()
+
+
+def test_a_large_k_cutoff_clusters_nothing(clusterer):
+    pbs = np.random.default_rng(0).normal(size=(8, 4))
+    plan = plan_clusters(pbs, [2] * 8, [True] * 8, clusterer=clusterer, k_cutoff=50.0,
+                         num_threshold=3)
+    assert plan.d_cutoff < 0 and plan.valid == () and (plan.labels == -1).all()
+
+
+def test_plan_clusters_checks_lengths(clusterer):
+    with pytest.raises(InvalidInputError, match="length 3"):
+        plan_clusters(np.zeros((3, 4)), [1, 1], [True] * 3, clusterer=clusterer,
+                      k_cutoff=0.5, num_threshold=3)
+
+
+def test_scipy_and_sklearn_plans_agree_on_random_pbs():
+    registry = get_registry()
+    try:
+        a = registry.build("clusterer", "scipy")
+        b = registry.build("clusterer", "sklearn")
+    except Exception:  # noqa: BLE001 - either back end missing
+        pytest.skip("needs both clusterer back ends")
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        m = int(rng.integers(2, 12))
+        pbs = rng.uniform(-1, 1, size=(m, 4))
+        ns = rng.integers(1, 4, size=m)
+        ex = rng.random(m) < 0.7
+        pa = plan_clusters(pbs, ns, ex, clusterer=a, k_cutoff=0.5, num_threshold=3)
+        pb = plan_clusters(pbs, ns, ex, clusterer=b, k_cutoff=0.5, num_threshold=3)
+        assert np.array_equal(pa.labels, pb.labels)
+        assert pa.valid == pb.valid and pa.medoids == pb.medoids
+
+
+# -- confidence -------------------------------------------------------------------------
+
+def test_confidence_is_the_margin_to_the_nearest_other_concept():
+    dist = np.array([[0.1, 0.4, 0.2],     # nearest c1 (0.1); other concept at 0.2
+                     [0.5, 0.5, 0.1],     # nearest c2 (0.1); other at 0.5
+                     [0.3, 0.3, 0.3]])    # tie: nearest entry 0, other concept at 0.3
+    nearest, conf = confidence(dist, ["c1", "c1", "c2"])
+    assert list(nearest) == [0, 2, 0]
+    np.testing.assert_allclose(conf, [1 - 0.1 / 0.2, 1 - 0.1 / 0.5, 0.0])
+    _, single = confidence(np.array([[0.2, 0.7]]), ["c1", "c1"])
+    assert single[0] == 1.0
+
+
+# -- Mem -----------------------------------------------------------------------------
+
+def make_memory() -> Memory:
+    from iloci.sensorimotor.encoding import SensorimotorEncoder
+    enc = SensorimotorEncoder.from_state({"scale": np.full(6, 0.01), "limit": np.array(0.9)})
+    entries = [entry([0.1, 0.2, 0.3, 0.4], "c1", 1, False, "GShape/0"),
+               entry([0.5, 0.2, 0.3, 0.4], "c2", 3, True, "Angle/1"),
+               entry([0.1, 0.9, 0.3, 0.4], "c1", 2, False, "JShape_2/4")]
+    entries[1].sources = ("Angle/1", "Angle/2", "Sine/0")
+    return Memory(entries, enc, concept_count=2, demonstrations_seen=6)
+
+
+def test_memory_views():
+    mem = make_memory()
+    assert mem.n_prototypes == len(mem) == 3
+    assert mem.pbs.shape == mem.pbs_rec.shape == (3, 4)
+    assert mem.concepts() == ["c1", "c2"]
+    assert mem.indices_of("c1") == [0, 2]
+    assert mem.num_samples_of("c1") == 3 and mem.num_samples_of("c2") == 3
+    assert mem.entries[1].prototype and mem.entries[0].exemplar
+    assert mem.new_concept_label() == "c3" and mem.concept_count == 3
+    assert "c2: 1 entries (1 prototypes), numSamples 3" in mem.summary()
+    empty = Memory()
+    assert empty.pbs.shape == (0, 0) and empty.concepts() == []
+
+
+def test_label_concepts_takes_the_majority_true_concept():
+    from iloci.data.concepts import concept_of
+    mem = make_memory()
+    names = mem.label_concepts(lambda key: concept_of(key.rsplit("/", 1)[0]))
+    # c1: GShape/0 and JShape_2/4 tie, the first seen wins; c2: 2 Angle, 1 Sine
+    assert names == {"c1": "GShape", "c2": "Angle"}
+    assert Memory([entry([0, 0, 0, 0], key="x/0")]).label_concepts(lambda k: None) == \
+        {"c1": None}
+
+
+def test_memory_arrays_round_trip():
+    mem = make_memory()
+    arrays, meta = mem.to_arrays()
+    assert all(a.dtype != object for a in arrays.values())
+    back = Memory.from_arrays(arrays, meta)
+    assert entries_equal(back.entries, mem.entries)
+    np.testing.assert_array_equal(back.encoder.scale_, mem.encoder.scale_)
+    assert (back.concept_count, back.demonstrations_seen) == (2, 6)
+    copy = mem.copy()
+    copy.entries[0].num_samples += 1
+    assert not entries_equal(copy.entries, mem.entries)
+
+
+def test_inconsistent_arrays_are_a_memory_file_error():
+    arrays, meta = make_memory().to_arrays()
+    arrays["mem/pb"] = arrays["mem/pb"][:2]
+    with pytest.raises(MemoryFileError, match="inconsistent"):
+        Memory.from_arrays(arrays, meta)

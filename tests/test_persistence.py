@@ -1,0 +1,299 @@
+"""Saving and loading the robot's memory: format, atomicity, corruption, round trip."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+import zipfile
+
+import numpy as np
+import pytest
+
+import iloci
+from iloci.concepts import memory as memory_module
+from iloci.concepts.memory import (FORMAT_VERSION, Entry, Memory, entries_equal, load_memory,
+                                   save_memory)
+from iloci.errors import MemoryFileError
+from iloci.sensorimotor.encoding import SensorimotorEncoder
+
+
+def small_memory(n: int = 3) -> tuple[Memory, dict[str, np.ndarray]]:
+    rng = np.random.default_rng(n)
+    enc = SensorimotorEncoder.from_state({"scale": rng.uniform(0.01, 0.1, 6),
+                                          "limit": np.array(0.9)})
+    entries = [Entry(pb=rng.uniform(-1, 1, 4), pb_rec=rng.uniform(-1, 1, 4),
+                     num_samples=i + 1, num_steps=49, initial_input=rng.normal(size=6),
+                     start=rng.normal(size=6), dt=0.1, concept=f"c{i % 2 + 1}",
+                     generation_error=float(rng.random()), source=f"GShape/{i}",
+                     sources=tuple(f"GShape/{j}" for j in range(i + 1)), prototype=i == 2)
+               for i in range(n)]
+    net = {"w_in": rng.normal(size=(60, 35)), "b": rng.normal(size=60),
+           "hidden": np.array(60)}
+    return Memory(entries, enc, concept_count=2, demonstrations_seen=n + 2), net
+
+
+def test_round_trip_without_pickle(tmp_path):
+    mem, net = small_memory()
+    path = save_memory(tmp_path / "m.npz", mem, net, extra={"config": {"a": 1}})
+    with np.load(path, allow_pickle=False) as z:      # no object arrays inside
+        assert "__header__" in z.files and all(z[k].dtype != object for k in z.files)
+    back, net2, header = load_memory(path)
+    assert entries_equal(back.entries, mem.entries)
+    assert (back.concept_count, back.demonstrations_seen) == (2, 5)
+    np.testing.assert_array_equal(back.encoder.scale_, mem.encoder.scale_)
+    assert set(net2) == set(net)
+    for k in net:
+        np.testing.assert_array_equal(net2[k], net[k])
+    assert header["version"] == FORMAT_VERSION and header["config"] == {"a": 1}
+    assert header["format"] == "iloci-memory"
+
+
+def test_empty_memory_round_trip(tmp_path):
+    path = save_memory(tmp_path / "m.npz", Memory(), {})
+    back, net, _ = load_memory(path)
+    assert len(back) == 0 and back.encoder is None and net == {}
+
+
+def test_interrupted_save_leaves_the_previous_memory_loadable(tmp_path, monkeypatch):
+    path = tmp_path / "m.npz"
+    old, net = small_memory(2)
+    save_memory(path, old, net)
+    before = path.read_bytes()
+    new, net_new = small_memory(3)
+
+    def crash(src, dst):  # the process dies after writing, before the rename
+        raise KeyboardInterrupt("simulated crash")
+
+    monkeypatch.setattr(memory_module.os, "replace", crash)
+    with pytest.raises(KeyboardInterrupt):
+        save_memory(path, new, net_new)
+    monkeypatch.undo()
+    assert path.read_bytes() == before
+    back, _, _ = load_memory(path)
+    assert entries_equal(back.entries, old.entries)
+    assert [p.name for p in tmp_path.iterdir()] == ["m.npz"]  # no temporary file left
+
+
+def test_a_crash_leftover_temp_file_does_not_hide_the_memory(tmp_path):
+    path = tmp_path / "m.npz"
+    mem, net = small_memory()
+    save_memory(path, mem, net)
+    (tmp_path / ".m.npz.abc.tmp").write_bytes(path.read_bytes()[:100])  # a dead writer's
+    back, _, _ = load_memory(path)
+    assert entries_equal(back.entries, mem.entries)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(MemoryFileError, match="not found.*iloci teach"):
+        load_memory(tmp_path / "nothing.npz")
+
+
+def test_truncated_file(tmp_path):
+    path = tmp_path / "m.npz"
+    save_memory(path, *small_memory())
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(MemoryFileError, match="truncated"):
+        load_memory(path)
+
+
+def _rewrite(path: Path, change) -> None:
+    """Rewrite an npz member-by-member, letting ``change(arrays)`` edit it."""
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    change(arrays)
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+
+
+def test_tampered_array_fails_the_checksum(tmp_path):
+    path = tmp_path / "m.npz"
+    save_memory(path, *small_memory())
+
+    def edit(arrays):
+        arrays["mem/num_samples"] = arrays["mem/num_samples"] + 1
+
+    _rewrite(path, edit)
+    with pytest.raises(MemoryFileError, match="checksum"):
+        load_memory(path)
+
+
+def test_tampered_header_fails_the_checksum(tmp_path):
+    path = tmp_path / "m.npz"
+    save_memory(path, *small_memory())
+
+    def edit(arrays):
+        header = json.loads(arrays["__header__"].tobytes())
+        header["memory"]["concepts"][0] = "c9"
+        arrays["__header__"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+
+    _rewrite(path, edit)
+    with pytest.raises(MemoryFileError, match="checksum"):
+        load_memory(path)
+
+
+def test_flipped_byte_is_detected(tmp_path):
+    path = tmp_path / "m.npz"
+    save_memory(path, *small_memory())
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo("mem/pb.npy")
+    data[info.header_offset + 30 + len(info.filename) + 140] ^= 0xFF  # inside the array
+    path.write_bytes(bytes(data))
+    with pytest.raises(MemoryFileError):
+        load_memory(path)
+
+
+def test_newer_version_is_refused_with_upgrade_advice(tmp_path):
+    path = tmp_path / "m.npz"
+    mem, net = small_memory()
+    save_memory(path, mem, net)
+
+    def edit(arrays):
+        header = json.loads(arrays["__header__"].tobytes())
+        header["version"] = FORMAT_VERSION + 1
+        rest = {k: v for k, v in arrays.items() if k != "__header__"}
+        header["checksum"] = memory_module._checksum(header, rest)
+        arrays["__header__"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+
+    _rewrite(path, edit)
+    with pytest.raises(MemoryFileError, match="newer iloci.*Upgrade"):
+        load_memory(path)
+
+
+def test_other_npz_is_not_a_memory(tmp_path):
+    path = tmp_path / "other.npz"
+    np.savez(path, a=np.zeros(3))
+    with pytest.raises(MemoryFileError, match="not an iloci memory"):
+        load_memory(path)
+    path.write_text("hello")
+    with pytest.raises(MemoryFileError):
+        load_memory(path)
+
+
+def test_object_arrays_are_refused_on_save(tmp_path):
+    mem, _ = small_memory()
+    with pytest.raises(iloci.errors.InvalidInputError, match="no pickle"):
+        save_memory(tmp_path / "m.npz", mem, {"bad": np.array([{"a": 1}], dtype=object)})
+    assert not any(tmp_path.iterdir())
+
+
+def test_save_creates_parent_directories_and_overwrites(tmp_path):
+    path = tmp_path / "a" / "b" / "m.npz"
+    mem, net = small_memory(2)
+    save_memory(path, mem, net)
+    mem3, net3 = small_memory(3)
+    save_memory(path, mem3, net3)
+    assert len(load_memory(path)[0]) == 3
+    assert os.listdir(path.parent) == ["m.npz"]
+
+
+# -- with a real network -------------------------------------------------------------
+
+#: The RNNPB back end under test (ILOCI_TEST_RNNPB=jax-rnnpb runs these on JAX).
+RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "torch-rnnpb")
+
+SMALL_TOML = f"""
+[perceptual_model]
+name = "{RNNPB}"
+epochs = 30
+recognition_steps = 30
+[learner]
+rehearsal_epochs = 30
+[evaluation]
+seed = 0
+"""
+
+
+@pytest.fixture(scope="module")
+def taught(tmp_path_factory):
+    """An agent taught two concepts, saved to a file."""
+    pytest.importorskip({"torch-rnnpb": "torch", "jax-rnnpb": "jax"}.get(RNNPB, "torch"))
+    pytest.importorskip("pinocchio")
+    from iloci.data import load_lasa
+    from iloci.errors import MissingBackendError
+    cfg = tmp_path_factory.mktemp("cfg") / "small.toml"
+    cfg.write_text(SMALL_TOML)
+    try:
+        agent = iloci.build(cfg)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    demos = {d.key: d for d in load_lasa(["GShape", "Angle", "Sine"])}
+    agent.teach([demos["GShape/0"], demos["Angle/0"]])
+    path = agent.save(tmp_path_factory.mktemp("mem") / "memory.npz")
+    return agent, path, demos, cfg
+
+
+def test_save_load_recognize_gives_identical_answers(taught):
+    agent, path, demos, _ = taught
+    test = [demos["GShape/5"], demos["Angle/5"], demos["Sine/5"]]
+    before = agent.recognize(test)
+    loaded = iloci.Agent.load(path)
+    assert entries_equal(loaded.memory.entries, agent.memory.entries)
+    assert loaded.config.to_dict() == agent.config.to_dict()
+    after = loaded.recognize(test)
+    for a, b in zip(before, after):
+        assert (a.concept, a.entry, a.source) == (b.concept, b.entry, b.source)
+        assert a.confidence == pytest.approx(b.confidence, abs=1e-12)
+        assert a.distance == pytest.approx(b.distance, abs=1e-12)
+        np.testing.assert_allclose(a.pb_obs, b.pb_obs, atol=1e-12)
+
+
+def test_learning_continues_after_loading(taught, tmp_path):
+    _, path, demos, _ = taught
+    loaded = iloci.Agent.load(path)
+    outcome = loaded.learn(demos["Sine/0"])
+    assert outcome.action == "new_concept" and outcome.concept == "c3"
+    assert loaded.memory.demonstrations_seen == 3 and len(loaded.memory) == 3
+    again = iloci.Agent.load(loaded.save(tmp_path / "m2.npz"))
+    assert again.memory.concepts() == ["c1", "c2", "c3"]
+    assert again.recognize(demos["Sine/1"]).concept in ("c1", "c2", "c3")
+
+
+def test_cli_teach_then_recognize(taught, tmp_path, cli):
+    _, _, _, cfg = taught
+    memory = tmp_path / "robot.npz"
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y\n1,2\n")
+    out = cli("teach", "--config", str(cfg), "--memory", str(memory), "--teacher", "oracle",
+              "GShape/0", str(bad), "Angle/0")
+    assert out.returncode == 0, out.stderr
+    assert "GShape/0: no concept to guess -> new concept c1" in out.stdout
+    assert "Angle/0: guessed c1 (-1) -> new concept c2" in out.stdout
+    assert "skipped demonstration" in out.stderr and "bad.csv" in out.stderr
+    assert memory.is_file() and len(load_memory(memory)[0]) == 2
+    from iloci.data import load_lasa
+    npy = tmp_path / "mine.npy"
+    np.save(npy, load_lasa(["Angle"])[4].positions)
+    out = cli("recognize", "--memory", str(memory), "GShape/4", str(npy), "--json")
+    assert out.returncode == 0, out.stderr
+    answers = [json.loads(line) for line in out.stdout.splitlines()]
+    assert [a["demo"] for a in answers] == ["GShape/4", "mine/0"]
+    assert all(a["concept"] in ("c1", "c2") and 0 <= a["confidence"] <= 1 for a in answers)
+    # teaching again continues from the saved memory
+    out = cli("teach", "--memory", str(memory), "GShape/1")
+    assert out.returncode == 0, out.stderr
+    assert "continuing from" in out.stdout and load_memory(memory)[0].demonstrations_seen == 3
+
+
+def test_cli_errors(tmp_path, cli):
+    out = cli("recognize", "--memory", str(tmp_path / "none.npz"), "GShape/0")
+    assert out.returncode == 2 and "memory file not found" in out.stderr
+    out = cli("teach", "--memory", str(tmp_path / "m.npz"), "GShap/1")
+    assert out.returncode == 2 and "Did you mean 'GShape'" in out.stderr
+    out = cli("teach", "--memory", str(tmp_path / "m.npz"), "GShape/9")
+    assert out.returncode == 2 and "0..6" in out.stderr
+    assert not (tmp_path / "m.npz").exists()
+
+
+def test_default_teaching_stream_is_seeded():
+    from iloci.commands.teach import default_stream
+    from iloci.config import load_config
+    cfg = load_config({"data": {"shapes": ["GShape", "Angle", "Sine"]},
+                       "evaluation": {"seed": 3, "train_fraction": 0.3}})
+    a, b = default_stream(cfg), default_stream(cfg)
+    assert [d.key for d in a] == [d.key for d in b]
+    assert len(a) == 3 * 2 and {d.shape for d in a} == {"GShape", "Angle", "Sine"}
+    other = default_stream(cfg.replace(evaluation={"seed": 4}))
+    assert [d.key for d in other] != [d.key for d in a]
