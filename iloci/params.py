@@ -32,13 +32,13 @@ class RNNPBParams:
     #: Training epochs of a fresh network or of a rehearsal (full batch).
     epochs: int = 1500
     #: Adam learning rate for weights.
-    learning_rate: float = 0.01
+    learning_rate: float = 0.005
     #: Adam learning rate for PB vectors during training.
     pb_learning_rate: float = 0.05
     #: Both learning rates decay exponentially to this fraction of their
     #: value over one ``train`` call (1.0: constant). Settles the weights at
     #: the end of a training instead of leaving them on an Adam oscillation.
-    learning_rate_decay: float = 1.0
+    learning_rate_decay: float = 0.1
     #: The weights' learning rate ramps up linearly over this many epochs
     #: of each ``train`` call (0: none). Adam's first steps move every weight
     #: by about the full learning rate whatever its gradient; at the start

@@ -43,10 +43,12 @@ class Progress:
         k = msg["fold"]
         now = time.perf_counter()
         f = self.folds.setdefault(k, {"step": 0, "total": 1, "start": now, "done": False,
-                                      "ccr": None, "feedback": []})
+                                      "ccr": None, "feedback": [], "queued": False})
         kind = msg["kind"]
-        if kind == "fold_start":
-            f.update(total=max(1, msg["total"]), start=now)
+        if kind == "fold_queued":
+            f.update(total=max(1, msg["total"]), queued=True)
+        elif kind == "fold_start":
+            f.update(total=max(1, msg["total"]), start=now, queued=False)
         elif kind == "interaction":
             f["step"] = msg["step"] + 1
             f["total"] = max(1, msg["total"])
@@ -64,7 +66,7 @@ class Progress:
             eta = elapsed / f["step"] * (f["total"] - f["step"])
             tail = f"{elapsed:5.0f} s, ETA {_fmt_s(eta)}"
         else:
-            tail = "starting"
+            tail = "waiting for a worker" if f.get("queued") else "starting"
         return (f"fold {k} [{bar:<{self.width}}] {f['step']:>3}/{f['total']} demos  {tail}")
 
     def draw(self, changed: int) -> None:

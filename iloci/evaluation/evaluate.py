@@ -212,6 +212,8 @@ def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
         if queue is not None:
             queue.put(msg)
 
+    # a fold's clock starts when a worker takes it, not when it is queued
+    send({"kind": "fold_start", "fold": fold, "total": len(learn_idx)})
     res = run_fold(config_dict, fold, [demos[i] for i in learn_idx],
                    [demos[i] for i in test_idx], send=send, baseline=baseline)
     return res.to_dict()
@@ -284,8 +286,8 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     jobs : int, optional
         Parallel processes (default ``config.evaluation.jobs``).
     progress : callable, optional
-        Receives dicts: ``{"kind": "fold_start"|"interaction"|"rehearsal"|
-        "fold_done", "fold": k, ...}``.
+        Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
+        "rehearsal"|"fold_done", "fold": k, ...}``.
     folds : sequence of int, optional
         Run only these folds (default: all).
     baseline : bool
@@ -341,7 +343,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
                 learn_idx, test_idx = plan[k]
                 futures[pool.submit(_run_fold_in_worker, cfg_dict, k, learn_idx, test_idx,
                                     shapes, queue, baseline)] = k
-                emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
+                emit({"kind": "fold_queued", "fold": k, "total": len(learn_idx)})
             pending = set(futures)
             while pending:
                 done, pending = cf.wait(pending, timeout=0.2,
