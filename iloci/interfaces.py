@@ -194,6 +194,18 @@ class Response:
     attempt: int = 1
     extra: Mapping[str, Any] = field(default_factory=dict)
 
+    @property
+    def drawing(self) -> np.ndarray:
+        """The pen path to show the teacher, shape (T, 2) (m, y-z in the drawing plane).
+
+        When a simulator executed the response, what the arm actually drew:
+        ``execution.end_effector`` projected on the (vertical, x = const)
+        plane. Otherwise ``motion``, the path the network generated.
+        """
+        if self.execution is None:
+            return np.asarray(self.motion, dtype=np.float64)
+        return np.asarray(self.execution.end_effector, dtype=np.float64)[:, 1:3]
+
 
 @runtime_checkable
 class PerceptualModel(Protocol):
@@ -359,17 +371,65 @@ class IKSolver(Protocol):
 
 @runtime_checkable
 class Simulator(Protocol):
-    """A physics engine executing the arm's joint path."""
+    """A physics engine executing the arm's joint path.
+
+    :mod:`iloci.sensorimotor.simulation` holds what every simulator shares:
+    the input checks, the set-point schedule and tracking loop, the camera
+    and colours of the picture, and the base of the settings' schema.
+    """
 
     def execute(self, joint_path: np.ndarray, dt: float) -> Execution:
-        """Track ``joint_path`` (T, J) under position control at step ``dt``."""
+        """Track a joint path under position control.
+
+        The arm starts at rest in the path's first posture; the servos'
+        set-points move linearly from one row to the next over ``dt``.
+
+        Parameters
+        ----------
+        joint_path : ndarray, shape (T, J)
+            Joint angles (rad) at times ``0, dt, 2 dt, ...``, within the
+            robot's joint limits.
+        dt : float
+            Time between two rows (s), > 0.
+
+        Returns
+        -------
+        Execution
+            ``joint_path`` (T, J): the angles reached at each time;
+            ``end_effector`` (T, 3): the pen tip reached (m, torso frame);
+            ``dt``. Row 0 is the start posture itself.
+
+        Raises
+        ------
+        InvalidInputError
+            Not numeric, wrong shape (a width other than J), NaN or inf, a
+            joint outside its limits, or ``dt`` not a positive finite number.
+        """
         ...
 
     def render(self, execution: Execution, width: int = 480,
                height: int = 360) -> np.ndarray:
-        """Image of the arm and its drawn path, shape (height, width, 3) uint8."""
+        """Image of the arm in its last posture and the path its pen drew.
+
+        Parameters
+        ----------
+        execution : Execution
+            As :meth:`execute` returned it, or a prefix of one (the drawing
+            so far).
+        width, height : int
+            Image size (pixels).
+
+        Returns
+        -------
+        ndarray, shape (height, width, 3), uint8
+
+        Raises
+        ------
+        InvalidInputError
+            Not an Execution, malformed arrays, or a bad image size.
+        """
         ...
 
     def close(self) -> None:
-        """Release the engine."""
+        """Release the engine (idempotent)."""
         ...

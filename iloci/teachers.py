@@ -106,7 +106,9 @@ class ConsoleTeacher:
     ----------
     picture_dir : str
         Directory for a PNG of each answer (demonstration beside the robot's
-        drawing) when matplotlib is installed; ``""`` disables pictures.
+        drawing: :attr:`Response.drawing <iloci.interfaces.Response.drawing>`,
+        the executed pen path when a simulator is configured) when
+        matplotlib is installed; ``""`` disables pictures.
     stdin, stdout : file, optional
         For embedding and tests.
     """
@@ -124,30 +126,30 @@ class ConsoleTeacher:
         if not self.picture_dir:
             return None
         try:
-            import matplotlib
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
+            # a bare Figure, not pyplot: no backend switch in the host program
+            from matplotlib.figure import Figure
         except ImportError:
             return None
         self._count += 1
         out = Path(self.picture_dir)
         out.mkdir(parents=True, exist_ok=True)
         path = out / f"answer-{self._count:04d}.png"
-        fig, axes = plt.subplots(1, 2, figsize=(7, 3.5))
+        fig = Figure(figsize=(7, 3.5))
+        axes = fig.subplots(1, 2)
         axes[0].plot(demo.positions[:, 0], demo.positions[:, 1], "k-")
         axes[0].plot(*demo.positions[0], "go")
         axes[0].set_title(f"shown: {demo.key}")
-        motion = response.motion
-        if response.execution is not None:
-            motion = response.execution.end_effector[:, 1:]
-        axes[1].plot(motion[:, 0], motion[:, 1], "b-")
-        axes[1].plot(*motion[0], "go")
-        axes[1].set_title(f"robot: concept {response.concept}")
+        # with a simulator, the teacher judges what the arm drew, not what
+        # the network meant to draw
+        drawing = response.drawing
+        axes[1].plot(drawing[:, 0], drawing[:, 1], "b-")
+        axes[1].plot(*drawing[0], "go")
+        drawn = "drew" if response.execution is not None else "generated"
+        axes[1].set_title(f"robot {drawn}: concept {response.concept}")
         for ax in axes:
             ax.set_aspect("equal", adjustable="datalim")
         fig.tight_layout()
         fig.savefig(path, dpi=80)
-        plt.close(fig)
         return str(path)
 
     def feedback(self, demo: Demonstration, response: Response) -> int:

@@ -272,3 +272,156 @@ def test_motion_checks_shapes(robot):
         Motion("x/0", pp, np.zeros((5, 3)), np.zeros((4, 4)), 0.1)
     with pytest.raises(InvalidInputError, match="dt"):
         Motion("x/0", pp, np.zeros((5, 3)), np.zeros((5, 4)), 0.0)
+
+
+# ---------------------------------------------------------------------- simulation
+# What every simulator shares (iloci.sensorimotor.simulation), without an engine.
+
+def _arm_path(robot, T=20) -> np.ndarray:
+    s = np.linspace(0, 1, T)[:, None]
+    return robot.q_home + 0.2 * np.sin(2 * np.pi * s) * np.array([1.0, 0.5, 1.0, 0.5])
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda q: q[:, :3], (r"shape \(T, 4\) with T >= 1, one column per joint "
+                          r"\(RShoulderPitch, RShoulderRoll, RElbowYaw, RElbowRoll\), "
+                          r"got \(20, 3\)")),
+    (lambda q: np.zeros((20, 6)), r"got \(20, 6\)"),
+    (lambda q: q[0], r"got \(4,\)"),
+    (lambda q: q[:0], r"T >= 1.*got \(0, 4\)"),
+    (lambda q: np.where(np.arange(80).reshape(20, 4) == 13, np.nan, q),
+     r"NaN or inf \(first at step 3, joint RShoulderRoll\)"),
+    (lambda q: np.where(np.arange(80).reshape(20, 4) == 9, np.inf, q), "NaN or inf"),
+    (lambda q: np.vstack([q, [0.0, 0.0, 0.0, 1.0]]),
+     (r"step 20: RShoulderRoll = 0.0000 rad is outside its limits \[-1.6493, -0.0087\] "
+      r"\(1 step\(s\) out of range\)\. Clip the path")),
+    (lambda q: q + np.array([0, 0, 0, 1.0]), r"RElbowRoll = .* outside its limits"),
+    (lambda q: [["a"] * 4] * 3, "numeric array of shape"),
+    (lambda q: None, "shape"),
+], ids=["3 columns", "6 columns", "one row as 1-D", "empty", "NaN", "inf", "outside limit",
+        "above a limit", "strings", "None"])
+def test_check_joint_path_errors_say_what_is_wrong(robot, bad, match):
+    from iloci.sensorimotor.simulation import check_joint_path
+    with pytest.raises(InvalidInputError, match=match):
+        check_joint_path(bad(_arm_path(robot)), 0.05, robot)
+
+
+def test_check_joint_path_clips_within_tolerance_and_checks_dt(robot):
+    from iloci.sensorimotor.simulation import check_joint_path
+    q = _arm_path(robot)
+    q[5, 1] = robot.upper[1] + 5e-7  # a rounding error past a limit passes, clipped
+    out, dt = check_joint_path(q.tolist(), np.float32(0.05), robot)
+    assert out.dtype == np.float64 and out[5, 1] == robot.upper[1] and type(dt) is float
+    # a path the arm already performed may overshoot a limit: kept as it is
+    q[5, 1] = robot.upper[1] + 0.01
+    out, _ = check_joint_path(q, 0.05, robot, limits=False)
+    assert out[5, 1] == q[5, 1]
+    for dt in (0, -1.0, float("nan"), float("inf"), "fast", None):
+        with pytest.raises(InvalidInputError, match="dt"):
+            check_joint_path(_arm_path(robot), dt, robot)
+
+
+def test_check_postures_execution_and_image_size(robot):
+    from iloci.interfaces import Execution
+    from iloci.sensorimotor.simulation import check_execution, check_image_size, check_postures
+    qs, single = check_postures(robot.q_home, robot)
+    assert qs.shape == (1, 4) and single
+    qs, single = check_postures(np.tile(robot.lower - 0.1, (3, 1)), robot)  # limits not checked
+    assert qs.shape == (3, 4) and not single
+    with pytest.raises(InvalidInputError, match="NaN"):
+        check_postures(np.array([np.nan, 0, 0, 0]), robot)
+
+    q = _arm_path(robot, 5)
+    ex = Execution(q, np.zeros((5, 3)), 0.1)
+    q2, pen = check_execution(ex, robot)
+    assert q2.shape == (5, 4) and pen.shape == (5, 3)
+    with pytest.raises(InvalidInputError, match="render takes an Execution .*got ndarray"):
+        check_execution(q, robot)
+    with pytest.raises(InvalidInputError, match=r"end_effector must be finite with shape "
+                                                r"\(5, 3\), got \(5, 2\)"):
+        check_execution(Execution(q, np.zeros((5, 2)), 0.1), robot)
+    with pytest.raises(InvalidInputError, match="end_effector must be finite"):
+        check_execution(Execution(q, np.full((5, 3), np.nan), 0.1), robot)
+    with pytest.raises(InvalidInputError, match="joint path"):
+        check_execution(Execution(q[:, :2], np.zeros((5, 3)), 0.1), robot)
+
+    assert check_image_size(np.int64(64), 48) == (64, 48)
+    for w, h, which in ((0, 10, "width"), (10, 5000, "height"), (2.0, 10, "width"),
+                        (False, 10, "width"), ("64", 10, "width")):
+        with pytest.raises(InvalidInputError, match=f"image {which} must be an integer"):
+            check_image_size(w, h)
+
+
+def test_setpoints_and_track_follow_the_path_linearly(robot):
+    """A perfect servo (the state is the set-point) reaches every row exactly."""
+    from iloci.sensorimotor.simulation import setpoints, track, updates_per_step
+    assert updates_per_step(0.05, 0.001) == 50  # no extra update from rounding
+    assert updates_per_step(0.0005, 0.001) == 1
+    q = _arm_path(robot, 6)
+    segments = list(setpoints(q, 0.01, 0.004))
+    assert [i for i, _, _ in segments] == [0, 1, 2, 3, 4]
+    _, targets, velocity = segments[2]
+    assert targets.shape == (3, 4)
+    np.testing.assert_allclose(targets[-1], q[3])
+    np.testing.assert_allclose(targets[0], q[2] + (q[3] - q[2]) / 3)
+    np.testing.assert_allclose(velocity, (q[3] - q[2]) / 0.01)
+
+    state = {"q": q[0].copy(), "holds": 0}
+
+    def hold(target, velocity):
+        state["q"] = target.copy()
+        state["holds"] += 1
+
+    ex = track(q, 0.01, 0.004, hold, lambda: (state["q"], np.r_[0.0, state["q"][:2]]))
+    assert state["holds"] == 5 * 3
+    np.testing.assert_allclose(ex.joint_path, q)
+    np.testing.assert_allclose(ex.end_effector[:, 1:], q[:, :2])
+    assert ex.dt == 0.01
+    # a single posture: nothing to track, the start is what is read
+    one = track(q[:1], 0.01, 0.004, hold, lambda: (q[0], np.zeros(3)))
+    assert one.joint_path.shape == (1, 4) and one.end_effector.shape == (1, 3)
+
+
+def test_simulator_params_and_settings_errors():
+    from dataclasses import dataclass
+    from typing import ClassVar
+
+    from iloci.sensorimotor.simulation import SimulatorParams, check_settings
+
+    @dataclass(frozen=True)
+    class EngineParams(SimulatorParams):
+        POSITIVE: ClassVar[tuple[str, ...]] = ("step",)
+        step: float = 0.001
+
+    EngineParams().validate()
+    for kw, msg in (({"step": 0.0}, "step must be > 0, got 0.0"),
+                    ({"gravity": -9.81}, "gravity must be >= 0"),
+                    ({"step": float("nan")}, "step must be a finite number"),
+                    ({"gravity": float("inf")}, "gravity must be a finite number")):
+        with pytest.raises(InvalidInputError, match=msg + ".*see .*EngineParams"):
+            check_settings(EngineParams(**kw))
+
+
+def test_picture_helpers(robot):
+    from iloci.sensorimotor.simulation import VIEW, path_dots, plane_outline
+    outline = plane_outline(robot.plane)
+    assert outline.shape == (5, 3) and np.array_equal(outline[0], outline[-1])
+    assert np.allclose(outline[:, 0], robot.plane.x)
+    dots = path_dots(outline, 0.004)
+    # a 10 cm square every 4 mm: 25 dots a side (26 where 0.1 / 0.004 rounds
+    # up), plus the first point
+    assert 101 <= len(dots) <= 105 and dots.shape[1] == 3
+    assert np.linalg.norm(np.diff(dots, axis=0), axis=1).max() <= 0.004 + 1e-12
+    # the camera looks at the plane from in front of the robot
+    assert VIEW["eye"][0] > robot.plane.x > 0 and 0 < VIEW["fov"] < 90
+
+
+def test_simulation_module_is_light():
+    import subprocess
+    import sys
+    code = ("import sys, iloci.sensorimotor.simulation; "
+            "print(sorted(m for m in ('pybullet', 'mujoco', 'pinocchio', 'matplotlib', 'torch')"
+            " if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"

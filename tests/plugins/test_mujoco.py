@@ -1,4 +1,5 @@
-"""The ``mujoco`` simulator plugin: tracking, determinism, rendering, bad input."""
+"""The ``mujoco`` simulator plugin: the shared simulator cases (sim_cases.py), its
+settings, the servos at their torque limit, rendering without OpenGL, ``iloci draw``."""
 
 from __future__ import annotations
 
@@ -11,32 +12,18 @@ pytest.importorskip("mujoco")
 pytest.importorskip("pinocchio")
 
 from iloci_mujoco.sim import MuJoCoSimulator
-from iloci_pinocchio.ik import PinocchioIK
+from sim_cases import *  # the shared simulator tests
 
 from iloci.config import load_config
 from iloci.data import load_lasa
-from iloci.errors import ConfigError, IlociError, InvalidInputError, MissingBackendError
-from iloci.interfaces import Execution, Simulator
-from iloci.sensorimotor.pipeline import to_motion
+from iloci.errors import ConfigError, InvalidInputError, MissingBackendError
 from iloci.sensorimotor.robots import get_robot
 from iloci.testing import parametrize_with_checks, registry_factory
 
 
 @pytest.fixture(scope="module")
-def sim():
-    s = MuJoCoSimulator()
-    yield s
-    s.close()
-
-
-@pytest.fixture(scope="module")
-def ik():
-    return PinocchioIK()
-
-
-@pytest.fixture(scope="module")
-def motion(ik):
-    return to_motion(load_lasa("GShape")[0], None, ik)
+def make():
+    return MuJoCoSimulator
 
 
 def _can_render() -> bool:
@@ -53,6 +40,11 @@ CAN_RENDER = _can_render()
 needs_gl = pytest.mark.skipif(not CAN_RENDER, reason="no OpenGL context (EGL/OSMesa)")
 
 
+@pytest.fixture(scope="module")
+def can_render():
+    return CAN_RENDER
+
+
 @parametrize_with_checks([("simulator", registry_factory("simulator", "mujoco"))])
 def test_conformance(component, check):
     if check.__name__ == "sim_render" and not CAN_RENDER:
@@ -60,126 +52,13 @@ def test_conformance(component, check):
     check(component)
 
 
-def test_satisfies_protocol(sim):
-    assert isinstance(sim, Simulator)
-
-
-def test_tracks_lasa_joint_path_within_2mm(sim, ik, motion):
-    ex = sim.execute(motion.joint_path, motion.dt)
-    assert isinstance(ex, Execution)
-    assert ex.joint_path.shape == motion.joint_path.shape
-    assert ex.end_effector.shape == (len(motion), 3)
-    assert ex.dt == pytest.approx(motion.dt)
-    err = np.linalg.norm(ex.end_effector - ik.forward(motion.joint_path), axis=1)
-    assert err.max() < 0.002
-    # the arm starts at rest in the first posture: row 0 is exact
-    assert err[0] < 1e-6
-    # and the reached joint angles are what the pen positions say
-    np.testing.assert_allclose(sim.forward(ex.joint_path), ex.end_effector, atol=1e-6)
-
-
-def test_repeated_execution_is_independent_and_deterministic(sim, motion):
-    a = sim.execute(motion.joint_path, motion.dt)
-    sim.execute(motion.joint_path[::-1], motion.dt / 2)  # something else in between
-    b = sim.execute(motion.joint_path, motion.dt)
-    np.testing.assert_array_equal(a.end_effector, b.end_effector)
-    np.testing.assert_array_equal(a.joint_path, b.joint_path)
-
-
-def test_gravity_sags_a_held_posture_only_slightly(motion):
-    # hold the first posture for 2 s: the motors must carry the arm's weight
-    q = np.repeat(motion.joint_path[:1], 41, axis=0)
-    with MuJoCoSimulator() as s:
-        held = s.execute(q, 0.05)
-    with MuJoCoSimulator(gravity=0.0) as s:
-        free = s.execute(q, 0.05)
-    sag = np.linalg.norm(held.end_effector - held.end_effector[0], axis=1).max()
-    assert 1e-7 < sag < 0.001, "gravity must act, and the motors must hold the arm"
-    assert np.linalg.norm(free.end_effector - free.end_effector[0], axis=1).max() < 1e-9
-
-
-@needs_gl
-def test_render_shows_the_drawn_path(sim, ik, motion):
-    ex = sim.execute(motion.joint_path, motion.dt)
-    img = sim.render(ex, 160, 120)
-    assert img.shape == (120, 160, 3) and img.dtype == np.uint8
-    blue = (img[..., 2].astype(int) - img[..., 0] > 80) & (img[..., 2] > 120)
-    assert blue.sum() > 50, "the pen path is not in the image"
-    # half the drawing draws fewer blue pixels; rendering leaves no bodies behind
-    half = Execution(ex.joint_path[:25], ex.end_effector[:25], ex.dt)
-    img_half = sim.render(half, 160, 120)
-    blue_half = (img_half[..., 2].astype(int) - img_half[..., 0] > 80) & (img_half[..., 2] > 120)
-    assert 0 < blue_half.sum() < blue.sum()
-    np.testing.assert_array_equal(sim.render(ex, 160, 120), img)
-
-
-def test_a_path_ending_at_a_limit_executes_and_renders():
-    """The IK clamps to the limits; the arm may overshoot one a little (soft
-    limits), and what it reached must still render and evaluate."""
-    robot = get_robot()
-    q = np.repeat(robot.q_home[None], 30, axis=0)
-    q[:, 1] = np.linspace(robot.q_home[1], robot.upper[1], 30)
-    q[:, 3] = np.linspace(robot.q_home[3], robot.lower[3], 30)
-    with MuJoCoSimulator() as s:
-        ex = s.execute(q, 0.02)
-        assert np.abs(ex.joint_path - q).max() < 0.01
-        np.testing.assert_allclose(s.forward(ex.joint_path), ex.end_effector, atol=1e-6)
-        if CAN_RENDER:
-            assert s.render(ex, 32, 24).shape == (24, 32, 3)
-
-
-@pytest.mark.parametrize("bad, what", [
-    (lambda q: q[:, :3], "shape"),
-    (lambda q: q[:, 0], "shape"),
-    (lambda q: q[:0], "shape"),
-    (lambda q: np.where(np.arange(q.size).reshape(q.shape) == 7, np.nan, q), "NaN"),
-    (lambda q: q + np.array([0, 0, 0, 3.0]), "RElbowRoll"),
-    (lambda q: q - np.array([0, 2.0, 0, 0]), "RShoulderRoll"),
-    (lambda q: [["a"] * 4] * 3, "numeric"),
-])
-def test_bad_joint_path(sim, motion, bad, what):
-    with pytest.raises(InvalidInputError, match=what):
-        sim.execute(bad(np.array(motion.joint_path)), 0.05)
-
-
-@pytest.mark.parametrize("dt", [0.0, -0.1, float("nan"), float("inf"), "fast"])
-def test_bad_dt(sim, motion, dt):
-    with pytest.raises(InvalidInputError, match="dt"):
-        sim.execute(motion.joint_path, dt)
-
-
-@pytest.mark.parametrize("size", [(0, 10), (10, -1), (10.5, 10), (True, 10), (10, 10_000)])
-def test_bad_image_size(sim, motion, size):
-    ex = sim.execute(motion.joint_path[:3], motion.dt)
-    with pytest.raises(InvalidInputError, match="width|height"):
-        sim.render(ex, *size)
-
-
-def test_render_rejects_what_is_not_an_execution(sim, motion):
-    with pytest.raises(InvalidInputError, match="Execution"):
-        sim.render(motion.joint_path, 32, 24)
-    ex = Execution(np.array(motion.joint_path), np.zeros((3, 3)), motion.dt)
-    with pytest.raises(InvalidInputError, match="end_effector"):
-        sim.render(ex, 32, 24)
-
-
-def test_closed_simulator_says_so(motion):
-    s = MuJoCoSimulator()
-    s.close()
-    s.close()  # idempotent
-    with pytest.raises(IlociError, match="closed"):
-        s.execute(motion.joint_path, motion.dt)
-
-
-def test_bad_settings():
-    with pytest.raises(InvalidInputError, match="timestep"):
-        MuJoCoSimulator(timestep=0.0)
-    with pytest.raises(InvalidInputError, match="timestep"):
+def test_servo_settings():
+    with pytest.raises(InvalidInputError, match="timestep <= control_period"):
         MuJoCoSimulator(timestep=0.01, control_period=0.001)
     with pytest.raises(InvalidInputError, match="kp"):
         MuJoCoSimulator(kp=float("nan"))
-    with pytest.raises(InvalidInputError, match="gravity"):
-        MuJoCoSimulator(gravity=-1.0)
+    with pytest.raises(InvalidInputError, match="kv must be >= 0"):
+        MuJoCoSimulator(kv=-1.0)
 
 
 def test_config_section():
@@ -191,11 +70,6 @@ def test_config_section():
         load_config({"simulator": {"name": "mujoco", "timestep": 0.01}})
     with pytest.raises(ConfigError, match="substeps"):
         load_config({"simulator": {"name": "mujoco", "substeps": 4}})
-
-
-def test_robot_object_accepted():
-    with MuJoCoSimulator(get_robot()) as s:
-        assert s.joint_names == get_robot().joint_names
 
 
 def test_torque_limit_holds_and_stays_stable():

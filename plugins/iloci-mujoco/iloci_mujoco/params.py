@@ -3,16 +3,21 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
+
+from iloci.sensorimotor.simulation import SimulatorParams
 
 __all__ = ["MuJoCoParams"]
 
 
 @dataclass(frozen=True)
-class MuJoCoParams:
-    """Settings of :class:`iloci_mujoco.sim.MuJoCoSimulator`."""
+class MuJoCoParams(SimulatorParams):
+    """Settings of :class:`iloci_mujoco.sim.MuJoCoSimulator`: ``robot`` and
+    ``gravity`` as every simulator's, and the servos' gains and update rates."""
 
-    #: Robot (a name of :mod:`iloci.sensorimotor.robots`).
-    robot: str = "nao-v32-right-arm"
+    POSITIVE: ClassVar[tuple[str, ...]] = ("control_period", "timestep", "kp")
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("gravity", "kv")
+
     #: Longest period (s) at which the servos' set-points are updated: each
     #: step ``dt`` of the joint path is split into ``ceil(dt / control_period)``
     #: equal control periods.
@@ -28,18 +33,9 @@ class MuJoCoParams:
     #: Gain of each joint's velocity servo (N m s / rad), which tracks the
     #: path's velocity and damps the position servo.
     kv: float = 2.0
-    #: Gravity (m/s^2) pulling along -z of the torso frame; 0 switches it off.
-    gravity: float = 9.81
 
     def validate(self) -> None:
-        if not self.control_period > 0:
-            raise ValueError(f"control_period must be > 0 (s), got {self.control_period}")
-        if not 0 < self.timestep <= self.control_period:
-            raise ValueError(f"need 0 < timestep <= control_period (s), got timestep="
+        super().validate()
+        if not self.timestep <= self.control_period:
+            raise ValueError(f"need timestep <= control_period (s), got timestep="
                              f"{self.timestep}, control_period={self.control_period}")
-        if not self.kp > 0:
-            raise ValueError(f"kp must be > 0, got {self.kp}")
-        if not self.kv >= 0:
-            raise ValueError(f"kv must be >= 0, got {self.kv}")
-        if not self.gravity >= 0:
-            raise ValueError(f"gravity must be >= 0 (m/s^2, pointing down), got {self.gravity}")

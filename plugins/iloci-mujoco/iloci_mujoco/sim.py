@@ -21,8 +21,9 @@ which adds what a URDF cannot say:
 posture, moves each servo's set-point linearly from one path point to the
 next over ``dt`` (updated every ``control_period``, 1 ms) with that
 segment's velocity as the velocity set-point, and steps the physics
-(``timestep``, 0.2 ms) against gravity. It returns the joint angles and the pen tip (the ``r_pen_tip``
-body) reached at each time of the path.
+(``timestep``, 0.2 ms) against gravity (the loop is
+:func:`iloci.sensorimotor.simulation.track`). It returns the joint angles
+and the pen tip (the ``r_pen_tip`` body) reached at each time of the path.
 
 Rendering is offscreen OpenGL. On a Linux machine without a display, this
 module selects EGL (``MUJOCO_GL=egl``) unless ``MUJOCO_GL`` is set; it needs
@@ -47,8 +48,10 @@ import numpy as np
 
 from iloci.errors import IlociError, InvalidInputError, MissingBackendError
 from iloci.interfaces import Execution
+from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot, get_robot
 from iloci_mujoco import choose_opengl
+from iloci_mujoco.params import MuJoCoParams
 
 choose_opengl()
 try:
@@ -66,100 +69,12 @@ except Exception as exc:  # noqa: BLE001  (MuJoCo starts OpenGL on import; it ma
 else:
     _IMPORT_ERROR = None
 
-__all__ = ["RENDER_HELP", "VIEW", "MuJoCoSimulator"]
-
-#: Camera of :meth:`MuJoCoSimulator.render`, the same as the ``pybullet``
-#: simulator's: in front of the robot, above and to the side of its right arm
-#: (m, torso frame), vertical field of view in degrees.
-VIEW = {"eye": (0.45, -0.28, 0.25), "target": (0.11, -0.12, 0.11), "fov": 38.0}
+__all__ = ["RENDER_HELP", "MuJoCoSimulator"]
 
 #: What offscreen rendering needs, quoted by the error when it fails.
 RENDER_HELP = ("on a headless Linux machine: apt-get install libegl1 and set MUJOCO_GL=egl, "
                "or apt-get install libosmesa6 and set MUJOCO_GL=osmesa, before mujoco is "
                "first imported")
-
-_PEN_RGBA = np.array([0.10, 0.20, 0.80, 1.0], dtype=np.float32)
-_START_RGBA = np.array([0.10, 0.70, 0.20, 1.0], dtype=np.float32)
-_FRAME_RGBA = np.array([0.55, 0.55, 0.55, 1.0], dtype=np.float32)
-#: Largest image side (pixels) :meth:`MuJoCoSimulator.render` accepts.
-MAX_IMAGE_SIZE = 4096
-
-
-def check_joint_path(joint_path: np.ndarray, dt: float, robot: Robot,
-                     tol: float = 1e-6, limits: bool = True) -> tuple[np.ndarray, float]:
-    """Validate a joint path and its time step for execution.
-
-    Parameters
-    ----------
-    joint_path : array_like, shape (T, J)
-        Joint angles (rad), columns in ``robot.joint_names`` order, ``T >= 1``.
-    dt : float
-        Time between two rows (s), > 0.
-    robot : Robot
-    tol : float
-        Slack on the joint limits (rad); the path is clipped to the limits.
-    limits : bool
-        Check the limits. Off for paths an arm already performed, which a
-        physics engine lets overshoot a limit slightly (its joint limits are
-        soft constraints); they are returned unclipped.
-
-    Returns
-    -------
-    (ndarray of shape (T, J), float)
-
-    Raises
-    ------
-    InvalidInputError
-        Not numeric, wrong shape, NaN or inf, a joint outside its limits, or
-        ``dt`` not a positive finite number.
-    """
-    names = tuple(robot.joint_names)
-    J = len(names)
-    try:
-        q = np.asarray(joint_path, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"joint path must be a numeric array of shape (T, {J}).") \
-            from None
-    if q.ndim != 2 or q.shape[1] != J or len(q) == 0:
-        raise InvalidInputError(
-            f"joint path must have shape (T, {J}) with T >= 1, one column per joint "
-            f"({', '.join(names)}), got {q.shape}.")
-    if not np.all(np.isfinite(q)):
-        row, col = (int(i) for i in np.argwhere(~np.isfinite(q))[0])
-        raise InvalidInputError(
-            f"joint path contains NaN or inf (first at step {row}, joint {names[col]}); "
-            "pass finite angles in radians.")
-    lo = np.asarray(robot.lower, dtype=np.float64)
-    hi = np.asarray(robot.upper, dtype=np.float64)
-    bad = (q < lo - tol) | (q > hi + tol) if limits else np.zeros(q.shape, dtype=bool)
-    if bad.any():
-        row, col = (int(i) for i in np.argwhere(bad)[0])
-        raise InvalidInputError(
-            f"joint path step {row}: {names[col]} = {q[row, col]:.4f} rad is outside its "
-            f"limits [{lo[col]:.4f}, {hi[col]:.4f}] ({int(bad.any(axis=1).sum())} step(s) "
-            "out of range). Clip the path to the robot's limits (robot.lower, "
-            "robot.upper) before executing it.")
-    try:
-        step = float(dt)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"dt must be a number of seconds, got {dt!r}.") from None
-    if not (math.isfinite(step) and step > 0):
-        raise InvalidInputError(f"dt must be a positive, finite time step (s), got {dt!r}.")
-    return (np.clip(q, lo, hi) if limits else q), step
-
-
-def check_image_size(width: int, height: int,
-                     largest: int = MAX_IMAGE_SIZE) -> tuple[int, int]:
-    """Validate an image size in pixels; returns ``(width, height)`` as ints."""
-    out = []
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or \
-                not 1 <= int(v) <= largest:
-            raise InvalidInputError(
-                f"image {name} must be an integer number of pixels in 1..{largest}, "
-                f"got {v!r}.")
-        out.append(int(v))
-    return out[0], out[1]
 
 
 class MuJoCoSimulator:
@@ -168,28 +83,19 @@ class MuJoCoSimulator:
     Parameters
     ----------
     robot : str or Robot
-        Robot name (see :func:`iloci.sensorimotor.robots.get_robot`) or a
-        :class:`~iloci.sensorimotor.robots.Robot`.
-    control_period : float
-        Longest period (s) between two set-point updates.
-    timestep : float
-        Longest physics step (s), at most ``control_period``.
-    kp : float
-        Stiffness of each joint's position servo (N m / rad).
-    kv : float
-        Gain of each joint's velocity servo (N m s / rad).
-    gravity : float
-        Gravity (m/s^2) along -z; 0 switches it off.
+        The robot (a name of :mod:`iloci.sensorimotor.robots`, or one of its
+        :class:`~iloci.sensorimotor.robots.Robot` objects).
+    control_period, timestep, kp, kv, gravity : float
+        Set-point period and physics step (s), the servos' gains and gravity
+        (m/s^2); see :class:`~iloci_mujoco.params.MuJoCoParams`.
 
     Attributes
     ----------
-    robot : Robot
-    joint_names : tuple of str
-        The ``J = 4`` actuated joints, in column order.
-    lower, upper : ndarray, shape (J,)
-        Joint limits (rad).
     model : mujoco.MjModel
         The compiled robot with its servos.
+    robot : Robot
+        Also giving the simulator its attributes ``joint_names`` (J names,
+        column order) and ``lower``, ``upper`` (J,), the joint limits (rad).
 
     Notes
     -----
@@ -202,13 +108,8 @@ class MuJoCoSimulator:
                  kp: float = 1000.0, kv: float = 2.0, gravity: float = 9.81) -> None:
         if _IMPORT_ERROR is not None:
             raise _IMPORT_ERROR
-        for name, v, ok in (("control_period", control_period, control_period > 0),
-                            ("timestep", timestep, 0 < timestep <= control_period),
-                            ("kp", kp, kp > 0), ("kv", kv, kv >= 0),
-                            ("gravity", gravity, gravity >= 0)):
-            if not (math.isfinite(v) and ok):
-                raise InvalidInputError(f"{name} = {v!r} is out of range; see "
-                                        "iloci_mujoco.MuJoCoParams.")
+        simulation.check_settings(MuJoCoParams(
+            control_period=control_period, timestep=timestep, kp=kp, kv=kv, gravity=gravity))
         self.robot = robot if isinstance(robot, Robot) else get_robot(robot)
         self.control_period = float(control_period)
         self.timestep = float(timestep)
@@ -262,7 +163,7 @@ class MuJoCoSimulator:
         sky.width = sky.height = 64
         spec.visual.headlight.ambient = [0.45, 0.45, 0.45]
         spec.visual.headlight.diffuse = [0.55, 0.55, 0.55]
-        spec.visual.global_.fovy = VIEW["fov"]
+        spec.visual.global_.fovy = simulation.VIEW["fov"]
         return spec.compile()
 
     def __repr__(self) -> str:
@@ -291,20 +192,12 @@ class MuJoCoSimulator:
         mujoco.mj_forward(self.model, d)
 
     def forward(self, q: np.ndarray) -> np.ndarray:
-        """Pen-tip positions by MuJoCo's kinematics (postures set, no dynamics).
+        """Where MuJoCo's kinematics puts the pen tip for each posture.
 
-        Parameters
-        ----------
-        q : ndarray, shape (T, J) or (J,)
-            Joint angles (rad).
-
-        Returns
-        -------
-        ndarray, shape (T, 3) or (3,)
-            Pen-tip positions (m, torso frame).
+        ``q`` is (T, J) or (J,) in rad; the result (T, 3) or (3,) in m,
+        torso frame. ``mj_kinematics`` only: no dynamics.
         """
-        single = np.ndim(q) == 1
-        qs, _ = check_joint_path(np.atleast_2d(q), 1.0, self.robot, limits=False)
+        qs, single = simulation.check_postures(q, self.robot)
         m, d = self.model, self._d
         out = np.empty((len(qs), 3))
         for i, qi in enumerate(qs):
@@ -314,51 +207,34 @@ class MuJoCoSimulator:
         return out[0] if single else out
 
     def execute(self, joint_path: np.ndarray, dt: float) -> Execution:
-        """Track a joint path with the position and velocity servos.
+        """Track a joint path (T, J) with MuJoCo's position and velocity servos.
 
-        Parameters
-        ----------
-        joint_path : ndarray, shape (T, J)
-            Joint angles (rad) at times ``0, dt, 2 dt, ...``, within the limits.
-        dt : float
-            Time between two rows (s).
-
-        Returns
-        -------
-        Execution
-            ``joint_path`` (T, J): the angles reached at each time;
-            ``end_effector`` (T, 3): the pen tip reached (m, torso frame);
-            ``dt``. Row 0 is the start posture itself.
-
-        Raises
-        ------
-        InvalidInputError
-            Wrong shape, NaN or inf, a joint outside its limits, or ``dt <= 0``.
+        Set-points are updated every ``control_period``, each held for
+        several physics steps of at most ``timestep``. What the arm reached
+        comes back as an :class:`~iloci.interfaces.Execution` (``joint_path``
+        (T, J), ``end_effector`` (T, 3)), as
+        :meth:`iloci.interfaces.Simulator.execute` specifies, errors included.
         """
-        q, step = check_joint_path(joint_path, dt, self.robot)
+        q, step = simulation.check_joint_path(joint_path, dt, self.robot)
         m, d = self.model, self._d
-        n = max(1, math.ceil(step / self.control_period - 1e-9))
-        physics = max(1, math.ceil(step / n / self.timestep - 1e-9))
+        n = simulation.updates_per_step(step, self.control_period)
+        physics = simulation.updates_per_step(step / n, self.timestep)
         m.opt.timestep = step / (n * physics)
         self._set_posture(q[0])
         J = len(self.joint_names)
         qadr, pen = self._qadr, self._pen
-        reached_q = np.empty_like(q)
-        reached_x = np.empty((len(q), 3))
-        reached_q[0] = d.qpos[qadr]
-        reached_x[0] = d.xpos[pen]
-        fractions = np.arange(1, n + 1) / n
-        for i in range(len(q) - 1):
-            delta = q[i + 1] - q[i]
-            d.ctrl[J:] = delta / step
-            for s in fractions:
-                d.ctrl[:J] = q[i] + s * delta
-                mujoco.mj_step(m, d, physics)
+
+        def hold(target: np.ndarray, velocity: np.ndarray) -> None:
+            d.ctrl[:J] = target
+            d.ctrl[J:] = velocity
+            mujoco.mj_step(m, d, physics)
+
+        def read() -> tuple[np.ndarray, np.ndarray]:
             # mj_step leaves xpos at the state before its integration
             mujoco.mj_kinematics(m, d)
-            reached_q[i + 1] = d.qpos[qadr]
-            reached_x[i + 1] = d.xpos[pen]
-        return Execution(joint_path=reached_q, end_effector=reached_x, dt=step)
+            return d.qpos[qadr], d.xpos[pen]
+
+        return simulation.track(q, step, self.control_period, hold, read)
 
     # ------------------------------------------------------------------ render
     def _get_renderer(self, width: int, height: int) -> mujoco.Renderer:
@@ -387,42 +263,22 @@ class MuJoCoSimulator:
                 r.close()
 
     def render(self, execution: Execution, width: int = 480, height: int = 360) -> np.ndarray:
-        """Image of the arm in its last posture and the path its pen drew.
+        """Offscreen OpenGL picture of an :class:`~iloci.interfaces.Execution`.
 
-        The pen path (``execution.end_effector``) is drawn in blue with its
-        start in green; grey lines outline the robot's drawing plane. The
-        camera is :data:`VIEW`.
-
-        Parameters
-        ----------
-        execution : Execution
-            As returned by :meth:`execute` (a prefix of one shows the drawing
-            so far).
-        width, height : int
-            Image size (pixels), at most :data:`MAX_IMAGE_SIZE`.
-
-        Returns
-        -------
-        ndarray, shape (height, width, 3), uint8
-
-        Raises
-        ------
-        MissingBackendError
-            No OpenGL context can be made (see :data:`RENDER_HELP`).
+        As :meth:`iloci.interfaces.Simulator.render` specifies: an RGB image,
+        shape (height, width, 3), uint8, of the arm in its last posture with
+        the pen path as blue capsules (its start a green sphere) and the
+        drawing plane outlined in grey, seen from
+        :data:`iloci.sensorimotor.simulation.VIEW`. Raises
+        :class:`~iloci.errors.MissingBackendError` when no OpenGL context can
+        be made (see :data:`RENDER_HELP`).
         """
-        w, h = check_image_size(width, height)
-        if not isinstance(execution, Execution):
-            raise InvalidInputError(f"render takes an Execution (from execute), got "
-                                    f"{type(execution).__name__}.")
-        q, _ = check_joint_path(execution.joint_path, execution.dt, self.robot, limits=False)
-        pen = np.asarray(execution.end_effector, dtype=np.float64)
-        if pen.shape != (len(q), 3) or not np.all(np.isfinite(pen)):
-            raise InvalidInputError(
-                f"execution.end_effector must be finite with shape ({len(q)}, 3), got "
-                f"{pen.shape}.")
+        w, h = simulation.check_image_size(width, height)
+        q, pen = simulation.check_execution(execution, self.robot)
         renderer = self._get_renderer(w, h)
         self._set_posture(q[-1])
-        eye, target = np.array(VIEW["eye"]), np.array(VIEW["target"])
+        camera = simulation.VIEW
+        eye, target = np.array(camera["eye"]), np.array(camera["target"])
         look = target - eye
         cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
@@ -434,12 +290,13 @@ class MuJoCoSimulator:
         option.geomgroup[0] = 0  # hide collision geometry, show the visual shapes
         renderer.update_scene(self._d, camera=cam, scene_option=option)
         scene = renderer.scene
-        plane = self.robot.plane
-        frame = plane.to_3d(np.vstack([plane.corners, plane.corners[:1]]))
-        segments = [(a, b, 0.0007, _FRAME_RGBA) for a, b in itertools.pairwise(frame)]
-        segments += [(a, b, 0.0016, _PEN_RGBA) for a, b in itertools.pairwise(pen)]
+        frame = simulation.plane_outline(self.robot.plane)
+        line = (simulation.FRAME_RADIUS, simulation.FRAME_RGBA)
+        ink = (simulation.PEN_RADIUS, simulation.PEN_RGBA)
+        segments = [(a, b, *line) for a, b in itertools.pairwise(frame)]
+        segments += [(a, b, *ink) for a, b in itertools.pairwise(pen)]
         if len(pen) == 1:
-            segments.append((pen[0], pen[0] + 1e-9, 0.0016, _PEN_RGBA))
+            segments.append((pen[0], pen[0] + 1e-9, *ink))
         if scene.ngeom + len(segments) + 1 > scene.maxgeom:
             raise InvalidInputError(f"the path has {len(pen)} points, too many to draw "
                                     f"(at most {scene.maxgeom - scene.ngeom - 2}).")
@@ -447,12 +304,13 @@ class MuJoCoSimulator:
         for a, b, radius, rgba in segments:
             g = scene.geoms[scene.ngeom]
             mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3),
-                                eye3, rgba)
+                                eye3, np.asarray(rgba, dtype=np.float32))
             mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_CAPSULE, radius, a, b)
             scene.ngeom += 1
         g = scene.geoms[scene.ngeom]
-        mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_SPHERE, np.full(3, 0.003), pen[0], eye3,
-                            _START_RGBA)
+        mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_SPHERE,
+                            np.full(3, simulation.START_RADIUS), pen[0], eye3,
+                            np.asarray(simulation.START_RGBA, dtype=np.float32))
         scene.ngeom += 1
         return np.ascontiguousarray(renderer.render(), dtype=np.uint8)
 

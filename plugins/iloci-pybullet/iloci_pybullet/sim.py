@@ -9,7 +9,8 @@ tracks a joint path the way a servoed arm does:
 * each joint's set-point moves linearly from one path point to the next
   over the path's time step ``dt``, and its target velocity is that
   segment's velocity (the velocity feed-forward of a trajectory-following
-  servo), as Nao's motion controller interpolates the commands it is sent;
+  servo), as Nao's motion controller interpolates the commands it is sent
+  (:func:`iloci.sensorimotor.simulation.setpoints`);
 * PyBullet's ``POSITION_CONTROL`` motor follows the set-point with at most
   the joint's effort limit from the URDF (1.33 N m, elbow roll 0.54 N m),
   against gravity and the links' inertia, at ``ceil(dt / timestep)``
@@ -26,8 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import itertools
-import math
 import os
 import sys
 from collections.abc import Iterator
@@ -37,7 +36,9 @@ import numpy as np
 
 from iloci.errors import IlociError, InvalidInputError
 from iloci.interfaces import Execution
+from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot, get_robot
+from iloci_pybullet.params import PyBulletParams
 
 
 @contextlib.contextmanager
@@ -70,116 +71,11 @@ with _quiet():
     import pybullet as pb
     from pybullet_utils.bullet_client import BulletClient
 
-__all__ = ["VIEW", "PyBulletSimulator"]
+__all__ = ["PyBulletSimulator"]
 
-#: Camera of :meth:`PyBulletSimulator.render`: the teacher's view, in front of
-#: the robot, above and to the side of its right arm (m, torso frame), with a
-#: vertical field of view in degrees. Seen from the front, the drawing reads
-#: as the teacher drew it (see :mod:`iloci.sensorimotor.preprocess`).
-VIEW = {"eye": (0.45, -0.28, 0.25), "target": (0.11, -0.12, 0.11), "fov": 38.0}
-
-_PEN_RGBA = (0.10, 0.20, 0.80, 1.0)
-_START_RGBA = (0.10, 0.70, 0.20, 1.0)
-_FRAME_RGBA = (0.55, 0.55, 0.55, 1.0)
 #: Dots available to draw a pen path, and where unused ones wait (out of view).
 _POOL = 800
 _PARKED = (0.0, 0.0, -10.0)
-
-
-def check_joint_path(joint_path: np.ndarray, dt: float, robot: Robot,
-                     tol: float = 1e-6, limits: bool = True) -> tuple[np.ndarray, float]:
-    """Validate a joint path and its time step for execution.
-
-    Parameters
-    ----------
-    joint_path : array_like, shape (T, J)
-        Joint angles (rad), columns in ``robot.joint_names`` order, ``T >= 1``.
-    dt : float
-        Time between two rows (s), > 0.
-    robot : Robot
-    tol : float
-        Slack on the joint limits (rad); the path is clipped to the limits.
-    limits : bool
-        Check the limits. Off for paths an arm already performed, which a
-        physics engine lets overshoot a limit slightly (its joint limits are
-        soft constraints); they are returned unclipped.
-
-    Returns
-    -------
-    (ndarray of shape (T, J), float)
-
-    Raises
-    ------
-    InvalidInputError
-        Not numeric, wrong shape, NaN or inf, a joint outside its limits, or
-        ``dt`` not a positive finite number.
-    """
-    names = tuple(robot.joint_names)
-    J = len(names)
-    try:
-        q = np.asarray(joint_path, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"joint path must be a numeric array of shape (T, {J}).") \
-            from None
-    if q.ndim != 2 or q.shape[1] != J or len(q) == 0:
-        raise InvalidInputError(
-            f"joint path must have shape (T, {J}) with T >= 1, one column per joint "
-            f"({', '.join(names)}), got {q.shape}.")
-    if not np.all(np.isfinite(q)):
-        row, col = (int(i) for i in np.argwhere(~np.isfinite(q))[0])
-        raise InvalidInputError(
-            f"joint path contains NaN or inf (first at step {row}, joint {names[col]}); "
-            "pass finite angles in radians.")
-    lo = np.asarray(robot.lower, dtype=np.float64)
-    hi = np.asarray(robot.upper, dtype=np.float64)
-    bad = (q < lo - tol) | (q > hi + tol) if limits else np.zeros(q.shape, dtype=bool)
-    if bad.any():
-        row, col = (int(i) for i in np.argwhere(bad)[0])
-        raise InvalidInputError(
-            f"joint path step {row}: {names[col]} = {q[row, col]:.4f} rad is outside its "
-            f"limits [{lo[col]:.4f}, {hi[col]:.4f}] ({int(bad.any(axis=1).sum())} step(s) "
-            "out of range). Clip the path to the robot's limits (robot.lower, "
-            "robot.upper) before executing it.")
-    try:
-        step = float(dt)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"dt must be a number of seconds, got {dt!r}.") from None
-    if not (math.isfinite(step) and step > 0):
-        raise InvalidInputError(f"dt must be a positive, finite time step (s), got {dt!r}.")
-    return (np.clip(q, lo, hi) if limits else q), step
-
-
-def check_image_size(width: int, height: int, largest: int = 4096) -> tuple[int, int]:
-    """Validate an image size in pixels; returns ``(width, height)`` as ints."""
-    out = []
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or \
-                not 1 <= int(v) <= largest:
-            raise InvalidInputError(
-                f"image {name} must be an integer number of pixels in 1..{largest}, "
-                f"got {v!r}.")
-        out.append(int(v))
-    return out[0], out[1]
-
-
-def path_dots(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Points along a polyline every ``spacing`` metres (and every vertex).
-
-    Parameters
-    ----------
-    points : ndarray, shape (T, 3)
-    spacing : float
-
-    Returns
-    -------
-    ndarray, shape (K, 3)
-    """
-    out = [points[:1]]
-    for a, b in itertools.pairwise(points):
-        n = max(1, math.ceil(float(np.linalg.norm(b - a)) / spacing))
-        s = np.arange(1, n + 1)[:, None] / n
-        out.append(a + s * (b - a))
-    return np.concatenate(out)
 
 
 class PyBulletSimulator:
@@ -188,22 +84,16 @@ class PyBulletSimulator:
     Parameters
     ----------
     robot : str or Robot
-        Robot name (see :func:`iloci.sensorimotor.robots.get_robot`) or a
-        :class:`~iloci.sensorimotor.robots.Robot`.
-    timestep : float
-        Longest physics step (s).
-    position_gain, velocity_gain : float
-        Gains of PyBullet's ``POSITION_CONTROL`` motors.
-    gravity : float
-        Gravity (m/s^2) along -z; 0 switches it off.
+        A robot of :mod:`iloci.sensorimotor.robots`, by name or itself.
+    timestep, position_gain, velocity_gain, gravity : float
+        The physics step (s), the motors' gains and gravity (m/s^2), as
+        :class:`~iloci_pybullet.params.PyBulletParams` describes them.
 
     Attributes
     ----------
     robot : Robot
-    joint_names : tuple of str
-        The ``J = 4`` actuated joints, in column order.
-    lower, upper : ndarray, shape (J,)
-        Joint limits (rad).
+        Its ``joint_names`` (the J columns of a joint path) and joint limits
+        ``lower``, ``upper`` (J,) are attributes of the simulator too.
 
     Notes
     -----
@@ -216,13 +106,9 @@ class PyBulletSimulator:
     def __init__(self, robot: str | Robot = "nao-v32-right-arm", timestep: float = 0.001,
                  position_gain: float = 0.1, velocity_gain: float = 1.0,
                  gravity: float = 9.81) -> None:
-        for name, v, ok in (("timestep", timestep, timestep > 0),
-                            ("position_gain", position_gain, position_gain > 0),
-                            ("velocity_gain", velocity_gain, velocity_gain >= 0),
-                            ("gravity", gravity, gravity >= 0)):
-            if not (math.isfinite(v) and ok):
-                raise InvalidInputError(f"{name} = {v!r} is out of range; see "
-                                        "iloci_pybullet.PyBulletParams.")
+        simulation.check_settings(PyBulletParams(
+            timestep=timestep, position_gain=position_gain, velocity_gain=velocity_gain,
+            gravity=gravity))
         self.robot = robot if isinstance(robot, Robot) else get_robot(robot)
         self.timestep = float(timestep)
         self.position_gain = float(position_gain)
@@ -296,20 +182,12 @@ class PyBulletSimulator:
         return [s[0] for s in self._c.getJointStates(self._body, self._joints)]
 
     def forward(self, q: np.ndarray) -> np.ndarray:
-        """Pen-tip positions by PyBullet's kinematics (postures set, no dynamics).
+        """Pen-tip positions of postures by PyBullet's kinematics (no dynamics).
 
-        Parameters
-        ----------
-        q : ndarray, shape (T, J) or (J,)
-            Joint angles (rad).
-
-        Returns
-        -------
-        ndarray, shape (T, 3) or (3,)
-            Pen-tip positions (m, torso frame).
+        ``q`` is (T, J) or (J,) in rad; each posture is set in the physics
+        client and its pen tip read: (T, 3) or (3,), m, torso frame.
         """
-        single = np.ndim(q) == 1
-        qs, _ = check_joint_path(np.atleast_2d(q), 1.0, self.robot, limits=False)
+        qs, single = simulation.check_postures(q, self.robot)
         out = np.empty((len(qs), 3))
         for i, qi in enumerate(qs):
             self._set_posture(qi)
@@ -317,53 +195,33 @@ class PyBulletSimulator:
         return out[0] if single else out
 
     def execute(self, joint_path: np.ndarray, dt: float) -> Execution:
-        """Track a joint path under position control.
+        """Track a joint path (T, J) with PyBullet's ``POSITION_CONTROL`` motors.
 
-        Parameters
-        ----------
-        joint_path : ndarray, shape (T, J)
-            Joint angles (rad) at times ``0, dt, 2 dt, ...``, within the limits.
-        dt : float
-            Time between two rows (s).
-
-        Returns
-        -------
-        Execution
-            ``joint_path`` (T, J): the angles reached at each time;
-            ``end_effector`` (T, 3): the pen tip reached (m, torso frame);
-            ``dt``. Row 0 is the start posture itself.
-
-        Raises
-        ------
-        InvalidInputError
-            Wrong shape, NaN or inf, a joint outside its limits, or ``dt <= 0``.
+        One physics step per set-point update. Returns the
+        :class:`~iloci.interfaces.Execution` reached: ``joint_path`` (T, J)
+        and ``end_effector`` (T, 3); shapes and errors are those of
+        :meth:`iloci.interfaces.Simulator.execute`.
         """
-        q, step = check_joint_path(joint_path, dt, self.robot)
+        q, step = simulation.check_joint_path(joint_path, dt, self.robot)
         c = self._c
         c.restoreState(self._home_state)
-        n = max(1, math.ceil(step / self.timestep - 1e-9))
-        c.setTimeStep(step / n)
+        c.setTimeStep(step / simulation.updates_per_step(step, self.timestep))
         self._set_posture(q[0])
         body, joints, forces = self._body, self._joints, self._forces
         kp = [self.position_gain] * len(joints)
         kv = [self.velocity_gain] * len(joints)
-        reached_q = np.empty_like(q)
-        reached_x = np.empty((len(q), 3))
-        reached_q[0] = self._joint_positions()
-        reached_x[0] = self._pen_position()
-        fractions = np.arange(1, n + 1) / n
-        for i in range(len(q) - 1):
-            delta = q[i + 1] - q[i]
-            velocity = (delta / step).tolist()
-            for s in fractions:
-                c.setJointMotorControlArray(
-                    body, joints, pb.POSITION_CONTROL,
-                    targetPositions=(q[i] + s * delta).tolist(), targetVelocities=velocity,
-                    forces=forces, positionGains=kp, velocityGains=kv)
-                c.stepSimulation()
-            reached_q[i + 1] = self._joint_positions()
-            reached_x[i + 1] = self._pen_position()
-        return Execution(joint_path=reached_q, end_effector=reached_x, dt=step)
+
+        def hold(target: np.ndarray, velocity: np.ndarray) -> None:
+            c.setJointMotorControlArray(
+                body, joints, pb.POSITION_CONTROL, targetPositions=target.tolist(),
+                targetVelocities=velocity.tolist(), forces=forces, positionGains=kp,
+                velocityGains=kv)
+            c.stepSimulation()
+
+        def read() -> tuple[list[float], tuple[float, float, float]]:
+            return self._joint_positions(), self._pen_position()
+
+        return simulation.track(q, step, self.timestep, hold, read)
 
     # ------------------------------------------------------------------ render
     def _scene_client(self) -> BulletClient:
@@ -387,54 +245,36 @@ class PyBulletSimulator:
             return [c.createMultiBody(baseMass=0, baseVisualShapeIndex=shape,
                                       basePosition=tuple(map(float, p))) for p in points]
 
-        plane = self.robot.plane
-        dots(path_dots(plane.to_3d(np.vstack([plane.corners, plane.corners[:1]])), 0.004),
-             0.0008, _FRAME_RGBA)
+        outline = simulation.plane_outline(self.robot.plane)
+        dots(simulation.path_dots(outline, 0.004), simulation.FRAME_RADIUS, simulation.FRAME_RGBA)
         parked = np.tile(_PARKED, (_POOL, 1))
         self._scene = c
         self._scene_body = body
-        self._pen_dots = dots(parked, 0.0016, _PEN_RGBA)
-        self._start_dot = dots(parked[:1], 0.003, _START_RGBA)[0]
+        self._pen_dots = dots(parked, simulation.PEN_RADIUS, simulation.PEN_RGBA)
+        self._start_dot = dots(parked[:1], simulation.START_RADIUS, simulation.START_RGBA)[0]
         self._dots_used = 0
         return c
 
     def render(self, execution: Execution, width: int = 480, height: int = 360) -> np.ndarray:
-        """Image of the arm in its last posture and the path its pen drew.
+        """Image (height, width, 3) uint8 of the arm and the path its pen drew.
 
-        The pen path (``execution.end_effector``) is drawn in blue with its
-        start in green; grey dots outline the robot's drawing plane. The
-        camera is :data:`VIEW`. Rendering does not touch the physics: it
-        happens in a separate PyBullet client.
-
-        Parameters
-        ----------
-        execution : Execution
-            As returned by :meth:`execute` (a prefix of one shows the drawing
-            so far).
-        width, height : int
-            Image size (pixels).
-
-        Returns
-        -------
-        ndarray, shape (height, width, 3), uint8
+        PyBullet's software renderer draws ``execution`` (see
+        :meth:`iloci.interfaces.Simulator.render`): the arm in its last
+        posture, the pen path as blue dots starting at a green one, grey dots
+        around the drawing plane, seen from
+        :data:`iloci.sensorimotor.simulation.VIEW`. It does not touch the
+        physics: the scene lives in a second PyBullet client.
         """
-        w, h = check_image_size(width, height)
-        if not isinstance(execution, Execution):
-            raise InvalidInputError(f"render takes an Execution (from execute), got "
-                                    f"{type(execution).__name__}.")
-        q, _ = check_joint_path(execution.joint_path, execution.dt, self.robot, limits=False)
-        pen = np.asarray(execution.end_effector, dtype=np.float64)
-        if pen.shape != (len(q), 3) or not np.all(np.isfinite(pen)):
-            raise InvalidInputError(
-                f"execution.end_effector must be finite with shape ({len(q)}, 3), got "
-                f"{pen.shape}.")
+        w, h = simulation.check_image_size(width, height)
+        q, pen = simulation.check_execution(execution, self.robot)
         c = self._scene_client()
         for j, qj in zip(self._joints, q[-1]):
             c.resetJointState(self._scene_body, j, float(qj), 0.0)
         # dots 0.8 mm apart (radius 1.6 mm) make a solid line; a very long
         # path spreads the pool's dots further apart
         length = float(np.linalg.norm(np.diff(pen, axis=0), axis=1).sum())
-        points = path_dots(pen, max(0.0008, 1.05 * length / (_POOL - len(pen))))[:_POOL]
+        spacing = max(0.0008, 1.05 * length / (_POOL - len(pen)))
+        points = simulation.path_dots(pen, spacing)[:_POOL]
         move = c.resetBasePositionAndOrientation
         for i, p in zip(self._pen_dots, points):
             move(i, tuple(map(float, p)), (0, 0, 0, 1))
@@ -442,8 +282,9 @@ class PyBulletSimulator:
             move(i, _PARKED, (0, 0, 0, 1))
         self._dots_used = len(points)
         move(self._start_dot, tuple(map(float, pen[0])), (0, 0, 0, 1))
-        view = c.computeViewMatrix(VIEW["eye"], VIEW["target"], (0, 0, 1))
-        proj = c.computeProjectionMatrixFOV(VIEW["fov"], w / h, 0.01, 5.0)
+        camera = simulation.VIEW
+        view = c.computeViewMatrix(camera["eye"], camera["target"], (0, 0, 1))
+        proj = c.computeProjectionMatrixFOV(camera["fov"], w / h, 0.01, 5.0)
         img = c.getCameraImage(w, h, view, proj, renderer=pb.ER_TINY_RENDERER,
                                lightDirection=(1.0, -0.6, 1.5), shadow=0)
         rgba = np.reshape(np.asarray(img[2], dtype=np.uint8), (h, w, 4))

@@ -1,0 +1,92 @@
+"""The console teacher and what it shows (kernel only; a real simulator in a learning
+run is tested in tests/plugins/test_pybullet.py)."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iloci.data import load_lasa
+from iloci.errors import FeedbackError
+from iloci.interfaces import Execution, Response
+from iloci.teachers import ConsoleTeacher
+
+
+def _response(executed: bool) -> Response:
+    t = np.linspace(0, 1, 20)
+    motion = np.column_stack([-0.125 + 0.04 * np.cos(6 * t), 0.1 + 0.04 * np.sin(6 * t)])
+    execution = None
+    if executed:
+        # the arm drew it 3 mm lower than the network meant
+        pen = np.column_stack([np.full(20, 0.165), motion + [0.0, -0.003]])
+        execution = Execution(np.zeros((20, 4)), pen, 0.05)
+    return Response("c1", motion, np.zeros((20, 4)), "GShape/0", ("GShape/0",), execution)
+
+
+def test_response_drawing_is_the_executed_pen_path_when_there_is_one():
+    plain, executed = _response(False), _response(True)
+    np.testing.assert_array_equal(plain.drawing, plain.motion)
+    np.testing.assert_array_equal(executed.drawing, executed.execution.end_effector[:, 1:])
+    assert executed.drawing.shape == (20, 2)
+
+
+@pytest.mark.parametrize("executed", [False, True])
+def test_console_picture_draws_what_the_teacher_judges(tmp_path, monkeypatch, executed):
+    pytest.importorskip("matplotlib")
+    from matplotlib.axes import Axes
+
+    drawn, titles = [], []
+    plot, set_title = Axes.plot, Axes.set_title
+
+    def spy_plot(ax, *args, **kw):
+        if args[2:] == ("b-",):  # the robot's pen path
+            drawn.append(np.column_stack(args[:2]))
+        return plot(ax, *args, **kw)
+
+    def spy_title(ax, title, *args, **kw):
+        titles.append(title)
+        return set_title(ax, title, *args, **kw)
+
+    monkeypatch.setattr(Axes, "plot", spy_plot)
+    monkeypatch.setattr(Axes, "set_title", spy_title)
+    out = io.StringIO()
+    teacher = ConsoleTeacher(str(tmp_path), stdin=io.StringIO("maybe\ny\n"), stdout=out)
+    response = _response(executed)
+    assert teacher.feedback(load_lasa("GShape")[0], response) == 1
+    assert (tmp_path / "answer-0001.png").stat().st_size > 0
+    assert len(drawn) == 1
+    np.testing.assert_array_equal(drawn[0], response.drawing)
+    assert titles[-1] == ("robot drew: concept c1" if executed else
+                          "robot generated: concept c1")
+    text = out.getvalue()
+    assert "its drawing is in" in text and "Please answer y or n." in text
+
+
+def test_console_teacher_eof_is_a_clear_error():
+    teacher = ConsoleTeacher("", stdin=io.StringIO(""), stdout=io.StringIO())
+    with pytest.raises(FeedbackError, match="EOF"):
+        teacher.feedback(load_lasa("GShape")[0], _response(False))
+
+
+def test_console_picture_leaves_the_host_backend_alone(tmp_path):
+    """Embedding iloci in a program with its own matplotlib backend (a GUI, a
+    notebook) must not switch it."""
+    import subprocess
+    import sys
+    pytest.importorskip("matplotlib")
+    code = (
+        "import io, matplotlib\n"
+        "matplotlib.use('svg')\n"
+        "from iloci.data import load_lasa\n"
+        "from iloci.teachers import ConsoleTeacher\n"
+        "from test_teachers import _response\n"
+        f"t = ConsoleTeacher({str(tmp_path)!r}, stdin=io.StringIO('y\\n'), stdout=io.StringIO())\n"
+        "t.feedback(load_lasa('GShape')[0], _response(True))\n"
+        "print(matplotlib.get_backend())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).parent)
+    assert out.stdout.strip() == "svg"
+    assert (tmp_path / "answer-0001.png").read_bytes()[:4] == b"\x89PNG"
