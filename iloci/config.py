@@ -53,7 +53,9 @@ COMPONENT_SECTIONS = {
 OPTIONAL_SECTIONS = {"simulator"}
 
 DEFAULT_NAMES = {
-    "perceptual_model": "torch-rnnpb",
+    # JAX: at the memory sizes of a learning phase its compiled training
+    # step is about twice as fast as torch's (benchmarks/results/rnnpb.json)
+    "perceptual_model": "jax-rnnpb",
     "clusterer": "scipy",
     "teacher": "oracle",
     "ik": "pinocchio",
@@ -92,9 +94,11 @@ class LearnerConfig:
     #: Similarity_threshold: PB distance below which a rewarded
     #: demonstration only strengthens the nearest entry (paper: 0.1).
     similarity_threshold: float = 0.1
-    #: Epochs of each memory rehearsal; 0 uses the perceptual model's
-    #: ``epochs``.
-    rehearsal_epochs: int = 0
+    #: Epochs of each memory rehearsal after the first consolidation (which
+    #: trains a fresh network for the model's ``epochs``); 0 uses the
+    #: model's ``epochs`` throughout. Rehearsals start from trained weights,
+    #: so they need fewer epochs (the paper is silent on the number).
+    rehearsal_epochs: int = 1000
 
     def validate(self) -> None:
         if self.k_cutoff < 0:
@@ -155,7 +159,9 @@ class EvaluationConfig:
 
     #: Number of folds (paper: 5).
     folds: int = 5
-    #: Fraction of each shape's demonstrations in the learning set (paper: 20 %).
+    #: Fraction of each ``[data]`` shape's demonstrations in the default
+    #: learning stream of ``iloci teach`` (paper: 20 %). ``iloci evaluate``
+    #: does not read it: each fold learns from one of ``folds`` partitions.
     train_fraction: float = 0.2
     #: Seed of everything: fold split, presentation order, network
     #: initialisation, noisy teacher.

@@ -223,9 +223,20 @@ def pad_sequences(sequences: Sequence[np.ndarray], rows: int | None = None
     return X, mask
 
 
-def bucket(n: int, multiple: int = 4) -> int:
-    """``n`` rounded up to a multiple, so compiled back ends reuse their kernels."""
-    return -(-int(n) // multiple) * multiple
+def bucket(n: int, multiple: int = 4, geometric: bool = False) -> int:
+    """Rows to pad ``n`` sequences to, so compiled back ends reuse their kernels.
+
+    ``n`` rounded up to a multiple of ``multiple``; with ``geometric``, to
+    ``multiple`` times a power of two (a memory growing one entry at a time
+    then needs a new kernel only each time it doubles).
+    """
+    n = max(1, int(n))
+    if geometric:
+        rows = multiple
+        while rows < n:
+            rows *= 2
+        return rows
+    return -(-n // multiple) * multiple
 
 
 def check_pbs(pbs: Any, rows: int | None, pb_size: int, what: str = "pbs") -> np.ndarray:
@@ -514,6 +525,9 @@ class RNNPBBase:
     #: Sequences are padded to a multiple of this many rows so compiled
     #: kernels are reused as the memory grows one entry at a time.
     batch_multiple = 4
+    #: Pad to ``batch_multiple`` times a power of two instead (for back ends
+    #: whose compilation costs more than the padded rows).
+    geometric_buckets = False
     #: Most rows scored at once when ranking candidate PBs.
     score_chunk = 8192
 
@@ -578,7 +592,7 @@ class RNNPBBase:
     # -- public API ------------------------------------------------------------
 
     def _padded(self, seqs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        rows = bucket(len(seqs), self.batch_multiple)
+        rows = bucket(len(seqs), self.batch_multiple, self.geometric_buckets)
         X, mask = pad_sequences(seqs, rows)
         steps = mask.sum(axis=0)
         per_seq = np.divide(1.0, steps, out=np.zeros(rows), where=steps > 0)
@@ -643,7 +657,7 @@ class RNNPBBase:
         for lo in range(0, b, per):
             part = seqs[lo:lo + per]
             X, mask, _ = self._padded(part)
-            rows = bucket(len(part) * k, self.batch_multiple)
+            rows = bucket(len(part) * k, self.batch_multiple, self.geometric_buckets)
             Xr = np.zeros((X.shape[0], rows, X.shape[2]))
             mr = np.zeros((mask.shape[0], rows))
             pr = np.zeros((rows, self.pb_size))
@@ -729,7 +743,12 @@ class RNNPBBase:
         steps = max(lens) - 1
         if steps == 0:
             return [x0[i:i + 1].copy() for i in range(len(p))]
-        Y = self._generate_kernel(p, x0, steps)
+        # padded to a bucket, like training, so compiled kernels are reused
+        rows = bucket(len(p), self.batch_multiple, self.geometric_buckets)
+        pr = np.zeros((rows, self.pb_size))
+        xr = np.zeros((rows, self.input_size))
+        pr[:len(p)], xr[:len(p)] = p, x0
+        Y = self._generate_kernel(pr, xr, steps)[:, :len(p)]
         full = np.concatenate([x0[None], Y], axis=0)
         return [np.ascontiguousarray(full[:n, i]) for i, n in enumerate(lens)]
 

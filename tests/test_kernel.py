@@ -107,7 +107,7 @@ def _full(reg):
 
     Only component *names* are needed to validate a config; nothing is built.
     """
-    for kind, name in [("perceptual_model", "torch-rnnpb"), ("clusterer", "scipy"),
+    for kind, name in [("perceptual_model", "jax-rnnpb"), ("clusterer", "scipy"),
                        ("ik_solver", "pinocchio")]:
         if (kind, name) not in reg:
             reg.add(kind, name, "iloci_missing_for_test:X", plugin="test")

@@ -22,6 +22,7 @@ import multiprocessing as mp
 import os
 import platform
 import signal
+import threading
 import time
 from typing import Any
 
@@ -200,6 +201,16 @@ def _worker_init() -> None:
     # The parent handles Ctrl-C and terminates the workers.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    # A parent killed outright (SIGKILL, SIGTERM) cannot stop its workers;
+    # they notice they were orphaned and exit instead of computing on.
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="iloci-orphan-watch").start()
 
 
 def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],

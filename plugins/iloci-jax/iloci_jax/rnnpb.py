@@ -197,6 +197,9 @@ class JaxRNNPB(RNNPBBase):
     """
 
     backend = "jax"
+    # each new batch shape costs about a second of XLA compilation, more
+    # than the padded rows of a power-of-two bucket cost to compute
+    geometric_buckets = True
 
     def _setup(self) -> None:
         self._x64 = self.params.dtype == "float64"
