@@ -94,11 +94,11 @@ class LearnerConfig:
     #: Similarity_threshold: PB distance below which a rewarded
     #: demonstration only strengthens the nearest entry (paper: 0.1).
     similarity_threshold: float = 0.1
-    #: Epochs of each memory rehearsal after the first consolidation (which
-    #: trains a fresh network for the model's ``epochs``); 0 uses the
-    #: model's ``epochs`` throughout. Rehearsals start from trained weights,
-    #: so they need fewer epochs (the paper is silent on the number).
-    rehearsal_epochs: int = 1000
+    #: Epochs of each memory rehearsal; 0 uses the perceptual model's
+    #: ``epochs`` (the paper is silent on the number). Fewer run faster but
+    #: let regenerated patterns drift further from what was demonstrated:
+    #: on LASA fold 0, 500 epochs gave 90 % CCR where 1500 gave 99 %.
+    rehearsal_epochs: int = 0
 
     def validate(self) -> None:
         if self.k_cutoff < 0:

@@ -121,6 +121,49 @@ def test_scipy_and_sklearn_plans_agree_on_random_pbs():
         assert pa.valid == pb.valid and pa.medoids == pb.medoids
 
 
+def test_scipy_and_sklearn_give_identical_partitions_on_real_pbs():
+    """PBs a real network learned from real LASA demos, clustered both ways."""
+    registry = get_registry()
+    try:
+        a = registry.build("clusterer", "scipy")
+        b = registry.build("clusterer", "sklearn")
+        model = registry.build("perceptual_model", "jax-rnnpb",
+                               {"epochs": 300, "recognition_steps": 30}, seed=0)
+        ik = registry.build("ik_solver", "pinocchio")
+    except Exception:  # noqa: BLE001 - a back end missing
+        pytest.skip("needs scipy, sklearn, jax-rnnpb and pinocchio")
+    from iloci.config import SensorimotorConfig
+    from iloci.data import load_lasa
+    from iloci.sensorimotor.encoding import SensorimotorEncoder
+    from iloci.sensorimotor.pipeline import to_motions
+
+    demos = load_lasa(["GShape", "Angle", "Sshape", "Leaf_1"])
+    motions = to_motions(demos, SensorimotorConfig(), ik)
+    seqs, _ = SensorimotorEncoder().fit(motions).encode_all(motions)
+    pbs = model.train(seqs)
+    rng = np.random.default_rng(0)
+    compared = 0
+    for k_cutoff in (0.0, 0.25, 0.5, 1.0):
+        for shape in range(4):  # one shape's 7 PBs: a concept's entries
+            rows = slice(7 * shape, 7 * shape + 7)
+            ns = rng.integers(1, 3, size=7)
+            ex = ns == 1
+            pa = plan_clusters(pbs[rows], ns, ex, clusterer=a, k_cutoff=k_cutoff,
+                               num_threshold=3)
+            pb = plan_clusters(pbs[rows], ns, ex, clusterer=b, k_cutoff=k_cutoff,
+                               num_threshold=3)
+            assert np.array_equal(pa.labels, pb.labels), (k_cutoff, shape)
+            assert pa.valid == pb.valid and pa.medoids == pb.medoids
+            compared += len(set(pa.labels.tolist())) > 1
+        # all 28 together: PBs of different shapes in one clustering
+        pa = plan_clusters(pbs, np.ones(28, int), np.ones(28, bool), clusterer=a,
+                           k_cutoff=k_cutoff, num_threshold=3)
+        pb = plan_clusters(pbs, np.ones(28, int), np.ones(28, bool), clusterer=b,
+                           k_cutoff=k_cutoff, num_threshold=3)
+        assert np.array_equal(pa.labels, pb.labels)
+    assert compared > 0, "no PB set was split: the comparison would be vacuous"
+
+
 # -- confidence -------------------------------------------------------------------------
 
 def test_confidence_is_the_margin_to_the_nearest_other_concept():

@@ -186,7 +186,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
             name = names.get(label) or label
             if name in res.shapes:
                 continue
-            motion = np.asarray(agent.respond(label).motion)
+            # what the robot drew: executed in the simulator when one is configured
+            motion = np.asarray(agent.respond(label).drawing)
             res.shapes[name] = motion.tolist()
     if baseline:
         from iloci.evaluation.baseline import dtw_1nn
