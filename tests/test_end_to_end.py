@@ -126,17 +126,20 @@ def test_recognize(taught, tmp_path):
     assert all(0.0 <= a["confidence"] <= 1.0 for a in answers)
 
 
-def _torch_missing() -> bool:
-    return "torch-rnnpb" not in _available("perceptual_model")
+def _defaults_missing() -> bool:
+    """Whether a default component (a name in iloci.config.DEFAULT_NAMES) is not installed."""
+    from iloci.config import COMPONENT_SECTIONS, DEFAULT_NAMES
+    return any(name != "none" and name not in _available(COMPONENT_SECTIONS[sec])
+               for sec, name in DEFAULT_NAMES.items())
 
 
 @needs_backends
 @pytest.mark.skipif(not COMBINATIONS or COMBINATIONS[-1]["simulator"] == "none",
                     reason="needs a simulator back end")
-@pytest.mark.xfail(_torch_missing(), strict=True,
+@pytest.mark.xfail(_defaults_missing(), strict=True,
                    reason="known bug: `iloci draw` resolves the saved [simulator] section "
-                          "with default names for the other sections, so it needs "
-                          "torch-rnnpb installed (iloci/commands/draw.py)")
+                          "with default names for the other sections, so it needs the "
+                          "default back ends installed (iloci/commands/draw.py)")
 def test_draw(taught, tmp_path):
     combo, memory, _ = taught
     image = tmp_path / "gshape.png"
