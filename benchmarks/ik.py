@@ -24,7 +24,6 @@ import json
 import os
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -112,13 +111,9 @@ def main() -> dict:
     }
     result["passed"] = bool(result["max_error_m"] < 0.001 and violations == 0
                             and result["seconds"] <= 1.0)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    # atomic write: a reader never sees a half-written file
-    fd, tmp = tempfile.mkstemp(dir=RESULTS.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(result, fh, indent=2)
-        fh.write("\n")
-    os.replace(tmp, RESULTS)
+    # atomic: a reader never sees a half-written file
+    from iloci.evaluation.report import write_json_atomic
+    write_json_atomic(RESULTS, result)
     return result
 
 

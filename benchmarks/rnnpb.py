@@ -41,7 +41,6 @@ import os
 import platform
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -208,16 +207,9 @@ def offline_ccr(backend: str, demos, motions, folds, **params) -> dict:
 
 
 def write(result: dict) -> None:
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=RESULTS.parent, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(result, fh, indent=2)
-            fh.write("\n")
-        os.replace(tmp, RESULTS)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    """Write the results atomically (a reader never sees a half-written file)."""
+    from iloci.evaluation.report import write_json_atomic
+    write_json_atomic(RESULTS, result)
 
 
 def main(argv=None) -> dict:

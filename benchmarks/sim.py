@@ -27,11 +27,9 @@ iloci-mujoco).
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -93,13 +91,9 @@ def main() -> dict:
                                 for n in ("pybullet", "mujoco")))
     result["machine"] = {"python": sys.version.split()[0], "platform": platform.platform(),
                          "cpus": os.cpu_count()}
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    # atomic write: a reader never sees a half-written file
-    fd, tmp = tempfile.mkstemp(dir=RESULTS.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(result, fh, indent=2)
-        fh.write("\n")
-    os.replace(tmp, RESULTS)
+    # atomic: a reader never sees a half-written file
+    from iloci.evaluation.report import write_json_atomic
+    write_json_atomic(RESULTS, result)
     return result
 
 
