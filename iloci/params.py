@@ -51,10 +51,13 @@ class RNNPBParams:
     #: Fraction of steps fed with the network's own output during training
     #: (1.0 = fully closed loop; 0.0 = teacher forced).
     closed_loop: float = 1.0
-    #: Recognition: gradient steps per start.
-    recognition_steps: int = 200
-    #: Recognition: learning rate on the PB.
-    recognition_learning_rate: float = 0.05
+    #: Recognition: Levenberg-Marquardt steps per start (each solves the
+    #: P x P normal equations of every sequence; about as far as 200 Adam
+    #: steps get, see ``RNNPBBase.recognize``).
+    recognition_steps: int = 10
+    #: Recognition: initial Levenberg-Marquardt damping (relative to the
+    #: diagonal of the normal equations; adapted per sequence after each step).
+    recognition_damping: float = 0.01
     #: Recognition: number of starts taken from the best-fitting known PBs.
     recognition_starts: int = 3
     #: Weight initialisation scale multiplier.
@@ -75,7 +78,7 @@ class RNNPBParams:
             raise ValueError("learning_rate_decay must be in (0, 1], got "
                              f"{self.learning_rate_decay}")
         for name in ("learning_rate", "pb_learning_rate", "grad_clip", "pb_bound",
-                     "recognition_learning_rate", "init_scale"):
+                     "recognition_damping", "init_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.dtype not in ("float32", "float64"):

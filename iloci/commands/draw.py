@@ -12,12 +12,12 @@ from __future__ import annotations
 import argparse
 import os
 import struct
-import tempfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 
+from iloci.data.files import write_atomic
 from iloci.errors import InvalidInputError, MissingBackendError, did_you_mean
 
 __all__ = ["DrawResult", "draw", "register", "resolve_concept", "run", "write_gif", "write_png"]
@@ -171,18 +171,6 @@ def draw(agent, concept: str, simulator) -> DrawResult:
     return DrawResult(label, response, execution, clipped, tracking, gap)
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def png_bytes(image: np.ndarray) -> bytes:
     """Encode an RGB image as PNG (8-bit, no dependency beyond zlib).
 
@@ -207,9 +195,8 @@ def png_bytes(image: np.ndarray) -> bytes:
 
 def write_png(path: str | os.PathLike[str], image: np.ndarray) -> Path:
     """Write an RGB image (H, W, 3) uint8 to a PNG file, atomically."""
-    out = Path(path)
-    _atomic_write(out, png_bytes(image))
-    return out
+    data = png_bytes(image)
+    return write_atomic(path, lambda fh: fh.write(data), mkdir=True)
 
 
 def write_gif(path: str | os.PathLike[str], frames: list[np.ndarray],
@@ -229,9 +216,8 @@ def write_gif(path: str | os.PathLike[str], frames: list[np.ndarray],
     buf = io.BytesIO()
     images[0].save(buf, format="GIF", save_all=True, append_images=images[1:],
                    duration=durations, loop=0, optimize=False)
-    out = Path(path)
-    _atomic_write(out, buf.getvalue())
-    return out
+    data = buf.getvalue()
+    return write_atomic(path, lambda fh: fh.write(data), mkdir=True)
 
 
 def _simulator_name(args: argparse.Namespace, saved: dict) -> str:

@@ -8,12 +8,11 @@ it, and the joint angles over time.
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from iloci.data.files import write_atomic
 from iloci.errors import InvalidInputError, MissingBackendError
 
 __all__ = ["plot_motion", "register", "run"]
@@ -156,15 +155,10 @@ def plot_motion(demo, motion, reached: np.ndarray, robot_name: str, out: str | P
     fig.tight_layout()
 
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     fmt = out.suffix.lstrip(".").lower() or "png"
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
-    os.close(fd)
     try:
-        fig.savefig(tmp, format=fmt, dpi=110)
-        os.replace(tmp, out)
+        # a file object has no suffix to infer the format from, hence format=
+        write_atomic(out, lambda fh: fig.savefig(fh, format=fmt, dpi=110), mkdir=True)
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return out

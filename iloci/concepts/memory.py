@@ -29,9 +29,10 @@ only:
 * ``enc/*`` - the sensorimotor encoder's state (its scales);
 * ``net/*`` - the perceptual model's :meth:`state`.
 
-It is written to a temporary file in the target directory, flushed to disk
-and renamed over the target (:func:`os.replace`), so a crash leaves either
-the old or the new memory, never a mixture.
+It is written with :func:`iloci.data.files.write_atomic`: to a temporary
+file in the target directory, flushed to disk and renamed over the target
+(:func:`os.replace`), so a crash leaves either the old or the new memory,
+never a mixture. Replacing a memory file keeps its permission bits.
 """
 
 from __future__ import annotations
@@ -42,12 +43,12 @@ import hashlib
 import json
 import os
 from pathlib import Path
-import tempfile
 from typing import Any
 import zipfile
 
 import numpy as np
 
+from iloci.data.files import write_atomic
 from iloci.errors import InvalidInputError, MemoryFileError
 from iloci.sensorimotor.encoding import SensorimotorEncoder
 
@@ -359,22 +360,7 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
                               "iloci": __version__, "memory": meta, **dict(extra or {})}
     header["checksum"] = _checksum(header, arrays)
     arrays["__header__"] = np.frombuffer(json.dumps(header, sort_keys=True).encode(), np.uint8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        # the rename is the commit point: before it the old file is intact
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return write_atomic(path, lambda fh: np.savez(fh, **arrays), mkdir=True)
 
 
 def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndarray],

@@ -1,17 +1,21 @@
-"""A user's own pen trajectories from ``.npy`` or ``.csv`` files."""
+"""A user's own pen trajectories from ``.npy`` or ``.csv`` files; atomic file writes."""
 
 from __future__ import annotations
 
 import csv
 import os
+import secrets
+import stat
+from collections.abc import Callable
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["load_trajectory"]
+__all__ = ["load_trajectory", "write_atomic", "write_text_atomic"]
 
 _TIME_NAMES = ("t", "time", "times", "timestamp")
 
@@ -119,3 +123,101 @@ def _numeric(row: list[str]) -> bool:
     except ValueError:
         return False
     return True
+
+
+def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any], *,
+                 mkdir: bool = False) -> Path:
+    """Write a file atomically: readers see the old file or the new one, never a part.
+
+    ``writer(fh)`` writes the content to a binary temporary file
+    ``.NAME.<random>.tmp`` in the target's directory (the same file system,
+    so the rename below is atomic). The file is flushed and fsync'ed, then
+    renamed over the target with :func:`os.replace`, which is the commit
+    point: if the writer raises (any exception, including
+    :class:`KeyboardInterrupt`) or the rename fails, the temporary file is
+    removed and the old target is left untouched.
+
+    Permissions: a new file gets ``0o666`` minus the process umask, like
+    ``open(path, "w")`` (the temporary file is created with :func:`os.open`
+    and mode ``0o666`` so the kernel applies the umask; the umask is never
+    read or changed, which would race with other threads). Replacing an
+    existing file keeps its permission bits, so a file a user made private
+    stays private.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The target file.
+    writer : callable
+        Called once with the open binary file object; its return value is
+        ignored.
+    mkdir : bool
+        Create missing parent directories first (otherwise a missing
+        directory raises :class:`FileNotFoundError`).
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    OSError
+        Unchanged from the file system (e.g. :class:`PermissionError` for an
+        unwritable directory); whatever ``writer`` raises propagates too.
+    """
+    target = Path(path)
+    directory = target.parent
+    if mkdir:
+        directory.mkdir(parents=True, exist_ok=True)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    while True:
+        tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
+        try:
+            fd = os.open(tmp, flags, 0o666)
+        except FileExistsError:
+            continue
+        break
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            writer(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        try:
+            old_mode = stat.S_IMODE(os.stat(target).st_mode)
+        except FileNotFoundError:
+            pass
+        else:
+            os.chmod(tmp, old_mode)
+        # the rename is the commit point: before it the old file is intact
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return target
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8",
+                      mkdir: bool = False) -> Path:
+    """Write ``text`` to ``path`` atomically (see :func:`write_atomic`).
+
+    Parameters
+    ----------
+    path : str or path-like
+    text : str
+        Written as is (no newline translation).
+    encoding : str
+        Text encoding, UTF-8 by default (not the locale's).
+    mkdir : bool
+        Create missing parent directories first.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    data = text.encode(encoding)
+    return write_atomic(path, lambda fh: fh.write(data), mkdir=mkdir)

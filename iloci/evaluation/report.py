@@ -4,33 +4,25 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import json
-import os
 from pathlib import Path
-import tempfile
 from typing import Any
 
 import numpy as np
 
+from iloci.data.files import write_text_atomic
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
 __all__ = ["write_outputs", "write_json_atomic", "headline"]
 
 
 def write_json_atomic(path: str | Path, data: Any) -> Path:
-    """Write JSON to a temporary file in the same directory, then rename it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, allow_nan=True)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    """Write indented JSON atomically (see :func:`iloci.data.files.write_atomic`).
+
+    Missing parent directories are created; NaN and inf are written as
+    ``NaN`` / ``Infinity``.
+    """
+    text = json.dumps(data, indent=2, allow_nan=True) + "\n"
+    return write_text_atomic(path, text, mkdir=True)
 
 
 def _pct(x: float) -> str:
@@ -185,7 +177,5 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
                   f"{_pct(m['baseline']['ccr_mean'])} ± {_pct(m['baseline']['ccr_std'])} %."]
         lines += baseline_rows
     report = out / "report.md"
-    tmp = report.with_suffix(".md.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, report)
+    write_text_atomic(report, "\n".join(lines) + "\n")
     return report

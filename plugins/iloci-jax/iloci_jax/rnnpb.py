@@ -3,7 +3,8 @@
 The model is defined in :mod:`iloci.rnnpb_common`. Here every kernel is
 one ``jax.jit`` function over padded, time-major arrays: the time loop is a
 ``lax.scan``, the whole training (all epochs, Adam, clipping) or recognition
-(all steps) is one ``lax.fori_loop``, so Python runs once per call, not once
+(all Levenberg-Marquardt steps, the Jacobian by ``jax.linearize``) is one
+``lax.fori_loop``, so Python runs once per call, not once
 per step. The backward pass is written by hand (two matrix products per
 time step; the weight gradients are single matrix products over all steps
 afterwards), which is about twice as fast as differentiating the scan.
@@ -22,7 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from iloci.rnnpb_common import WEIGHT_NAMES, RNNPBBase
+from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
+                                 WEIGHT_NAMES, RNNPBBase)
 
 __all__ = ["JaxRNNPB"]
 
@@ -153,15 +155,44 @@ def _train(w, u, X, mask, weight, epochs, lr, pb_lr, decay, warmup, clip, bound,
 
 
 @jax.jit
-def _recognize(w, u, X, mask, weight, steps, lr, bound):
-    def body(i, carry):
-        u, m, v = carry
-        th = jnp.tanh(u)
-        _, _, gpb = _loss_and_grads(w, bound * th, X, mask, weight, 1.0, False)
-        return _adam(u, gpb * bound * (1.0 - th * th), m, v, (i + 1).astype(X.dtype), lr)
+def _recognize(w, u, X, mask, weight, steps, damping, bound):
+    """Levenberg-Marquardt on each row's PB (weights frozen); returns the new ``u``.
 
-    z = jnp.zeros_like(u)
-    return jax.lax.fori_loop(0, steps, body, (u, z, z))[0]
+    Every row is its own least-squares problem in ``P`` unknowns: the
+    residuals ``r = sqrt(mask * weight) (y - x)`` (L, R, D) and their
+    Jacobian with respect to ``u`` (P forward-mode directions through the
+    closed loop) give the ``P x P`` normal equations of each row, damped by
+    ``lam * diag`` (Marquardt). A step is kept only where it lowers that
+    row's error; ``lam`` then shrinks, else it grows.
+    """
+    d = X.shape[2]
+    sw = jnp.sqrt(mask * weight[None, :])[:, :, None]
+    eye = jnp.eye(u.shape[1], dtype=u.dtype)
+
+    def residuals(u):
+        O = _forward(w, bound * jnp.tanh(u), X, 1.0, keep=False)
+        return (O[:, :, :d] - X[1:]) * sw
+
+    def sse(r):
+        return jnp.sum(r * r, axis=(0, 2))
+
+    def body(i, carry):
+        u, lam, e = carry
+        r, jvp = jax.linearize(residuals, u)
+        J = jax.vmap(lambda k: jvp(jnp.broadcast_to(k, u.shape)))(eye)   # (P, L, R, D)
+        A = jnp.einsum("plrd,qlrd->rpq", J, J)
+        g = jnp.einsum("plrd,lrd->rp", J, r)
+        damp = lam[:, None] * (jnp.diagonal(A, axis1=1, axis2=2) + LM_TINY)
+        delta = -jnp.linalg.solve(A + damp[:, :, None] * eye, g[..., None])[..., 0]
+        trial = jnp.clip(u + delta, -LM_U_MAX, LM_U_MAX)
+        e_new = sse(residuals(trial))
+        ok = e_new < e                    # False for NaN: a bad step is never kept
+        return (jnp.where(ok[:, None], trial, u),
+                jnp.clip(jnp.where(ok, lam * LM_DOWN, lam * LM_UP), LM_MIN, LM_MAX),
+                jnp.where(ok, e_new, e))
+
+    lam = jnp.full(u.shape[:1], damping, u.dtype)
+    return jax.lax.fori_loop(0, steps, body, (u, lam, sse(residuals(u))))[0]
 
 
 _errors_jit = jax.jit(_errors)
@@ -241,7 +272,7 @@ class JaxRNNPB(RNNPBBase):
         with jax.enable_x64(self._x64):
             Xj, mj, wj, uj = self._cast(X, mask, weight, u)
             out = _recognize(self._w, uj, Xj, mj, wj, p.recognition_steps,
-                             p.recognition_learning_rate, p.pb_bound)
+                             p.recognition_damping, p.pb_bound)
             return np.asarray(out, dtype=np.float64)
 
     def _error_kernel(self, X, mask, pbs, exact):

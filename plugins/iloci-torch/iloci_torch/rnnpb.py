@@ -26,7 +26,8 @@ import numpy as np
 import torch
 
 from iloci.errors import IlociError
-from iloci.rnnpb_common import WEIGHT_NAMES, RNNPBBase, weight_shapes
+from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
+                                 WEIGHT_NAMES, RNNPBBase, weight_shapes)
 
 __all__ = ["TorchRNNPB"]
 
@@ -152,6 +153,50 @@ class _Net:
         diff = torch.sub(O[:, :, :self.d], X[1:], out=ws["diff"])
         se = diff.square_().mean(dim=2).mul_(mask)
         return se.sum(dim=0) / mask.sum(dim=0).clamp_(min=1.0)
+
+    def sse(self, u: torch.Tensor, bound: float, X: torch.Tensor,
+            sw: torch.Tensor) -> torch.Tensor:
+        """Closed-loop ``sum_t sum_D (sw (y - x))^2`` per row, shape (R,).
+
+        ``u`` (R, P) with ``pb = bound tanh(u)``; ``sw`` (L, R) scales each
+        step's residual (square root of mask times the row's weight).
+        """
+        ws = self.workspace(X.shape[0] - 1, X.shape[1])
+        O = self.forward(torch.tanh(u).mul_(bound), X, 1.0, ws)
+        r = torch.sub(O[:, :, :self.d], X[1:], out=ws["diff"]).mul_(sw.unsqueeze(2))
+        return r.square_().sum(dim=(0, 2))
+
+    def residuals_and_jacobian(self, u: torch.Tensor, bound: float, X: torch.Tensor,
+                               sw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Closed-loop residuals ``r`` (L, R, D) and ``J = dr/du`` (L, P, R, D).
+
+        Forward mode: the derivatives of the state along each of the ``P``
+        coordinates of ``u`` are carried through the steps next to the state
+        itself, as ``P`` stacked copies of the batch (one matrix product for
+        all of them). Plain ``tanh`` here: this pass is not the hot loop of
+        training, and the algebra stays that of the definition.
+        """
+        v, d, S = self.views, self.d, self.s
+        R, P = u.shape
+        L = X.shape[0] - 1
+        th = torch.tanh(u)
+        w_s, w_p, w_o, b_o = v["w_in"][:S], v["w_in"][S:], v["w_out"], v["b_out"]
+        pre = torch.addmm(v["b_hidden"], th * bound, w_p)                     # (R, H)
+        # d pre / d u_k = bound (1 - tanh(u_k)^2) w_p[k]: (P, R, H), the same every step
+        dpre = (bound * (1.0 - th * th)).T.unsqueeze(2) * w_p.unsqueeze(1)
+        s = X.new_zeros(R, S)
+        s[:, :d] = X[0]
+        ds = X.new_zeros(P, R, S)
+        r, J = X.new_empty(L, R, d), X.new_empty(L, P, R, d)
+        for t in range(L):
+            h = torch.addmm(pre, s, w_s).tanh_()
+            dh = torch.matmul(ds, w_s).add_(dpre).mul_(1.0 - h * h)
+            o = torch.addmm(b_o, h, w_o).tanh_()
+            do = torch.matmul(dh, w_o).mul_(1.0 - o * o)
+            torch.sub(o[:, :d], X[t + 1], out=r[t]).mul_(sw[t].unsqueeze(1))
+            torch.mul(do[:, :, :d], sw[t].unsqueeze(1), out=J[t])
+            s, ds = o, do                    # closed loop: s_{t+1} = o_t
+        return r, J
 
     def loss_and_grads(self, pb: torch.Tensor, X: torch.Tensor, mask_w: torch.Tensor,
                        alpha: float, weights_too: bool
@@ -293,15 +338,27 @@ class TorchRNNPB(RNNPBBase):
     def _recognize_kernel(self, X, mask, weight, u):
         p = self.params
         net = self._net
-        Xt, mw, ut = self._t(X), self._t(mask * weight[None, :]), self._t(u)
-        m, v, den = (torch.zeros_like(ut) for _ in range(3))
+        Xt, ut = self._t(X), self._t(u)
+        sw = self._t(np.sqrt(mask * weight[None, :]))
         bound = p.pb_bound
+        eye = torch.eye(p.pb, dtype=net.dtype)
         with torch.no_grad(), _one_thread():
-            for t in range(1, p.recognition_steps + 1):
-                th = torch.tanh(ut)
-                _, _, gpb = net.loss_and_grads(th * bound, Xt, mw, 1.0, False)
-                gu = gpb.mul_(th.square_().neg_().add_(1.0)).mul_(bound)
-                _adam(ut, gu, m, v, den, t, p.recognition_learning_rate)
+            e = net.sse(ut, bound, Xt, sw)
+            lam = torch.full((len(ut),), p.recognition_damping, dtype=net.dtype)
+            for _ in range(p.recognition_steps):
+                r, J = net.residuals_and_jacobian(ut, bound, Xt, sw)
+                A = torch.einsum("lprd,lqrd->rpq", J, J)                 # (R, P, P)
+                g = torch.einsum("lprd,lrd->rp", J, r)                   # (R, P)
+                damp = lam.unsqueeze(1) * (torch.diagonal(A, dim1=1, dim2=2) + LM_TINY)
+                # solve_ex: a singular system gives non-finite steps, rejected below
+                delta = torch.linalg.solve_ex(A + damp.unsqueeze(2) * eye,
+                                              g.unsqueeze(2))[0].squeeze(2)
+                trial = (ut - delta).clamp_(-LM_U_MAX, LM_U_MAX)
+                e_new = net.sse(trial, bound, Xt, sw)
+                ok = e_new < e                 # False for NaN: a bad step is never kept
+                ut = torch.where(ok.unsqueeze(1), trial, ut)
+                lam = torch.where(ok, lam * LM_DOWN, lam * LM_UP).clamp_(LM_MIN, LM_MAX)
+                e = torch.where(ok, e_new, e)
         return ut.numpy().astype(np.float64)
 
     def _error_kernel(self, X, mask, pbs, exact):
