@@ -10,8 +10,11 @@ Writes ``benchmarks/results/rnnpb.json``::
                          ("BxT" keys), per back end and for the naive reference
     recognize_146_s      seconds to recognize 146 sequences with the default
                          settings (candidates: the 36 stored PBs + zero; best 3
-                         refined), median of 3 warm calls, per back end
+                         refined by 10 Levenberg-Marquardt steps), median of 3 warm calls,
+                         per back end
     recognize_146_first_call_s   the first call (includes JAX's compilation)
+    recognize_146_s_adam the same with recognition_method = "adam" (200 steps,
+                         the paper's gradient descent on the PB)
     offline_ccr          per back end: correct classification rate per fold of
                          DESIGN.md section 6 and mean +- std; each test demo is
                          classified by its nearest PB_rec (PB_rec = recognize() of
@@ -19,7 +22,8 @@ Writes ``benchmarks/results/rnnpb.json``::
                          lowest-prediction-error classifier (the stored PB that
                          predicts the test sequence best). ``jax_teacher_forced``
                          repeats the JAX folds with closed_loop = 0 to show why the
-                         default trains closed loop.
+                         default trains closed loop; ``jax_adam_recognition``
+                         recognizes with Adam instead of Levenberg-Marquardt.
     targets              the issue's targets and whether this run met them
 
 The naive reference is how a user would first write the model: ``nn.Linear``
@@ -49,6 +53,9 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
 #: Training epochs of the offline accuracy check (other settings: defaults).
 OFFLINE_EPOCHS = 3000
+#: The paper's recognition (gradient descent on the PB), for comparison with
+#: the default Levenberg-Marquardt.
+ADAM_RECOGNITION = {"recognition_method": "adam", "recognition_steps": 200}
 
 
 # -- data ----------------------------------------------------------------------
@@ -160,8 +167,8 @@ def time_train(backend: str, seqs, reps: int, epochs: int) -> float:
     return statistics.median(runs)
 
 
-def time_recognize(backend: str, learn, test, reps: int = 3) -> tuple[float, float]:
-    m = model_class(backend)(seed=0)
+def time_recognize(backend: str, learn, test, reps: int = 3, **params) -> tuple[float, float]:
+    m = model_class(backend)(seed=0, **params)
     m.train(learn)
     t0 = time.perf_counter()
     m.recognize(test)
@@ -238,10 +245,12 @@ def main(argv=None) -> dict:
     print("  ", step_ms, flush=True)
 
     print("recognition of 146 sequences ...", flush=True)
-    rec, rec_first = {}, {}
+    rec, rec_first, rec_adam = {}, {}, {}
     for b in backends:
         rec[b], rec_first[b] = time_recognize(b, [seqs[i] for i in learn], rest)
-    print("  ", rec, rec_first, flush=True)
+        rec_adam[b] = time_recognize(b, [seqs[i] for i in learn], rest,
+                                     **ADAM_RECOGNITION)[0]
+    print("  ", rec, rec_first, "adam:", rec_adam, flush=True)
 
     print("step time grid ...", flush=True)
     grid: dict[str, dict[str, float]] = {b: {} for b in (*backends, "naive")}
@@ -267,6 +276,8 @@ def main(argv=None) -> dict:
            for b in backends}
     ccr["jax_teacher_forced"] = offline_ccr("jax", demos, motions, run_folds, closed_loop=0.0,
                                             epochs=OFFLINE_EPOCHS)
+    ccr["jax_adam_recognition"] = offline_ccr("jax", demos, motions, run_folds,
+                                              epochs=OFFLINE_EPOCHS, **ADAM_RECOGNITION)
 
     fastest = min(backends, key=lambda b: step_ms[b])
     speedup = {b: step_ms["naive"] / step_ms[b] for b in backends}
@@ -281,6 +292,7 @@ def main(argv=None) -> dict:
         "speedup_vs_naive": speedup,
         "recognize_146_s": rec,
         "recognize_146_first_call_s": rec_first,
+        "recognize_146_s_adam": rec_adam,
         "step_ms_grid": grid,
         "offline_ccr": ccr,
         "targets": {

@@ -51,13 +51,18 @@ class RNNPBParams:
     #: Fraction of steps fed with the network's own output during training
     #: (1.0 = fully closed loop; 0.0 = teacher forced).
     closed_loop: float = 1.0
-    #: Recognition: Levenberg-Marquardt steps per start (each solves the
-    #: P x P normal equations of every sequence; about as far as 200 Adam
-    #: steps get, see ``RNNPBBase.recognize``).
+    #: Recognition: how the PB of a sequence is refined from each start,
+    #: ``"lm"`` (Levenberg-Marquardt: a Gauss-Newton step on the P unknowns
+    #: of each sequence) or ``"adam"`` (gradient descent on the PB, as the
+    #: paper's back-propagation; needs ~200 steps).
+    recognition_method: str = "lm"
+    #: Recognition: steps per start (of ``recognition_method``).
     recognition_steps: int = 10
-    #: Recognition: initial Levenberg-Marquardt damping (relative to the
-    #: diagonal of the normal equations; adapted per sequence after each step).
+    #: Recognition, ``"lm"``: initial damping, relative to the diagonal of
+    #: the normal equations; adapted per sequence after each step.
     recognition_damping: float = 0.01
+    #: Recognition, ``"adam"``: learning rate on the PB.
+    recognition_learning_rate: float = 0.05
     #: Recognition: number of starts taken from the best-fitting known PBs.
     recognition_starts: int = 3
     #: Weight initialisation scale multiplier.
@@ -78,9 +83,12 @@ class RNNPBParams:
             raise ValueError("learning_rate_decay must be in (0, 1], got "
                              f"{self.learning_rate_decay}")
         for name in ("learning_rate", "pb_learning_rate", "grad_clip", "pb_bound",
-                     "recognition_damping", "init_scale"):
+                     "recognition_damping", "recognition_learning_rate", "init_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.recognition_method not in ("lm", "adam"):
+            raise ValueError("recognition_method must be 'lm' or 'adam', got "
+                             f"{self.recognition_method!r}")
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
         if not 0.0 <= self.closed_loop <= 1.0:

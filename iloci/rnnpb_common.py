@@ -75,12 +75,9 @@ __all__ = [
 #: Value of ``state()["format"]``.
 FORMAT = "iloci-rnnpb"
 #: Version of the state layout; bumped when keys or their meaning change.
-#: 2: recognition is Levenberg-Marquardt (``recognition_steps`` counts its
-#: steps; ``recognition_learning_rate`` became ``recognition_damping``).
+#: 2: ``recognition_method`` (Levenberg-Marquardt by default); a version-1
+#: state recognized by Adam, so it loads with ``recognition_method="adam"``.
 FORMAT_VERSION = 2
-#: Stored settings whose meaning a format version changed: ignored when
-#: reading an older state (the loading model's values are kept).
-_CHANGED_IN = {2: ("recognition_steps",)}
 #: Weight arrays of a state, in this order.
 WEIGHT_NAMES = ("w_in", "b_hidden", "w_out", "b_out")
 #: Hyper-parameters that must match for a state to be loadable (sizes).
@@ -398,10 +395,11 @@ def read_state(state: Mapping[str, Any], params: RNNPBParams
         raise InvalidInputError(f"RNNPB state version {version} is newer than this iloci "
                                 f"reads ({FORMAT_VERSION}); upgrade iloci.")
     values = asdict(params)
-    stale = {name for v, names in _CHANGED_IN.items() if version < v for name in names}
+    if version < 2:
+        values["recognition_method"] = "adam"
     for f in fields(RNNPBParams):
         key = f"param.{f.name}"
-        if key in state and f.name != "dtype" and f.name not in stale:
+        if key in state and f.name != "dtype":
             v = np.asarray(state[key])
             values[f.name] = type(values[f.name])(v.item() if v.ndim == 0 else v)
     try:
@@ -548,7 +546,8 @@ class RNNPBBase:
     #: kernels are reused as the memory grows one entry at a time.
     batch_multiple = 4
     #: Pad to ``batch_multiple`` times a power of two instead (for back ends
-    #: whose compilation costs more than the padded rows).
+    #: whose compilation costs more than the padded rows); recognition,
+    #: scoring and generation only, training always pads to the next multiple.
     geometric_buckets = False
     #: Most rows scored at once when ranking candidate PBs.
     score_chunk = 8192
@@ -599,12 +598,12 @@ class RNNPBBase:
 
     def _recognize_kernel(self, X: np.ndarray, mask: np.ndarray, weight: np.ndarray,
                           u: np.ndarray) -> np.ndarray:
-        """Levenberg-Marquardt on ``u`` (R, P), weights frozen, closed loop.
+        """Refine ``u`` (R, P), weights frozen, closed loop; returns the new ``u``.
 
-        ``recognition_steps`` steps minimising each row's
-        ``sum_t mask * weight * sum_D (y - x)^2``; damping starts at
-        ``recognition_damping`` and is adapted per row (``LM_*``). Returns
-        the new ``u``.
+        ``recognition_steps`` steps of ``recognition_method`` minimising each
+        row's ``sum_t mask * weight * sum_D (y - x)^2``: Levenberg-Marquardt
+        (damping from ``recognition_damping``, adapted per row, ``LM_*``) or
+        Adam (``recognition_learning_rate``).
         """
         raise NotImplementedError
 
@@ -619,8 +618,10 @@ class RNNPBBase:
 
     # -- public API ------------------------------------------------------------
 
-    def _padded(self, seqs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        rows = bucket(len(seqs), self.batch_multiple, self.geometric_buckets)
+    def _padded(self, seqs: list[np.ndarray], geometric: bool | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        geometric = self.geometric_buckets if geometric is None else geometric
+        rows = bucket(len(seqs), self.batch_multiple, geometric)
         X, mask = pad_sequences(seqs, rows)
         steps = mask.sum(axis=0)
         per_seq = np.divide(1.0, steps, out=np.zeros(rows), where=steps > 0)
@@ -668,7 +669,9 @@ class RNNPBBase:
         n = self.params.epochs if epochs is None else epochs
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise InvalidInputError(f"epochs must be an integer >= 0, got {epochs!r}.")
-        X, mask, per_seq = self._padded(seqs)
+        # training pads to the next multiple only: its cost grows with the
+        # padded rows over every epoch, which outweighs a compilation
+        X, mask, per_seq = self._padded(seqs, geometric=False)
         u = np.zeros((X.shape[1], self.pb_size))
         u[:b] = pb_to_u(pbs0, self.params.pb_bound)
         if n > 0:
@@ -703,18 +706,19 @@ class RNNPBBase:
         Multi-start: every candidate PB (``candidate_pbs``, else the stored
         :attr:`pbs_`, plus the zero PB) is scored by its closed-loop
         prediction error on the sequence; the ``recognition_starts`` best
-        are refined by ``recognition_steps`` Levenberg-Marquardt steps on the
-        PB (initial damping ``recognition_damping``), all sequences and
-        starts in one batch; each sequence gets the refined PB with the
-        lowest prediction error. Starting from zero alone stalls in local
-        minima.
+        are refined by ``recognition_steps`` steps of ``recognition_method``
+        on the PB, all sequences and starts in one batch; each sequence gets
+        the refined PB with the lowest prediction error. Starting from zero
+        alone stalls in local minima.
 
-        Why Levenberg-Marquardt: each sequence's PB is a least-squares
+        ``"lm"``, Levenberg-Marquardt (initial damping
+        ``recognition_damping``): each sequence's PB is a least-squares
         problem in only ``P`` unknowns, so the ``P`` forward-mode
         derivatives of the residuals and a ``P x P`` solve per sequence give
         a Gauss-Newton step; 10 such steps reach the prediction error of
-        200 Adam steps (the PB gradient descent of the paper) at about a
-        sixth of the arithmetic.
+        200 Adam steps at about a sixth of the arithmetic. ``"adam"``:
+        gradient descent on the PB (the paper's back-propagation),
+        ``recognition_learning_rate``.
 
         Parameters
         ----------

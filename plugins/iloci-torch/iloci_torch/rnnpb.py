@@ -2,7 +2,7 @@
 
 The model is defined in :mod:`iloci.rnnpb_common`. A training step runs
 every sequence at once over padded, time-major tensors: per time step the
-forward pass is two ``addmm`` + ``sigmoid`` and the backward pass two
+forward pass is two ``mm`` + ``add_`` + ``sigmoid`` and the backward pass two
 matrix products and two element-wise products, all written into buffers
 allocated once per batch shape; the weight gradients are then single
 matrix products over all steps. Autograd would record and replay ~20 nodes
@@ -97,7 +97,7 @@ class _Net:
                   "G": e(L, R, S), "DZ": e(L, R, H), "dtO": e(L, R, S), "dtH": e(L, R, H), "IN": e(L, R, S),
                   "diff": e(L, R, self.d), "pre": e(R, H), "preR": e(R, H),
                   "w_r": e(S, H), "w_o4": e(H, S), "b_o2": e(S), "w_oT": e(S, H),
-                  "w_sT": e(H, S), "sdz": e(R, H), "grad": torch.empty_like(self.flat)}
+                  "w_sT": e(H, S), "sdz": e(R, H), "back": e(R, S), "grad": torch.empty_like(self.flat)}
             # per-step views, made once: indexing in the loop costs as much as the maths
             for name in ("Q", "R", "G", "DZ", "dtO", "dtH"):
                 ws[name + "_t"] = ws[name].unbind(0)
@@ -142,8 +142,9 @@ class _Net:
         w_r, w_o4, b_o2 = ws["w_r"], ws["w_o4"], ws["b_o2"]
         torch.addmm(b_o2, Qs[0], w_o4, out=Rs[0]).sigmoid_()
         for t in range(1, L):
-            torch.addmm(biases[t - 1], Rs[t - 1], w_r, out=Qs[t]).sigmoid_()
-            torch.addmm(b_o2, Qs[t], w_o4, out=Rs[t]).sigmoid_()
+            # mm + add_ : PyTorch's CPU addmm costs more than the two of them
+            torch.mm(Rs[t - 1], w_r, out=Qs[t]).add_(biases[t - 1]).sigmoid_()
+            torch.mm(Qs[t], w_o4, out=Rs[t]).add_(b_o2).sigmoid_()
         return torch.mul(ws["R"], 2.0, out=ws["O"]).sub_(1.0)
 
     def errors(self, pb: torch.Tensor, X: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -225,12 +226,12 @@ class _Net:
         mix[:d] = alpha
         torch.mul(v["w_in"][:self.s].T, mix, out=ws["w_sT"])
         Gt, DZt, dtO, dtH = ws["G_t"], ws["DZ_t"], ws["dtO_t"], ws["dtH_t"]
-        w_oT, w_sT = ws["w_oT"], ws["w_sT"]
+        w_oT, w_sT, back = ws["w_oT"], ws["w_sT"], ws["back"]
         for t in range(L - 1, -1, -1):
             go = Gt[t].mul_(dtO[t])                       # G[t] becomes dL/dz_o
             dz = torch.mm(go, w_oT, out=DZt[t]).mul_(dtH[t])
             if t > 0:                                     # through s_t = o_{t-1} * mix + ...
-                Gt[t - 1].addmm_(dz, w_sT)
+                Gt[t - 1].add_(torch.mm(dz, w_sT, out=back))
         sdz = torch.sum(ws["DZ"], dim=0, out=ws["sdz"])
         g_pb = sdz @ v["w_in"][self.s:].T
         if not weights_too:
@@ -336,6 +337,8 @@ class TorchRNNPB(RNNPBBase):
         return ut.numpy().astype(np.float64), float(loss)
 
     def _recognize_kernel(self, X, mask, weight, u):
+        if self.params.recognition_method == "adam":
+            return self._recognize_adam(X, mask, weight, u)
         p = self.params
         net = self._net
         Xt, ut = self._t(X), self._t(u)
@@ -359,6 +362,20 @@ class TorchRNNPB(RNNPBBase):
                 ut = torch.where(ok.unsqueeze(1), trial, ut)
                 lam = torch.where(ok, lam * LM_DOWN, lam * LM_UP).clamp_(LM_MIN, LM_MAX)
                 e = torch.where(ok, e_new, e)
+        return ut.numpy().astype(np.float64)
+
+    def _recognize_adam(self, X, mask, weight, u):
+        p = self.params
+        net = self._net
+        Xt, mw, ut = self._t(X), self._t(mask * weight[None, :]), self._t(u)
+        m, v, den = (torch.zeros_like(ut) for _ in range(3))
+        bound = p.pb_bound
+        with torch.no_grad(), _one_thread():
+            for t in range(1, p.recognition_steps + 1):
+                th = torch.tanh(ut)
+                _, _, gpb = net.loss_and_grads(th * bound, Xt, mw, 1.0, False)
+                gu = gpb.mul_(th.square_().neg_().add_(1.0)).mul_(bound)
+                _adam(ut, gu, m, v, den, t, p.recognition_learning_rate)
         return ut.numpy().astype(np.float64)
 
     def _error_kernel(self, X, mask, pbs, exact):
