@@ -14,7 +14,7 @@ Writes ``benchmarks/results/rnnpb.json``::
                          per back end
     recognize_146_first_call_s   the first call (includes JAX's compilation)
     recognize_146_s_adam the same with recognition_method = "adam" (200 steps,
-                         the paper's gradient descent on the PB)
+                         gradient descent on the PB, as in Tani's RNNPB)
     offline_ccr          per back end: correct classification rate per fold of
                          DESIGN.md section 6 and mean +- std; each test demo is
                          classified by its nearest PB_rec (PB_rec = recognize() of
@@ -53,7 +53,7 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
 #: Training epochs of the offline accuracy check (other settings: defaults).
 OFFLINE_EPOCHS = 3000
-#: The paper's recognition (gradient descent on the PB), for comparison with
+#: Recognition by gradient descent on the PB (Tani's RNNPB), for comparison with
 #: the default Levenberg-Marquardt.
 ADAM_RECOGNITION = {"recognition_method": "adam", "recognition_steps": 200}
 

@@ -53,8 +53,8 @@ class RNNPBParams:
     closed_loop: float = 1.0
     #: Recognition: how the PB of a sequence is refined from each start,
     #: ``"lm"`` (Levenberg-Marquardt: a Gauss-Newton step on the P unknowns
-    #: of each sequence) or ``"adam"`` (gradient descent on the PB, as the
-    #: paper's back-propagation; needs ~200 steps).
+    #: of each sequence) or ``"adam"`` (gradient descent on the PB, as in
+    #: Tani's RNNPB; needs ~200 steps). The paper does not say which.
     recognition_method: str = "lm"
     #: Recognition: steps per start (of ``recognition_method``).
     recognition_steps: int = 10

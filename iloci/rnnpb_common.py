@@ -717,8 +717,10 @@ class RNNPBBase:
         derivatives of the residuals and a ``P x P`` solve per sequence give
         a Gauss-Newton step; 10 such steps reach the prediction error of
         200 Adam steps at about a sixth of the arithmetic. ``"adam"``:
-        gradient descent on the PB (the paper's back-propagation),
-        ``recognition_learning_rate``.
+        gradient descent on the PB (back-propagation as in Tani's RNNPB; the
+        paper does not say), ``recognition_learning_rate``. From a single start
+        LM stops in the nearest local minimum where Adam's momentum may carry
+        on; from the default starts both reach the same errors.
 
         Parameters
         ----------

@@ -64,7 +64,9 @@ class OracleTeacher:
         if c is None:
             raise FeedbackError(
                 f"oracle teacher does not know the concept of {demo.key!r}: give the "
-                "Demonstration a concept, or pass concepts={shape: concept}.")
+                "Demonstration a concept, or name it in the teacher's config, "
+                f'[teacher] concepts = ["{demo.shape}=CONCEPT"] (in Python: '
+                f'concepts={{"{demo.shape}": "CONCEPT"}}).')
         self._seen[demo.key] = c
         return c
 

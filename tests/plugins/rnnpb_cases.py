@@ -155,7 +155,7 @@ def test_recognition_finds_the_trained_pb(make, method):
 
 
 def test_lm_recognition_gets_as_far_as_200_adam_steps(make):
-    """The default (10 Levenberg-Marquardt steps) against the paper's gradient descent.
+    """The default (10 Levenberg-Marquardt steps) against RNNPB's usual gradient descent.
 
     From the default starts (stored PBs + zero). From the zero PB alone,
     LM can stop in the nearest local minimum where Adam's momentum carries

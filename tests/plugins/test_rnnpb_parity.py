@@ -95,7 +95,7 @@ def test_float64_training_and_recognition_agree():
     a3, b3 = (cls(**{**kw, "recognition_steps": 3}) for cls in (TorchRNNPB, JaxRNNPB))
     a3.train(seqs), b3.train(seqs)
     np.testing.assert_allclose(a3.recognize(seqs), b3.recognize(seqs), rtol=0, atol=1e-12)
-    # the paper's gradient descent: the same arithmetic all the way
+    # gradient descent (Adam): the same arithmetic all the way
     ka = {**kw, "recognition_method": "adam", "recognition_steps": 20}
     aa, ba = TorchRNNPB(**ka), JaxRNNPB(**ka)
     aa.train(seqs), ba.train(seqs)

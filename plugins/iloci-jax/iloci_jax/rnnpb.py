@@ -185,7 +185,7 @@ def _train(w, u, X, mask, weight, epochs, lr, pb_lr, decay, warmup, clip, bound,
 
 @jax.jit
 def _recognize_adam(w, u, X, mask, weight, steps, lr, bound):
-    """Adam on each row's PB (weights frozen), the paper's gradient descent."""
+    """Adam on each row's PB (weights frozen): gradient descent, as in Tani's RNNPB."""
     def body(i, carry):
         u, m, v = carry
         th = jnp.tanh(u)

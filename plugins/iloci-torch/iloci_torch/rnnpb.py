@@ -2,7 +2,7 @@
 
 The model is defined in :mod:`iloci.rnnpb_common`. A training step runs
 every sequence at once over padded, time-major tensors: per time step the
-forward pass is two ``mm`` + ``add_`` + ``sigmoid`` and the backward pass two
+forward pass is two ``addmm`` + ``sigmoid`` and the backward pass two
 matrix products and two element-wise products, all written into buffers
 allocated once per batch shape; the weight gradients are then single
 matrix products over all steps. Autograd would record and replay ~20 nodes
@@ -97,7 +97,7 @@ class _Net:
                   "G": e(L, R, S), "DZ": e(L, R, H), "dtO": e(L, R, S), "dtH": e(L, R, H), "IN": e(L, R, S),
                   "diff": e(L, R, self.d), "pre": e(R, H), "preR": e(R, H),
                   "w_r": e(S, H), "w_o4": e(H, S), "b_o2": e(S), "w_oT": e(S, H),
-                  "w_sT": e(H, S), "sdz": e(R, H), "back": e(R, S), "grad": torch.empty_like(self.flat)}
+                  "w_sT": e(H, S), "sdz": e(R, H), "grad": torch.empty_like(self.flat)}
             # per-step views, made once: indexing in the loop costs as much as the maths
             for name in ("Q", "R", "G", "DZ", "dtO", "dtH"):
                 ws[name + "_t"] = ws[name].unbind(0)
@@ -142,9 +142,8 @@ class _Net:
         w_r, w_o4, b_o2 = ws["w_r"], ws["w_o4"], ws["b_o2"]
         torch.addmm(b_o2, Qs[0], w_o4, out=Rs[0]).sigmoid_()
         for t in range(1, L):
-            # mm + add_ : PyTorch's CPU addmm costs more than the two of them
-            torch.mm(Rs[t - 1], w_r, out=Qs[t]).add_(biases[t - 1]).sigmoid_()
-            torch.mm(Qs[t], w_o4, out=Rs[t]).add_(b_o2).sigmoid_()
+            torch.addmm(biases[t - 1], Rs[t - 1], w_r, out=Qs[t]).sigmoid_()
+            torch.addmm(b_o2, Qs[t], w_o4, out=Rs[t]).sigmoid_()
         return torch.mul(ws["R"], 2.0, out=ws["O"]).sub_(1.0)
 
     def errors(self, pb: torch.Tensor, X: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -226,12 +225,12 @@ class _Net:
         mix[:d] = alpha
         torch.mul(v["w_in"][:self.s].T, mix, out=ws["w_sT"])
         Gt, DZt, dtO, dtH = ws["G_t"], ws["DZ_t"], ws["dtO_t"], ws["dtH_t"]
-        w_oT, w_sT, back = ws["w_oT"], ws["w_sT"], ws["back"]
+        w_oT, w_sT = ws["w_oT"], ws["w_sT"]
         for t in range(L - 1, -1, -1):
             go = Gt[t].mul_(dtO[t])                       # G[t] becomes dL/dz_o
             dz = torch.mm(go, w_oT, out=DZt[t]).mul_(dtH[t])
             if t > 0:                                     # through s_t = o_{t-1} * mix + ...
-                Gt[t - 1].add_(torch.mm(dz, w_sT, out=back))
+                Gt[t - 1].addmm_(dz, w_sT)
         sdz = torch.sum(ws["DZ"], dim=0, out=ws["sdz"])
         g_pb = sdz @ v["w_in"][self.s:].T
         if not weights_too:
