@@ -12,15 +12,19 @@
 
 from __future__ import annotations
 
+import io
+import os
+import re
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-import sys
 from typing import TextIO
 
 import numpy as np
 
 from iloci.data.concepts import concept_of
+from iloci.data.files import write_atomic
 from iloci.errors import FeedbackError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration, Response
@@ -110,7 +114,10 @@ class ConsoleTeacher:
         Directory for a PNG of each answer (demonstration beside the robot's
         drawing: :attr:`Response.drawing <iloci.interfaces.Response.drawing>`,
         the executed pen path when a simulator is configured) when
-        matplotlib is installed; ``""`` disables pictures.
+        matplotlib is installed; ``""`` disables pictures. The pictures are
+        numbered ``answer-0001.png``, ... on from the highest number already
+        in the directory, so a later session (or another teacher writing
+        there at the same time) adds pictures and never replaces one.
     stdin, stdout : file, optional
         For embedding and tests.
     """
@@ -122,7 +129,7 @@ class ConsoleTeacher:
         self.stdin = stdin or sys.stdin
         self.stdout = stdout or sys.stdout
         self._ask = ask
-        self._count = 0
+        self._count = 0  # number of the last picture this teacher wrote
 
     def _picture(self, demo: Demonstration, response: Response) -> str | None:
         if not self.picture_dir:
@@ -132,10 +139,6 @@ class ConsoleTeacher:
             from matplotlib.figure import Figure
         except ImportError:
             return None
-        self._count += 1
-        out = Path(self.picture_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / f"answer-{self._count:04d}.png"
         fig = Figure(figsize=(7, 3.5))
         axes = fig.subplots(1, 2)
         axes[0].plot(demo.positions[:, 0], demo.positions[:, 1], "k-")
@@ -151,8 +154,21 @@ class ConsoleTeacher:
         for ax in axes:
             ax.set_aspect("equal", adjustable="datalim")
         fig.tight_layout()
-        fig.savefig(path, dpi=80)
-        return str(path)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=80)
+        data = buf.getvalue()
+        out = Path(self.picture_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        number = max(self._count, _last_picture_number(out))
+        while True:
+            number += 1
+            path = out / PICTURE_NAME.format(number)
+            try:
+                write_atomic(path, lambda fh: fh.write(data), overwrite=False)
+            except FileExistsError:  # taken since the directory was read
+                continue
+            self._count = number
+            return str(path)
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
         picture = self._picture(demo, response)
@@ -178,6 +194,18 @@ class ConsoleTeacher:
                 return -1
             if self._ask is None:
                 self.stdout.write("Please answer y or n.\n")
+
+
+#: File name of the console teacher's n-th picture.
+PICTURE_NAME = "answer-{:04d}.png"
+_PICTURE_RE = re.compile(r"answer-(\d+)\.png")
+
+
+def _last_picture_number(directory: Path) -> int:
+    """Highest n of an ``answer-<n>.png`` in ``directory`` (0 when there is none)."""
+    numbers = [int(m.group(1)) for entry in os.scandir(directory)
+               if (m := _PICTURE_RE.fullmatch(entry.name))]
+    return max(numbers, default=0)
 
 
 @dataclass(frozen=True)

@@ -126,24 +126,58 @@ def test_recognize(taught, tmp_path):
     assert all(0.0 <= a["confidence"] <= 1.0 for a in answers)
 
 
-def _defaults_missing() -> bool:
-    """Whether a default component (a name in iloci.config.DEFAULT_NAMES) is not installed."""
-    from iloci.config import COMPONENT_SECTIONS, DEFAULT_NAMES
-    return any(name != "none" and name not in _available(COMPONENT_SECTIONS[sec])
-               for sec, name in DEFAULT_NAMES.items())
+#: Component kinds whose plugins `iloci draw` must do without, but for the memory's
+#: own perceptual model (its network regenerates the concept).
+NOT_FOR_DRAWING = ("perceptual_model", "clusterer", "teacher")
+
+
+def _block_all_but(combo: dict[str, str], *keep_sections: str) -> str:
+    """ILOCI_BLOCK_PLUGINS value: every plugin of NOT_FOR_DRAWING but those of ``combo``'s
+    ``keep_sections`` (and of its IK solver and simulator)."""
+    from iloci.config import COMPONENT_SECTIONS
+    registry = get_registry()
+    keep = {registry.get(COMPONENT_SECTIONS[sec], combo[sec]).plugin
+            for sec in (*keep_sections, "ik", "simulator")}
+    blocked = {s.plugin for s in registry.specs() if s.kind in NOT_FOR_DRAWING} - keep
+    return ",".join(sorted(blocked))
+
+
+needs_simulator = pytest.mark.skipif(not COMBINATIONS or COMBINATIONS[-1]["simulator"] == "none",
+                                     reason="needs a simulator back end")
 
 
 @needs_backends
-@pytest.mark.skipif(not COMBINATIONS or COMBINATIONS[-1]["simulator"] == "none",
-                    reason="needs a simulator back end")
-@pytest.mark.xfail(_defaults_missing(), strict=True,
-                   reason="known bug: `iloci draw` resolves the saved [simulator] section "
-                          "with default names for the other sections, so it needs the "
-                          "default back ends installed (iloci/commands/draw.py)")
-def test_draw(taught, tmp_path):
+@needs_simulator
+def test_draw_needs_only_the_memorys_network_ik_and_simulator(taught, tmp_path):
+    """`iloci draw` builds the memory's perceptual model, IK solver and the simulator, and
+    nothing else: not the clusterer or teacher the memory was taught with, nor any default
+    back end (it once resolved the defaults and built a whole agent)."""
+    combo, memory, _ = taught
+    blocked = _block_all_but(combo, "perceptual_model")
+    # every clusterer and teacher is among them: the memory's, and the default ones
+    assert {s.plugin for s in get_registry().specs() if s.kind in ("clusterer", "teacher")} \
+        <= set(blocked.split(",")), blocked
+    image = tmp_path / "gshape.png"
+    res = run_cli("draw", "--memory", str(memory), "--concept", "GShape",
+                  "--simulator", combo["simulator"], "--out", str(image), cwd=tmp_path,
+                  env={"ILOCI_BLOCK_PLUGINS": blocked})
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"in {combo['simulator']}" in res.stdout
+
+
+@needs_backends
+@needs_simulator
+def test_draw_without_the_memorys_network_names_the_back_end_to_install(taught, tmp_path):
+    """Drawing regenerates the concept with the memory's network: without its perceptual
+    model the command says which one, why, and the pip command."""
     combo, memory, _ = taught
     image = tmp_path / "gshape.png"
     res = run_cli("draw", "--memory", str(memory), "--concept", "GShape",
-                  "--simulator", combo["simulator"], "--out", str(image), cwd=tmp_path)
-    assert res.returncode == 0, res.stderr[-3000:]
-    assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+                  "--simulator", combo["simulator"], "--out", str(image), cwd=tmp_path,
+                  env={"ILOCI_BLOCK_PLUGINS": _block_all_but(combo)})
+    assert res.returncode == 2, res.stderr[-3000:]
+    err = res.stderr
+    assert f"perceptual model {combo['perceptual_model']!r}" in err
+    assert "iloci draw" in err and "pip install ./plugins/iloci-" in err
+    assert "Traceback" not in err and not image.exists()

@@ -79,6 +79,31 @@ def test_a_missing_directory_is_created_only_when_asked(tmp_path):
     assert path.read_text() == "x"
 
 
+@pytest.mark.parametrize("hard_links", [True, False])
+def test_overwrite_false_writes_a_new_file_and_never_replaces_one(tmp_path, monkeypatch,
+                                                                  hard_links):
+    if not hard_links:  # a file system without them: check, then rename
+        def no_link(src, dst):
+            raise PermissionError(1, "Operation not permitted")
+
+        monkeypatch.setattr(os, "link", no_link)
+    path = tmp_path / "picture.png"
+    assert write_atomic(path, lambda fh: fh.write(b"first"), overwrite=False) == path
+    assert path.read_bytes() == b"first"
+    with pytest.raises(FileExistsError) as info:
+        write_atomic(path, lambda fh: fh.write(b"second"), overwrite=False)
+    assert info.value.filename == str(path)
+    assert path.read_bytes() == b"first"
+    assert [p.name for p in tmp_path.iterdir()] == ["picture.png"]  # no temporary file left
+
+
+@posix_only
+def test_overwrite_false_gives_a_new_file_the_umask_mode(tmp_path, umask):
+    umask(0o077)
+    path = write_atomic(tmp_path / "new.bin", lambda fh: fh.write(b"x"), overwrite=False)
+    assert mode_of(path) == 0o600
+
+
 @posix_only
 @pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
                     reason="root writes into read-only directories")

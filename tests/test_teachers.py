@@ -4,6 +4,7 @@ run is tested in tests/plugins/test_pybullet.py)."""
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -90,3 +91,53 @@ def test_console_picture_leaves_the_host_backend_alone(tmp_path):
                          check=True, cwd=Path(__file__).parent)
     assert out.stdout.strip() == "svg"
     assert (tmp_path / "answer-0001.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def _session(directory, demos) -> list[str]:
+    """One console-teacher session: a fresh teacher judging one answer per demonstration.
+
+    Returns the names of the pictures the teacher said it wrote, in order."""
+    out = io.StringIO()
+    teacher = ConsoleTeacher(str(directory), stdin=io.StringIO("y\n" * len(demos)), stdout=out)
+    for demo in demos:
+        assert teacher.feedback(demo, _response(demo.key.endswith("/1"))) == 1
+    return [Path(p).name for p in re.findall(r"its drawing is in (\S+\.png)", out.getvalue())]
+
+
+def test_a_second_session_numbers_its_pictures_on_and_keeps_the_first_ones(tmp_path):
+    """`iloci teach` twice in one directory: each session has a new ConsoleTeacher, and the
+    second one's pictures follow the first one's instead of replacing them."""
+    pytest.importorskip("matplotlib")
+    first = _session(tmp_path, load_lasa("GShape")[:2])
+    assert first == ["answer-0001.png", "answer-0002.png"]
+    kept = {name: (tmp_path / name).read_bytes() for name in first}
+    second = _session(tmp_path, load_lasa("Sine")[:3])
+    assert second == ["answer-0003.png", "answer-0004.png", "answer-0005.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"answer-{i:04d}.png"
+                                                          for i in range(1, 6)]
+    for name, data in kept.items():
+        assert (tmp_path / name).read_bytes() == data, f"{name} was overwritten"
+    for name in second:
+        assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_pictures_follow_the_highest_number_and_never_replace_a_file(tmp_path, monkeypatch):
+    """Numbering goes on from the highest ``answer-<n>.png`` there; a name another
+    teacher took meanwhile is skipped, not replaced."""
+    pytest.importorskip("matplotlib")
+    from iloci import teachers
+
+    (tmp_path / "answer-0007.png").write_bytes(b"a person's picture")
+    (tmp_path / "answer-12.png").write_bytes(b"unpadded")  # numbers, not names, count
+    (tmp_path / "notes.txt").write_text("answer-0099.png is not a picture name")
+    (tmp_path / "answer-0050.png.bak").write_bytes(b"not a picture either")
+    assert _session(tmp_path, load_lasa("GShape")[:1]) == ["answer-0013.png"]
+    # another session takes the next name between the directory scan and the write
+    monkeypatch.setattr(teachers, "_last_picture_number", lambda directory: 0)
+    (tmp_path / "answer-0001.png").write_bytes(b"taken")
+    teacher = ConsoleTeacher(str(tmp_path), stdin=io.StringIO("y\n"), stdout=io.StringIO())
+    teacher.feedback(load_lasa("GShape")[0], _response(False))
+    assert (tmp_path / "answer-0001.png").read_bytes() == b"taken"
+    assert (tmp_path / "answer-0002.png").read_bytes()[:4] == b"\x89PNG"
+    assert (tmp_path / "answer-0007.png").read_bytes() == b"a person's picture"
+    assert not list(tmp_path.glob(".*.tmp")), "no temporary file left behind"

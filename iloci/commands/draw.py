@@ -5,6 +5,11 @@ network from its PB (the same answer the robot gives the teacher), decoded
 to a joint path, executed on the simulated arm, and rendered: the arm in its
 last posture with the pen path it drew, or, with ``--gif``, the drawing
 unfolding at the motion's own pace.
+
+Only what drawing uses is built: the memory's perceptual model (its network
+regenerates the concept), its IK solver (the forward kinematics the tracking
+error is measured with) and the simulator. The clusterer and teacher the
+memory was taught with, and the default back ends, need not be installed.
 """
 
 from __future__ import annotations
@@ -18,9 +23,17 @@ from pathlib import Path
 import numpy as np
 
 from iloci.data.files import write_atomic
-from iloci.errors import InvalidInputError, MissingBackendError, did_you_mean
+from iloci.errors import (
+    ConfigError,
+    InvalidInputError,
+    MemoryFileError,
+    MissingBackendError,
+    UnknownComponentError,
+    did_you_mean,
+)
 
-__all__ = ["DrawResult", "draw", "register", "resolve_concept", "run", "write_gif", "write_png"]
+__all__ = ["DrawResult", "Performer", "build_performer", "draw", "register",
+           "resolve_concept", "run", "write_gif", "write_png"]
 
 #: Simulators ``--simulator`` offers (any registered simulator name is accepted).
 SIMULATORS = ("pybullet", "mujoco")
@@ -137,13 +150,61 @@ class DrawResult:
         self.sensory_gap_m = sensory_gap_m
 
 
+class Performer:
+    """The part of an agent that performs its concepts: memory, network, IK solver.
+
+    What :func:`draw` needs of an :class:`~iloci.agent.Agent`, without the
+    clusterer and teacher (``iloci draw`` builds one from a memory file).
+
+    Attributes
+    ----------
+    memory : Memory
+    perceptual_model : PerceptualModel
+        The memory's network, its state loaded.
+    ik_solver : IKSolver
+    config : PerformerConfig
+    """
+
+    def __init__(self, memory, perceptual_model, ik_solver, sensorimotor) -> None:
+        self.memory = memory
+        self.perceptual_model = perceptual_model
+        self.ik_solver = ik_solver
+        self.config = PerformerConfig(sensorimotor)
+
+    def respond(self, concept: str):
+        """Perform ``concept``: its entry of lowest generation error (as :meth:`Agent.respond`)."""
+        from iloci.concepts.learner import Learner
+
+        idx = self.memory.indices_of(concept)
+        if not idx:
+            raise InvalidInputError(f"the memory holds no concept {concept!r}; known: "
+                                    f"{', '.join(self.memory.concepts()) or '(none)'}.")
+        best = min(idx, key=lambda i: self.memory.entries[i].generation_error)
+        limits = None
+        if hasattr(self.ik_solver, "lower"):
+            limits = (np.asarray(self.ik_solver.lower), np.asarray(self.ik_solver.upper))
+        # responding uses neither the clusterer nor the teacher
+        learner = Learner(self.memory, self.perceptual_model, None, None,  # type: ignore[arg-type]
+                          joint_limits=limits)
+        return learner.respond(best)
+
+
+class PerformerConfig:
+    """The config sections a :class:`Performer` reads (``sensorimotor``)."""
+
+    def __init__(self, sensorimotor) -> None:
+        self.sensorimotor = sensorimotor
+
+
 def draw(agent, concept: str, simulator) -> DrawResult:
     """Regenerate ``concept`` from ``agent``'s memory and execute it in ``simulator``.
 
     Parameters
     ----------
-    agent : Agent
-        Built with no simulator of its own (the caller executes).
+    agent : Agent or Performer
+        Built with no simulator of its own (the caller executes). Only its
+        ``memory``, ``respond``, ``ik_solver`` and ``config.sensorimotor``
+        are used.
     concept : str
         A robot concept label or true concept name (see :func:`resolve_concept`).
     simulator : Simulator
@@ -227,10 +288,118 @@ def _simulator_name(args: argparse.Namespace, saved: dict) -> str:
     return name if name != "none" else "pybullet"
 
 
-def run(args: argparse.Namespace) -> int:
-    from iloci.agent import Agent
+def _saved_name(saved: dict, section: str) -> object:
+    """The component name ``section`` of a memory's saved config gives (default if none)."""
+    from iloci.config import DEFAULT_NAMES
+
+    values = saved.get(section)
+    return (values if isinstance(values, dict) else {}).get("name", DEFAULT_NAMES[section])
+
+
+def _saved_section(saved: dict, section: str, registry, source: str):
+    """(spec, validated params) of component ``section`` in a memory's saved config.
+
+    Only this section is resolved: a back end the memory names elsewhere (its
+    clusterer, say) or a default one need not be installed.
+    """
+    from iloci.config import COMPONENT_SECTIONS, DEFAULT_NAMES
+    from iloci.registry import validate_params
+
+    values = saved.get(section) or {}
+    if not isinstance(values, dict):
+        raise ConfigError(f"[{section}] of the saved config must be a table, got {values!r}.",
+                          source=source, key=section)
+    values = dict(values)
+    name = values.pop("name", DEFAULT_NAMES[section])  # as load_config reads it
+    if not isinstance(name, str) or name == "none":
+        raise ConfigError(f"{section}.name of the saved config must name a component, got "
+                          f"{name!r}.", source=source, key=f"{section}.name")
+    spec = registry.get(COMPONENT_SECTIONS[section], name)
+    return spec, validate_params(spec, values, source=source)
+
+
+#: Why drawing needs each component it builds from a memory (besides the simulator).
+_NEEDED = {
+    "perceptual_model": "holds the network of perceptual model {!r}, which regenerates the "
+                        "concept",
+    "ik": "was taught with IK solver {!r}, whose forward kinematics measure the tracking "
+          "error",
+}
+
+
+def _why_needed(exc: Exception, section: str, name: str, source: str) -> Exception:
+    """``exc`` (a missing back end) with why drawing needs it in front of its message."""
+    message = f"{source} {_NEEDED[section].format(name)}, so `iloci draw` needs it: {exc}"
+    exc.args = (message,)
+    if isinstance(exc, ImportError):  # whose str() is its msg attribute
+        exc.msg = message
+    return exc
+
+
+def build_performer(memory_path: str | os.PathLike[str], *, registry=None,
+                    loaded=None) -> Performer:
+    """A :class:`Performer` of a memory file: its network and IK solver, nothing else.
+
+    Parameters
+    ----------
+    memory_path : path-like
+        A file written by ``iloci teach`` (:meth:`Agent.save`).
+    registry : Registry, optional
+        Defaults to the installed plugins'.
+    loaded : tuple, optional
+        What :func:`~iloci.concepts.memory.load_memory` returned for the
+        file, when the caller has read it already.
+
+    Raises
+    ------
+    MissingBackendError
+        The memory's perceptual model or IK solver is not installed (says
+        why drawing needs it and names the pip command).
+    MemoryFileError
+        The file holds no config, or its network does not fit the model.
+    """
     from iloci.concepts.memory import load_memory
-    from iloci.config import load_config
+    from iloci.config import EvaluationConfig, SensorimotorConfig
+    from iloci.registry import validate_dataclass
+
+    source = str(memory_path)
+    if registry is None:
+        from iloci.plugins import get_registry
+        registry = get_registry()
+    memory, net_state, header = loaded if loaded is not None else load_memory(memory_path)
+    saved = header.get("config")
+    if not isinstance(saved, dict):
+        raise MemoryFileError(f"{source} holds no config: it names no perceptual model to "
+                              "regenerate its concepts with.")
+    specs = {}
+    for section in _NEEDED:
+        try:
+            specs[section] = _saved_section(saved, section, registry, source)
+        except (MissingBackendError, UnknownComponentError) as exc:
+            # not installed: a first-party back end, or a third-party one
+            raise _why_needed(exc, section, _saved_name(saved, section), source)
+    sensorimotor = validate_dataclass(SensorimotorConfig, dict(saved.get("sensorimotor") or {}),
+                                      section="sensorimotor", source=source)
+    seed = validate_dataclass(EvaluationConfig, dict(saved.get("evaluation") or {}),
+                              section="evaluation", source=source).seed
+    components = {}
+    for section, (spec, params) in specs.items():
+        try:
+            components[section] = registry.build(spec.kind, spec.name, params, seed=seed)
+        except MissingBackendError as exc:  # registered, but its library is missing
+            raise _why_needed(exc, section, spec.name, source)
+    model = components["perceptual_model"]
+    if net_state:
+        try:
+            model.load_state(net_state)
+        except (ValueError, KeyError, InvalidInputError) as exc:
+            raise MemoryFileError(f"the network saved in {source} does not fit the "
+                                  f"configured perceptual model: {exc}") from None
+    return Performer(memory, model, components["ik"], sensorimotor)
+
+
+def run(args: argparse.Namespace) -> int:
+    from iloci.concepts.memory import load_memory
     from iloci.interfaces import Execution
     from iloci.plugins import get_registry
 
@@ -242,20 +411,22 @@ def run(args: argparse.Namespace) -> int:
     if not args.gif and suffix != ".png":
         raise InvalidInputError(f"--out must be a .png file (or use --gif with a .gif), got "
                                 f"{out}.")
-    _, _, header = load_memory(args.memory)
+    loaded = load_memory(args.memory)
+    header = loaded[2]
     saved = header.get("config") if isinstance(header.get("config"), dict) else {}
     name = _simulator_name(args, saved)
     registry = get_registry()
-    # resolve the name before loading the network: a typo fails fast, with "did you mean"
+    # resolve the names before loading the network: a typo fails fast, with "did you mean"
     spec = registry.get("simulator", name)
     sim_params = None
     if (saved.get("simulator") or {}).get("name") == name:
-        sim_params = load_config({"simulator": saved["simulator"]},
-                                 registry=registry).simulator.params
+        sim_params = _saved_section(saved, "simulator", registry, str(args.memory))[1]
+    resolve_concept(loaded[0], args.concept)
+    # only the memory's network and IK solver: not its clusterer and teacher
+    performer = build_performer(args.memory, registry=registry, loaded=loaded)
     simulator = registry.build("simulator", spec.name, sim_params)
     try:
-        agent = Agent.load(args.memory, simulator=None)
-        result = draw(agent, args.concept, simulator)
+        result = draw(performer, args.concept, simulator)
         ex = result.execution
         if args.gif:
             T = len(ex.joint_path)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import errno
 import os
 import secrets
 import stat
@@ -126,7 +127,7 @@ def _numeric(row: list[str]) -> bool:
 
 
 def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any], *,
-                 mkdir: bool = False) -> Path:
+                 mkdir: bool = False, overwrite: bool = True) -> Path:
     """Write a file atomically: readers see the old file or the new one, never a part.
 
     ``writer(fh)`` writes the content to a binary temporary file
@@ -144,6 +145,13 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
     existing file keeps its permission bits, so a file a user made private
     stays private.
 
+    With ``overwrite=False`` an existing target is never replaced: the
+    temporary file is committed with :func:`os.link`, which fails when the
+    target exists (atomically, so two writers racing for one name cannot
+    both win), and :class:`FileExistsError` is raised with the target left
+    as it was. On a file system without hard links the existence check and
+    the rename are two steps.
+
     Parameters
     ----------
     path : str or path-like
@@ -154,6 +162,9 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
     mkdir : bool
         Create missing parent directories first (otherwise a missing
         directory raises :class:`FileNotFoundError`).
+    overwrite : bool
+        Replace an existing target (the default); ``False`` raises
+        :class:`FileExistsError` instead.
 
     Returns
     -------
@@ -162,6 +173,8 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
 
     Raises
     ------
+    FileExistsError
+        ``overwrite=False`` and the target exists.
     OSError
         Unchanged from the file system (e.g. :class:`PermissionError` for an
         unwritable directory); whatever ``writer`` raises propagates too.
@@ -183,6 +196,9 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
             writer(fh)
             fh.flush()
             os.fsync(fh.fileno())
+        if not overwrite:
+            _commit_new(tmp, target)
+            return target
         try:
             old_mode = stat.S_IMODE(os.stat(target).st_mode)
         except FileNotFoundError:
@@ -198,6 +214,25 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
             pass
         raise
     return target
+
+
+def _commit_new(tmp: Path, target: Path) -> None:
+    """Give the finished temporary file ``tmp`` the name ``target``, which must not exist."""
+    try:
+        # the link is the commit point; it fails if the target exists
+        os.link(tmp, target)
+    except FileExistsError:
+        raise FileExistsError(errno.EEXIST, "file exists; not replaced", str(target)) from None
+    except OSError:  # no hard links here (some FAT, network or container file systems)
+        if os.path.lexists(target):
+            raise FileExistsError(errno.EEXIST, "file exists; not replaced",
+                                  str(target)) from None
+        os.replace(tmp, target)
+        return
+    try:
+        os.unlink(tmp)  # the target is written: a leftover name is no failure
+    except OSError:
+        pass
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8",
