@@ -344,28 +344,41 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         Anything :func:`~iloci.config.load_config` takes; ``None`` for the
         defaults (the paper's settings).
     plugin_manager : pluggy.PluginManager, optional
-        Defaults to :func:`~iloci.plugins.get_plugin_manager`.
+        Defaults to :func:`~iloci.plugins.get_plugin_manager`. Component
+        names are resolved through its plugins.
     **overrides
         Component instances to use instead of building them from the config,
         by section name (``teacher=my_teacher``, ``ik=my_solver``): how an
-        embedding robot stack plugs in its own objects.
+        embedding robot stack plugs in its own objects. The configured name
+        of a section given this way is never looked up, so it need not be
+        registered nor its back end installed; the section is kept in
+        ``agent.config`` as written, its other keys unvalidated. Each object
+        must have the members of its protocol in :mod:`iloci.interfaces`.
+        ``simulator=None`` leaves the simulator out.
 
     Raises
     ------
+    InvalidInputError
+        An override is not an instance with its protocol's members (one
+        error naming every such override and what it lacks), or is ``None``
+        for a component other than the simulator.
     ConfigError, UnknownComponentError
-        Invalid config (before anything heavy is imported).
+        Invalid config, or an unknown override name (before anything heavy
+        is imported).
     MissingBackendError
-        A configured back end is not installed (names the pip command).
+        A configured back end, of a component not given as an object, is
+        not installed (names the pip command).
     """
-    pm = plugin_manager or get_plugin_manager()
-    registry = get_registry(pm)
-    cfg = load_config(config, registry=registry)
     from iloci.config import COMPONENT_SECTIONS
     unknown = set(overrides) - set(COMPONENT_SECTIONS)
     if unknown:
         from iloci.errors import ConfigError
         raise ConfigError(f"build() got unknown component override(s) {sorted(unknown)}; "
                           f"valid: {', '.join(COMPONENT_SECTIONS)}.")
+    _check_overrides(overrides)
+    pm = plugin_manager or get_plugin_manager()
+    registry = get_registry(pm)
+    cfg = load_config(config, registry=registry, supplied=overrides)
     components: dict[str, Any] = {}
     for sec, kind in COMPONENT_SECTIONS.items():
         if sec in overrides:
@@ -377,6 +390,35 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
             continue
         components[sec] = registry.build(kind, cc.name, cc.params, seed=cfg.seed)
     return Agent(cfg, components, pm, registry)
+
+
+def _check_overrides(overrides: dict[str, Any]) -> None:
+    """Raise one InvalidInputError for every override that is not a component."""
+    from iloci.config import COMPONENT_SECTIONS, OPTIONAL_SECTIONS
+    from iloci.interfaces import PROTOCOLS, unmet_members
+    from iloci.registry import LABELS
+    problems = []
+    for sec, obj in overrides.items():
+        kind = COMPONENT_SECTIONS[sec]
+        protocol = PROTOCOLS[kind]
+        where = f"iloci.interfaces.{protocol.__name__}"
+        label = LABELS[kind]
+        a_label = ("an " if label[0].lower() in "aeiou" else "a ") + label
+        if obj is None:
+            if sec not in OPTIONAL_SECTIONS:
+                problems.append(f"{sec}=None: {a_label} is required (only simulator=None "
+                                "is allowed)")
+        elif isinstance(obj, type):
+            problems.append(f"{sec}={obj.__name__} is a class; pass an instance, "
+                            f"{obj.__name__}(...), implementing {where}")
+        else:
+            unmet = unmet_members(obj, protocol)
+            if unmet:
+                problems.append(f"{sec}={type(obj).__name__}(...) is not {a_label}: it lacks "
+                                f"{', '.join(unmet)} (see {where})")
+    if problems:
+        raise InvalidInputError("build() got component object(s) it cannot use: "
+                                + "; ".join(problems) + ".")
 
 
 def _describe(item: Any, i: int) -> str:

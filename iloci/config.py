@@ -18,7 +18,7 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
@@ -71,8 +71,11 @@ class ComponentConfig:
     ----------
     name : str
         Registered name, or ``"none"`` for an optional component left out.
-    params : dataclass instance or None
-        The component's schema filled from the config section.
+    params : dataclass instance, dict or None
+        The component's schema filled from the config section. A plain
+        dict of the section's other keys, unvalidated, when the component
+        was given to :func:`~iloci.agent.build` as an object (its name was
+        not looked up, so there is no schema to check them against).
     """
 
     name: str
@@ -262,7 +265,8 @@ def _read_toml(path: Path) -> dict[str, Any]:
 
 
 def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | None = None,
-                *, registry: Registry | None = None) -> Config:
+                *, registry: Registry | None = None,
+                supplied: Iterable[str] = ()) -> Config:
     """Load and validate a configuration.
 
     Parameters
@@ -273,6 +277,13 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     registry : Registry, optional
         Registry to resolve component names in; by default one is built
         from the installed plugins.
+    supplied : iterable of str
+        Component sections (``"ik"``, ``"teacher"``, ...) whose component
+        the caller supplies as an object, as :func:`~iloci.agent.build`
+        does for its overrides. Their name is not looked up (it need not
+        be registered, nor its back end installed) and their other keys
+        are kept as given, unvalidated. Ignored when ``source`` is already
+        a :class:`Config`.
 
     Returns
     -------
@@ -301,7 +312,12 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     else:
         raise ConfigError(f"load_config takes a path, a mapping or None, got "
                           f"{type(source).__name__}.")
-    if registry is None:
+    supplied = set(supplied)
+    bad = supplied - set(COMPONENT_SECTIONS)
+    if bad:
+        raise ConfigError(f"supplied names no component section: {sorted(bad)}; component "
+                          f"sections are {', '.join(COMPONENT_SECTIONS)}.")
+    if registry is None and not supplied >= set(COMPONENT_SECTIONS):
         from iloci.plugins import get_registry
         registry = get_registry()
 
@@ -326,6 +342,10 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
         if not isinstance(name, str):
             raise ConfigError(f"{sec}.name must be a string, got {name!r}.",
                               source=origin, key=f"{sec}.name")
+        if sec in supplied:  # the caller's object stands in: nothing to look up
+            kwargs[sec] = ComponentConfig(name, values or None)
+            continue
+        assert registry is not None
         if name == "none":
             if sec not in OPTIONAL_SECTIONS:
                 raise ConfigError(f"[{sec}] is required; 'none' is not allowed. Known "

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 import difflib
+from typing import Any
 
 __all__ = [
     "IlociError",
@@ -27,6 +28,20 @@ __all__ = [
 
 class IlociError(Exception):
     """Base class of every error iloci raises on purpose."""
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Exception's own reduce calls cls(*args) on unpickling, which fails for
+        # subclasses whose __init__ takes other arguments; an error raised in an
+        # evaluation worker process then broke the pool instead of reaching the caller.
+        return _rebuild_error, (type(self), self.args, dict(self.__dict__))
+
+
+def _rebuild_error(cls: type[IlociError], args: tuple[Any, ...],
+                   state: dict[str, Any]) -> IlociError:
+    exc = cls.__new__(cls)
+    exc.args = args
+    exc.__dict__.update(state)
+    return exc
 
 
 class ConfigError(IlociError, ValueError):

@@ -31,6 +31,8 @@ __all__ = [
     "IKSolver",
     "Simulator",
     "KINDS",
+    "PROTOCOLS",
+    "unmet_members",
 ]
 
 #: Component kinds, as used in config sections and the registry.
@@ -433,3 +435,30 @@ class Simulator(Protocol):
     def close(self) -> None:
         """Release the engine (idempotent)."""
         ...
+
+
+
+#: The protocol of each component kind.
+PROTOCOLS: dict[str, type] = {
+    "perceptual_model": PerceptualModel,
+    "clusterer": Clusterer,
+    "teacher": Teacher,
+    "ik_solver": IKSolver,
+    "simulator": Simulator,
+}
+
+
+def unmet_members(obj: Any, protocol: type) -> list[str]:
+    """Members of ``protocol`` that ``obj`` lacks, or has but cannot call, sorted.
+
+    Structural, like ``isinstance(obj, protocol)``, but it names what is
+    missing and also requires the protocol's methods to be callable. An
+    empty list means ``obj`` satisfies the protocol's shape (not that it
+    behaves: see :mod:`iloci.testing` for that).
+    """
+    attributes = set(vars(protocol).get("__annotations__", {}))
+    methods = {n for n, v in vars(protocol).items()
+               if callable(v) and not n.startswith("_")}
+    out = [n for n in attributes - methods if not hasattr(obj, n)]
+    out += [n for n in methods if not callable(getattr(obj, n, None))]
+    return sorted(out)

@@ -380,9 +380,11 @@ def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,
 
 
 def params_to_dict(params: Any) -> dict[str, Any]:
-    """A params dataclass as a plain dict (tuples kept as lists for TOML)."""
+    """A params dataclass (or mapping) as a plain dict (tuples kept as lists for TOML)."""
     if params is None:
         return {}
+    if isinstance(params, Mapping):
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}
     out = {}
     for f in dataclasses.fields(params):
         v = getattr(params, f.name)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 
 import pytest
 
@@ -13,7 +14,7 @@ pytest.importorskip("iloci_scipy")
 pytest.importorskip("matplotlib")
 
 from iloci.cli import main  # noqa: E402
-from iloci.errors import InvalidInputError  # noqa: E402
+from iloci.errors import InvalidInputError, MissingBackendError  # noqa: E402
 from iloci.evaluation.evaluate import evaluate  # noqa: E402
 
 SMALL = """
@@ -92,3 +93,77 @@ def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir):
 def test_unknown_fold_is_a_clear_error(small_config):
     with pytest.raises(InvalidInputError, match="fold 7 does not exist"):
         evaluate(small_config, folds=[7])
+
+
+# -- a plugin registered on the caller's own plugin manager (no entry point) ----------
+
+def _own_plugin_manager(factory="iloci.teachers:OracleTeacher", **extra):
+    """A program's own plugin on its own plugin manager: a teacher only it knows."""
+    from iloci import hookimpl
+    from iloci.plugins import get_plugin_manager
+
+    class HouseTeachers:
+        @hookimpl
+        def iloci_register_teachers(self, registry):
+            registry.add("house-oracle", factory, **extra)
+
+    return get_plugin_manager(plugins=[HouseTeachers()])
+
+
+def _house_config() -> dict:
+    data = tomllib.loads(SMALL)
+    data["teacher"] = {"name": "house-oracle"}
+    return data
+
+
+def _same_fold(a: dict, b: dict) -> None:
+    assert a["fold"] == b["fold"]
+    assert a["predicted"] == b["predicted"]
+    assert a["feedbacks"] == b["feedbacks"]
+    assert a["entries"] == b["entries"]
+
+
+def test_evaluate_resolves_names_through_the_given_plugin_manager(run_dir):
+    serial = json.loads((run_dir / "folds.json").read_text())
+    pm = _own_plugin_manager()  # the oracle, under a name only this manager knows
+    metrics, results = evaluate(_house_config(), plugin_manager=pm, jobs=1, folds=[0],
+                                baseline=False)
+    assert metrics["config"]["teacher"]["name"] == "house-oracle"
+    _same_fold(results[0], serial[0])  # the oracle under another name: the same fold
+
+
+def test_evaluate_workers_resolve_names_through_the_given_plugin_manager(run_dir):
+    from iloci import hookimpl
+
+    serial = json.loads((run_dir / "folds.json").read_text())
+    pm = _own_plugin_manager()
+    finished = []
+
+    class Folds:
+        @hookimpl
+        def iloci_on_fold_finished(self, event):
+            finished.append(event.fold)
+
+    pm.register(Folds())
+    # jobs=2: the fold runs in a spawned worker process, which cannot import the plugin
+    metrics, results = evaluate(_house_config(), plugin_manager=pm, jobs=2, folds=[1],
+                                baseline=False)
+    assert metrics["jobs"] == 2 and finished == [1]
+    _same_fold(results[0], serial[1])
+
+
+def test_evaluate_workers_cannot_receive_an_unpicklable_component(small_config):
+    from iloci.teachers import OracleTeacher
+
+    pm = _own_plugin_manager(lambda: OracleTeacher())
+    with pytest.raises(InvalidInputError, match="house-oracle") as exc:
+        evaluate(_house_config(), plugin_manager=pm, jobs=2, baseline=False)
+    assert "jobs=1" in str(exc.value) and "module:attribute" in str(exc.value)
+
+
+def test_a_worker_error_reaches_the_caller_as_itself(small_config):
+    # resolves (and pickles) in the parent; its import fails in the worker
+    pm = _own_plugin_manager("iloci_no_such_module_for_test:Teacher",
+                             install="pip install house-teachers")
+    with pytest.raises(MissingBackendError, match="pip install house-teachers"):
+        evaluate(_house_config(), plugin_manager=pm, jobs=2, folds=[0], baseline=False)

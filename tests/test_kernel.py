@@ -11,7 +11,7 @@ import pytest
 import iloci
 from iloci import hookimpl
 from iloci.config import Config, load_config, to_toml
-from iloci.errors import (ConfigError, MissingBackendError, PluginError,
+from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
                           UnknownComponentError)
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.teachers import OracleTeacher
@@ -209,3 +209,77 @@ def test_cli_plugins_table(cli):
     header = res.stdout.splitlines()[0].split()
     assert header == ["KIND", "NAME", "DISTRIBUTION", "VERSION", "STATUS"]
     assert any(line.split()[:2] == ["teacher", "oracle"] for line in res.stdout.splitlines())
+
+
+# -- build() with component objects -------------------------------------------------
+
+def _real_components() -> dict:
+    """Real first-party components, built through the default plugin manager."""
+    full = get_registry()
+    try:
+        return {"perceptual_model": full.build("perceptual_model", "jax-rnnpb",
+                                               {"epochs": 5}, seed=0),
+                "clusterer": full.build("clusterer", "scipy"),
+                "ik": full.build("ik_solver", "pinocchio")}
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+
+
+def test_build_with_component_objects_never_looks_up_their_configured_names():
+    objects = _real_components()
+    # only iloci's built-in teachers: no configured back end is registered here
+    bare = get_plugin_manager(autoload=False)
+    config = {"perceptual_model": {"name": "jax-rnnpb", "epochs": 5},
+              "ik": {"name": "pinocchio", "max_error": 1e-3},
+              "simulator": {"name": "pybullet"}}
+    agent = iloci.build(config, plugin_manager=bare, simulator=None, **objects)
+    assert agent.perceptual_model is objects["perceptual_model"]
+    assert agent.clusterer is objects["clusterer"]
+    assert agent.ik_solver is objects["ik"]
+    assert agent.simulator is None
+    assert isinstance(agent.teacher, OracleTeacher)  # not given: built from the config
+    # the sections of given components are kept as written (saved with the memory)
+    assert agent.config.ik.to_dict() == {"name": "pinocchio", "max_error": 1e-3}
+    assert agent.config.simulator.name == "pybullet"
+    # not even a name that no plugin registers anywhere is looked up
+    agent = iloci.build({"ik": {"name": "my-robot-ik", "gain": 2}, "clusterer": {"name": "x"}},
+                        plugin_manager=bare, **objects)
+    assert agent.ik_solver is objects["ik"] and agent.config.ik.name == "my-robot-ik"
+    # a component that is not given is still looked up, and still must be installed
+    with pytest.raises(MissingBackendError, match="pinocchio"):
+        iloci.build(config, plugin_manager=bare, simulator=None,
+                    perceptual_model=objects["perceptual_model"],
+                    clusterer=objects["clusterer"])
+
+
+def test_build_rejects_objects_that_are_not_components_in_one_error():
+    class HalfIK:
+        joint_names = ("a", "b")
+
+        def solve(self, points, q0=None):
+            return points
+
+    bare = get_plugin_manager(autoload=False)
+    # checked before any name is looked up: the missing default back ends are not the error
+    with pytest.raises(InvalidInputError) as exc:
+        iloci.build(None, plugin_manager=bare, ik=HalfIK(), teacher=OracleTeacher,
+                    clusterer=None)
+    msg = str(exc.value)
+    assert "ik=" in msg and "HalfIK" in msg and "IKSolver" in msg
+    assert "lacks forward, lower, upper (" in msg             # all it lacks, and only that
+    assert "teacher=" in msg and "instance" in msg          # the class, not an instance
+    assert "clusterer=None" in msg and "required" in msg    # only a simulator may be None
+
+
+def test_errors_survive_a_pickle_round_trip():
+    """Errors raised in evaluation worker processes reach the caller as themselves."""
+    import pickle
+
+    errors = [UnknownComponentError("teacher", "orcale", ["oracle"]),
+              MissingBackendError("IK solver", "pinocchio", ["pinocchio"], "pip install x"),
+              ConfigError("bad value", source="c.toml", key="learner.k_cutoff", line=3)]
+    errors[0].args = ("c.toml: [teacher] name: " + errors[0].args[0],)  # as load_config does
+    for exc in errors:
+        again = pickle.loads(pickle.dumps(exc))
+        assert type(again) is type(exc) and str(again) == str(exc)
+        assert vars(again) == vars(exc)

@@ -129,14 +129,16 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     details : bool
         Keep PB points and regenerated shapes for the figures.
     plugin_manager : pluggy.PluginManager, optional
-        Its observers see this fold's learning events.
+        Resolves the config's component names; its observers see this
+        fold's learning events. Defaults to
+        :func:`~iloci.plugins.get_plugin_manager`.
     """
     from iloci.agent import learn_and_recognize
-    from iloci.plugins import get_plugin_manager
+    from iloci.plugins import get_plugin_manager, get_registry
 
-    config = load_config(config)
-    t0 = time.perf_counter()
     pm = plugin_manager or get_plugin_manager()
+    config = load_config(config, registry=get_registry(pm))
+    t0 = time.perf_counter()
     observer = _ProgressObserver(fold, len(learn), send) if send else None
     if observer is not None:
         pm.register(observer)
@@ -214,11 +216,91 @@ def _worker_init() -> None:
     threading.Thread(target=watch, daemon=True, name="iloci-orphan-watch").start()
 
 
+class _ResolvedComponents:
+    """Plugin registering components another plugin manager resolved.
+
+    A worker process cannot receive the caller's plugin manager (plugin
+    objects and modules do not pickle), only the :class:`ComponentSpec` s
+    its registry resolved the config's names to. Registered alone on a
+    worker's plugin manager, this plugin makes that manager resolve the
+    same names to the same factories and schemas, and nothing else.
+    """
+
+    def __init__(self, specs: Sequence[Any]) -> None:
+        self.specs = list(specs)
+        self.__name__ = "iloci.evaluation.resolved"  # its name on the plugin manager
+
+    def _add(self, registry: Any) -> None:
+        for s in self.specs:
+            if s.kind == registry.kind:
+                registry.add(s.name, s.factory, params=s.params, requires=s.requires,
+                             install=s.install, summary=s.summary)
+
+    @hookimpl
+    def iloci_register_perceptual_models(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_clusterers(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_teachers(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_ik_solvers(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_simulators(self, registry) -> None:
+        self._add(registry)
+
+
+def _resolved_specs(config: Config, pm: Any) -> list[Any]:
+    """The specs ``pm`` resolves the config's components to, checked to pickle.
+
+    Raises InvalidInputError naming each component whose spec cannot be
+    sent to a worker process (e.g. a lambda or a class defined in a
+    function as its factory or schema).
+    """
+    import pickle
+
+    from iloci.config import COMPONENT_SECTIONS
+    from iloci.plugins import get_registry
+    from iloci.registry import LABELS
+    registry = get_registry(pm)
+    specs, problems = [], []
+    for sec, kind in COMPONENT_SECTIONS.items():
+        name = getattr(config, sec).name
+        if name == "none":
+            continue
+        spec = registry.get(kind, name)
+        try:
+            pickle.dumps(spec)
+        except (pickle.PicklingError, AttributeError, TypeError) as exc:  # e.g. local objects
+            problems.append(f"{LABELS[kind]} {name!r} (plugin {spec.plugin!r}): "
+                            f"{type(exc).__name__}: {exc}")
+        specs.append(spec)
+    if problems:
+        raise InvalidInputError(
+            "jobs > 1 runs each fold in a worker process, which builds the components "
+            "the given plugin_manager resolved from their pickled registry entries, and "
+            "these do not pickle: " + "; ".join(problems) + ". Register the factory as a "
+            "'module:attribute' string (or a module-level callable) and the params "
+            "schema as a module-level dataclass, or evaluate with jobs=1.")
+    return specs
+
+
 def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
                         test_idx: list[int], shapes: list[str], queue: Any,
-                        baseline: bool) -> dict:
+                        baseline: bool, specs: Sequence[Any] | None = None) -> dict:
     from iloci.data import load_lasa
+    from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
     demos = load_lasa(shapes or None)
+    # specs: what the caller's plugin manager resolved; None: the default manager's
+    pm = None if specs is None else get_plugin_manager(
+        autoload=False, block=DEFAULT_PLUGINS, plugins=[_ResolvedComponents(specs)])
 
     def send(msg: dict) -> None:
         if queue is not None:
@@ -227,7 +309,8 @@ def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
     # a fold's clock starts when a worker takes it, not when it is queued
     send({"kind": "fold_start", "fold": fold, "total": len(learn_idx)})
     res = run_fold(config_dict, fold, [demos[i] for i in learn_idx],
-                   [demos[i] for i in test_idx], send=send, baseline=baseline)
+                   [demos[i] for i in test_idx], send=send, baseline=baseline,
+                   plugin_manager=pm)
     return res.to_dict()
 
 
@@ -305,20 +388,43 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     baseline : bool
         Run the DTW 1-NN baseline too.
     plugin_manager : pluggy.PluginManager, optional
-        Receives ``iloci_on_fold_finished`` (and, with ``jobs == 1``, the
-        learning events); worker processes build their own.
+        Resolves every component name of the config (a plugin registered
+        only on this manager can be evaluated) and receives
+        ``iloci_on_fold_finished``; with ``jobs == 1`` also the learning
+        events. Defaults to :func:`~iloci.plugins.get_plugin_manager`.
+
+    Notes
+    -----
+    With ``jobs > 1`` the folds run in spawned worker processes, which
+    cannot receive a plugin manager (its plugin objects do not pickle).
+    Without ``plugin_manager``, each worker builds the default one from the
+    installed plugins, as the parent does. With one, the parent resolves
+    the config's component names through it and sends each worker how to
+    build those components (their registry entries: factory, schema,
+    requirements); a worker's plugin manager holds those and nothing else,
+    so the learning events in a worker reach no observer. A component
+    whose factory or schema cannot be pickled (a lambda, a class defined
+    in a function) cannot be sent: that is an :class:`InvalidInputError`
+    before any fold runs, rather than a silent serial run.
 
     Raises
     ------
+    InvalidInputError
+        Bad ``jobs`` or fold, or (``jobs > 1``) a component resolved
+        through ``plugin_manager`` that cannot be sent to a worker.
     KeyboardInterrupt
         Re-raised after the workers are stopped.
     """
     from iloci.data import load_lasa
+    from iloci.plugins import get_plugin_manager, get_registry
 
-    config = load_config(config)
+    pm = plugin_manager or get_plugin_manager()
+    config = load_config(config, registry=get_registry(pm))
     jobs = int(jobs or config.evaluation.jobs)
     if jobs < 1:
         raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
+    # resolved (and checked to pickle) before any data is loaded or fold run
+    specs = _resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
     plan = fold_plan(demos, config)
@@ -326,8 +432,6 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     for k in wanted:
         if not 0 <= k < len(plan):
             raise InvalidInputError(f"fold {k} does not exist; folds are 0..{len(plan) - 1}.")
-    from iloci.plugins import get_plugin_manager
-    pm = plugin_manager or get_plugin_manager()
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
     results: list[dict] = []
@@ -354,7 +458,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             for k in wanted:
                 learn_idx, test_idx = plan[k]
                 futures[pool.submit(_run_fold_in_worker, cfg_dict, k, learn_idx, test_idx,
-                                    shapes, queue, baseline)] = k
+                                    shapes, queue, baseline, specs)] = k
                 emit({"kind": "fold_queued", "fold": k, "total": len(learn_idx)})
             pending = set(futures)
             while pending:
