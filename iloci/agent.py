@@ -278,12 +278,7 @@ class Agent:
 
     def respond(self, concept: str):
         """Perform ``concept``: its entry of lowest generation error, as a Response."""
-        idx = self.memory.indices_of(concept)
-        if not idx:
-            raise InvalidInputError(f"the memory holds no concept {concept!r}; known: "
-                                    f"{', '.join(self.memory.concepts()) or '(none)'}.")
-        best = min(idx, key=lambda i: self.memory.entries[i].generation_error)
-        return self.learner.respond(best)
+        return self.learner.respond(self.memory.performer_of(concept))
 
     # -- persistence --------------------------------------------------------------------
     def save(self, path: str | os.PathLike[str]) -> Path:

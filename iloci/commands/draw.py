@@ -175,11 +175,7 @@ class Performer:
         """Perform ``concept``: its entry of lowest generation error (as :meth:`Agent.respond`)."""
         from iloci.concepts.learner import Learner
 
-        idx = self.memory.indices_of(concept)
-        if not idx:
-            raise InvalidInputError(f"the memory holds no concept {concept!r}; known: "
-                                    f"{', '.join(self.memory.concepts()) or '(none)'}.")
-        best = min(idx, key=lambda i: self.memory.entries[i].generation_error)
+        best = self.memory.performer_of(concept)
         limits = None
         if hasattr(self.ik_solver, "lower"):
             limits = (np.asarray(self.ik_solver.lower), np.asarray(self.ik_solver.upper))

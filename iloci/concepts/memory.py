@@ -181,6 +181,20 @@ class Memory:
         """Indices of the entries of ``concept``."""
         return [i for i, e in enumerate(self.entries) if e.concept == concept]
 
+    def performer_of(self, concept: str) -> int:
+        """Index of the entry that performs ``concept``: its lowest generation error.
+
+        Raises
+        ------
+        InvalidInputError
+            The memory holds no such concept.
+        """
+        idx = self.indices_of(concept)
+        if not idx:
+            raise InvalidInputError(f"the memory holds no concept {concept!r}; known: "
+                                    f"{', '.join(self.concepts()) or '(none)'}.")
+        return min(idx, key=lambda i: self.entries[i].generation_error)
+
     def num_samples_of(self, concept: str) -> int:
         """Total numSamples of the entries of ``concept``."""
         return sum(e.num_samples for e in self.entries if e.concept == concept)
