@@ -52,7 +52,11 @@ import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
 #: Training epochs of the offline accuracy check (other settings: defaults).
-OFFLINE_EPOCHS = 3000
+#: Chosen on a validation split, the folds of seed 1 (the reported folds are
+#: seed 0's), on 2026-11-23: mean CCR over both back ends 89.8 % at 3000
+#: epochs (jax 88.1, torch 91.5), 91.2 % at 5000 (jax 92.0, torch 90.4);
+#: jax 92.2 % at 8000.
+OFFLINE_EPOCHS = 5000
 #: Recognition by gradient descent on the PB (Tani's RNNPB), for comparison with
 #: the default Levenberg-Marquardt.
 ADAM_RECOGNITION = {"recognition_method": "adam", "recognition_steps": 200}
