@@ -16,7 +16,8 @@ Writes ``benchmarks/results/rnnpb.json``::
     recognize_146_s_adam the same with recognition_method = "adam" (200 steps,
                          gradient descent on the PB, as in Tani's RNNPB)
     offline_ccr          per back end: correct classification rate per fold of
-                         DESIGN.md section 6 and mean +- std; each test demo is
+                         DESIGN.md section 6 (mean over 3 network seeds; each
+                         run in ``runs``) and mean +- std over folds; each test demo is
                          classified by its nearest PB_rec (PB_rec = recognize() of
                          the learning sequences); also the rate of the
                          lowest-prediction-error classifier (the stored PB that
@@ -33,7 +34,7 @@ used. Sequences come from the real pipeline (LASA -> preprocess -> Pinocchio
 IK -> SensorimotorEncoder); the 584-sequence rows repeat the data 4 times.
 
 Run: ``python benchmarks/rnnpb.py`` (needs iloci-torch, iloci-jax and
-iloci-pinocchio; about 5 minutes on 2 cores). ``--quick`` skips the grid's
+iloci-pinocchio; about 6 minutes on 2 cores). ``--quick`` skips the grid's
 largest shapes and runs 2 folds, for a smoke test.
 """
 
@@ -57,6 +58,9 @@ RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
 #: epochs (jax 88.1, torch 91.5), 91.2 % at 5000 (jax 92.0, torch 90.4);
 #: jax 92.2 % at 8000.
 OFFLINE_EPOCHS = 5000
+#: Network seeds per fold of the offline check (the comparison rows below
+#: use the first only).
+OFFLINE_SEEDS = (0, 1, 2)
 #: Recognition by gradient descent on the PB (Tani's RNNPB), for comparison with
 #: the default Levenberg-Marquardt.
 ADAM_RECOGNITION = {"recognition_method": "adam", "recognition_steps": 200}
@@ -185,35 +189,48 @@ def time_recognize(backend: str, learn, test, reps: int = 3, **params) -> tuple[
     return statistics.median(runs), first
 
 
-def offline_ccr(backend: str, demos, motions, folds, **params) -> dict:
-    """Train on each fold's learning set, classify its test set by nearest PB_rec."""
+def offline_ccr(backend: str, demos, motions, folds, seeds=(0,), **params) -> dict:
+    """Train on each fold's learning set, classify its test set by nearest PB_rec.
+
+    Each fold is run once per network seed (``fold + 1000 * seed``) and its
+    rate is the mean over those runs: a training is chaotic, so a change in
+    the last bit of the arithmetic moves one run's rate by several points.
+    """
     concepts = np.array([d.concept for d in demos])
-    per_fold, by_error, seconds, losses = [], [], [], []
+    runs = []                                   # one dict per (fold, seed)
     for k, (learn, test) in enumerate(folds):
         seqs = encoded(motions, learn)
         L = [seqs[i] for i in learn]
         T = [seqs[i] for i in test]
-        t0 = time.perf_counter()
-        m = model_class(backend)(seed=k, **params)
-        pbs = m.train(L)
-        pb_rec = m.recognize(L)
-        pb_obs = m.recognize(T)
-        seconds.append(time.perf_counter() - t0)
-        nearest = np.linalg.norm(pb_obs[:, None] - pb_rec[None], axis=-1).argmin(axis=1)
-        per_fold.append(float(np.mean(concepts[learn][nearest] == concepts[test])))
-        # the stored PB under which the network predicts the test sequence best
-        errors = np.stack([m.prediction_error(T, np.repeat(pb[None], len(T), axis=0))
-                           for pb in pbs], axis=1)
-        by_error.append(float(np.mean(concepts[learn][errors.argmin(axis=1)] == concepts[test])))
-        losses.append(m.train_loss_)
-        print(f"  {backend} fold {k}: ccr {per_fold[-1]:.3f} (lowest error {by_error[-1]:.3f}), "
-              f"loss {losses[-1]:.4f}, {seconds[-1]:.1f} s", flush=True)
+        for s in seeds:
+            t0 = time.perf_counter()
+            m = model_class(backend)(seed=k + 1000 * s, **params)
+            pbs = m.train(L)
+            pb_rec = m.recognize(L)
+            pb_obs = m.recognize(T)
+            seconds = time.perf_counter() - t0
+            nearest = np.linalg.norm(pb_obs[:, None] - pb_rec[None], axis=-1).argmin(axis=1)
+            ccr = float(np.mean(concepts[learn][nearest] == concepts[test]))
+            # the stored PB under which the network predicts the test sequence best
+            errors = np.stack([m.prediction_error(T, np.repeat(pb[None], len(T), axis=0))
+                               for pb in pbs], axis=1)
+            by_error = float(np.mean(concepts[learn][errors.argmin(axis=1)] == concepts[test]))
+            runs.append({"fold": k, "seed": int(s), "ccr": ccr, "by_lowest_error": by_error,
+                         "train_loss": m.train_loss_, "seconds": seconds})
+            print(f"  {backend} fold {k} seed {s}: ccr {ccr:.3f} (lowest error {by_error:.3f}), "
+                  f"loss {m.train_loss_:.4f}, {seconds:.1f} s", flush=True)
+
+    def per_fold(key):
+        return [float(np.mean([r[key] for r in runs if r["fold"] == k]))
+                for k in range(len(folds))]
+
+    folds_ccr, folds_err = per_fold("ccr"), per_fold("by_lowest_error")
     return {
-        "folds": per_fold, "mean": float(np.mean(per_fold)), "std": float(np.std(per_fold)),
-        "by_lowest_error": {"folds": by_error, "mean": float(np.mean(by_error)),
-                            "std": float(np.std(by_error))},
-        "train_loss": losses, "seconds": seconds, "learning_set_sizes":
-            [int(len(f[0])) for f in folds], "params": params,
+        "folds": folds_ccr, "mean": float(np.mean(folds_ccr)), "std": float(np.std(folds_ccr)),
+        "seeds": list(seeds), "runs": runs,
+        "by_lowest_error": {"folds": folds_err, "mean": float(np.mean(folds_err)),
+                            "std": float(np.std(folds_err))},
+        "learning_set_sizes": [int(len(f[0])) for f in folds], "params": params,
     }
 
 
@@ -276,7 +293,8 @@ def main(argv=None) -> dict:
     run_folds = folds[:2] if args.quick else folds
     # a fresh network fitting all ~36 learning sequences at once needs more
     # epochs than the learner's incremental consolidations (default 1500)
-    ccr = {b: offline_ccr(b, demos, motions, run_folds, epochs=OFFLINE_EPOCHS)
+    ccr = {b: offline_ccr(b, demos, motions, run_folds, seeds=OFFLINE_SEEDS,
+                          epochs=OFFLINE_EPOCHS)
            for b in backends}
     ccr["jax_teacher_forced"] = offline_ccr("jax", demos, motions, run_folds, closed_loop=0.0,
                                             epochs=OFFLINE_EPOCHS)
