@@ -121,13 +121,11 @@ class Agent:
         Built on each access, so it always sees the current ``teacher``,
         ``simulator`` and ``memory`` attributes.
         """
-        from iloci.concepts.learner import Learner
-        limits = None
-        if self.ik_solver is not None and hasattr(self.ik_solver, "lower"):
-            limits = (np.asarray(self.ik_solver.lower), np.asarray(self.ik_solver.upper))
+        from iloci.concepts.learner import Learner, ik_joint_limits
         return Learner(self.memory, self.perceptual_model, self.clusterer, self.teacher,
                        self.config.learner, simulator=self.simulator,
-                       hook=self.plugin_manager.hook, joint_limits=limits)
+                       hook=self.plugin_manager.hook,
+                       joint_limits=ik_joint_limits(self.ik_solver))
 
     def motion(self, demo: Demonstration):
         """The demonstration as the robot performs it (preprocessing + IK).

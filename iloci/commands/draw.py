@@ -173,16 +173,12 @@ class Performer:
 
     def respond(self, concept: str):
         """Perform ``concept``: its entry of lowest generation error (as :meth:`Agent.respond`)."""
-        from iloci.concepts.learner import Learner
+        from iloci.concepts.learner import Learner, ik_joint_limits
 
-        best = self.memory.performer_of(concept)
-        limits = None
-        if hasattr(self.ik_solver, "lower"):
-            limits = (np.asarray(self.ik_solver.lower), np.asarray(self.ik_solver.upper))
         # responding uses neither the clusterer nor the teacher
         learner = Learner(self.memory, self.perceptual_model, None, None,  # type: ignore[arg-type]
-                          joint_limits=limits)
-        return learner.respond(best)
+                          joint_limits=ik_joint_limits(self.ik_solver))
+        return learner.respond(self.memory.performer_of(concept))
 
 
 class PerformerConfig:

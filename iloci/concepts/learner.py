@@ -43,7 +43,7 @@ from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Respons
                               Teacher)
 from iloci.teachers import check_feedback
 
-__all__ = ["Learner", "LearnOutcome", "Recognition", "confidence"]
+__all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "ik_joint_limits"]
 
 #: Actions the learner takes on a feedback (InteractionEvent.action).
 ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept")
@@ -123,6 +123,16 @@ class Recognition:
     source: str
     sources: tuple[str, ...]
     pb_obs: np.ndarray = field(repr=False)
+
+
+def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(lower, upper)`` joint limits (rad, shape (J,) each) of an IK solver, if it has them.
+
+    The learner clips regenerated joint paths to them before execution.
+    """
+    if ik_solver is None or not hasattr(ik_solver, "lower"):
+        return None
+    return np.asarray(ik_solver.lower), np.asarray(ik_solver.upper)
 
 
 def confidence(distances: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
