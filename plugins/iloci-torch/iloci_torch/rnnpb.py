@@ -105,8 +105,8 @@ class _Net:
         if ws is None:
             e = lambda *shape: torch.empty(*shape, dtype=self.dtype)  # noqa: E731
             L, R, S, H = steps, rows, self.s, self.h
-            ws = {"H": e(L, R, H), "O": e(L, R, S),
-                  "G": e(L, R, S), "DZ": e(L, R, H), "dtO": e(L, R, S), "dtH": e(L, R, H), "IN": e(L, R, S),
+            ws = {"H": e(L, R, H), "O": e(L, R, S), "G": e(L, R, S), "DZ": e(L, R, H),
+                  "dtO": e(L, R, S), "dtH": e(L, R, H), "IN": e(L, R, S),
                   "diff": e(L, R, self.d), "pre": e(R, H),
                   "w_r": e(S, H), "w_oT": e(S, H),
                   "w_sT": e(H, S), "sdz": e(R, H), "grad": torch.empty_like(self.flat)}
@@ -172,32 +172,31 @@ class _Net:
                                sw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Closed-loop residuals ``r`` (L, R, D) and ``J = dr/du`` (L, P, R, D).
 
-        Forward mode: the derivatives of the state along each of the ``P``
-        coordinates of ``u`` are carried through the steps next to the state
-        itself, as ``P`` stacked copies of the batch (one matrix product for
-        all of them). Plain ``tanh`` here: this pass is not the hot loop of
-        training, and the algebra stays that of the definition.
+        The states come from :meth:`forward`; the derivatives along each of
+        the ``P`` coordinates of ``u`` are then carried through the steps
+        (forward mode), as ``P`` stacked copies of the batch, so each step is
+        one matrix product per layer for all of them.
         """
         v, d, S = self.views, self.d, self.s
         R, P = u.shape
         L = X.shape[0] - 1
         th = torch.tanh(u)
-        w_s, w_p, w_o, b_o = v["w_in"][:S], v["w_in"][S:], v["w_out"], v["b_out"]
-        pre = torch.addmm(v["b_hidden"], th * bound, w_p)                     # (R, H)
+        ws = self.workspace(L, R)
+        O = self.forward(th * bound, X, 1.0, ws)
+        Hs, Os = ws["H_t"], ws["O_t"]
+        w_s, w_p, w_o = v["w_in"][:S], v["w_in"][S:], v["w_out"]
+        swd = sw.unsqueeze(2)                                                 # (L, R, 1)
+        r = (O[:, :, :d] - X[1:]).mul_(swd)
         # d pre / d u_k = bound (1 - tanh(u_k)^2) w_p[k]: (P, R, H), the same every step
         dpre = (bound * (1.0 - th * th)).T.unsqueeze(2) * w_p.unsqueeze(1)
-        s = X.new_zeros(R, S)
-        s[:, :d] = X[0]
-        ds = X.new_zeros(P, R, S)
-        r, J = X.new_empty(L, R, d), X.new_empty(L, P, R, d)
+        J = X.new_empty(L, P, R, d)
+        ds = None                                   # d s_0 / du = 0: s_0 is the data
         for t in range(L):
-            h = torch.addmm(pre, s, w_s).tanh_()
-            dh = torch.matmul(ds, w_s).add_(dpre).mul_(1.0 - h * h)
-            o = torch.addmm(b_o, h, w_o).tanh_()
-            do = torch.matmul(dh, w_o).mul_(1.0 - o * o)
-            torch.sub(o[:, :d], X[t + 1], out=r[t]).mul_(sw[t].unsqueeze(1))
-            torch.mul(do[:, :, :d], sw[t].unsqueeze(1), out=J[t])
-            s, ds = o, do                    # closed loop: s_{t+1} = o_t
+            dz = dpre if ds is None else torch.matmul(ds, w_s).add_(dpre)
+            dh = dz * (1.0 - Hs[t] * Hs[t])
+            do = torch.matmul(dh, w_o).mul_(1.0 - Os[t] * Os[t])
+            torch.mul(do[:, :, :d], swd[t], out=J[t])
+            ds = do                                 # closed loop: s_{t+1} = o_t
         return r, J
 
     def loss_and_grads(self, pb: torch.Tensor, X: torch.Tensor, mask_w: torch.Tensor,
