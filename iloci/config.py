@@ -208,6 +208,10 @@ class Config:
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
     #: Where the config came from (a path or ``"<dict>"``).
     source: str = "<defaults>"
+    # What load_config resolved the names with, so replace() re-validates the
+    # same way (a custom registry, objects the caller supplies); not data.
+    _registry: Any = field(default=None, compare=False, repr=False)
+    _supplied: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     @property
     def seed(self) -> int:
@@ -225,8 +229,10 @@ class Config:
     def replace(self, **changes: Any) -> Config:
         """A copy with some values changed, e.g. ``replace(teacher={"name": "noisy"})``.
 
-        Values are validated like a config file's; a section given as a
-        mapping updates that section.
+        Values are validated like a config file's, with the registry and
+        the supplied sections this config was loaded with (see
+        :func:`load_config`); a section given as a mapping updates that
+        section.
         """
         data = self.to_dict()
         for sec, value in changes.items():
@@ -238,7 +244,7 @@ class Config:
                     data[sec].update(value)
             else:
                 data[sec] = value
-        return load_config(data)
+        return load_config(data, registry=self._registry, supplied=self._supplied)
 
 
 _LINE_RE = re.compile(r"line (\d+)")
@@ -370,7 +376,7 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
                                          source=origin)
     if missing is not None:
         raise missing
-    return Config(**kwargs)
+    return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))
 
 
 def _toml_value(v: Any) -> str:

@@ -177,8 +177,28 @@ def test_config_show_round_trips(tmp_path):
 def test_replace_validates():
     reg = _full(get_registry(get_plugin_manager(autoload=False)))
     cfg = load_config(None, registry=reg)
-    with pytest.raises((ConfigError, UnknownComponentError, MissingBackendError)):
+    with pytest.raises(ConfigError, match="num_threshold"):
         cfg.replace(learner={"num_threshold": 0})
+
+
+def test_replace_resolves_through_the_config_own_registry():
+    # a teacher registered only in this registry, not by any installed plugin
+    reg = _full(get_registry(get_plugin_manager(autoload=False)))
+    reg.add("teacher", "lab-teacher", "iloci.teachers:OracleTeacher", plugin="lab")
+    cfg = load_config({"teacher": {"name": "lab-teacher"}}, registry=reg)
+    again = cfg.replace(learner={"k_cutoff": 0.5})
+    assert again.teacher.name == "lab-teacher" and again.learner.k_cutoff == 0.5
+    assert again == load_config(again.to_dict(), registry=reg)
+    with pytest.raises(UnknownComponentError, match="lab-teachr"):
+        cfg.replace(teacher={"name": "lab-teachr"})
+
+
+def test_replace_keeps_supplied_sections_unresolved():
+    reg = _full(get_registry(get_plugin_manager(autoload=False)))
+    cfg = load_config({"ik": {"name": "robot-stack-ik", "tol": 1e-4}}, registry=reg,
+                      supplied=["ik"])
+    again = cfg.replace(learner={"k_cutoff": 0.5})
+    assert again.ik.name == "robot-stack-ik" and again.learner.k_cutoff == 0.5
 
 
 def test_cli_unknown_component_exit_2(tmp_path, cli):
