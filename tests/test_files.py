@@ -148,3 +148,35 @@ def test_write_json_atomic_delegates(tmp_path):
     back = json.loads(text)
     assert back["a"] == [1, 2.5] and math.isnan(back["b"])
     assert [p.name for p in path.parent.iterdir()] == ["r.json"]
+
+
+@posix_only
+@pytest.mark.parametrize("overwrite", [True, False])
+def test_the_rename_is_made_durable(tmp_path, monkeypatch, overwrite):
+    # After the commit the directory itself is fsync'ed: without it a power cut
+    # can lose the new name although the file's data were synced.
+    synced = []
+    real_fsync = os.fsync
+
+    def spy(fd):
+        st = os.fstat(fd)
+        synced.append(("dir" if stat.S_ISDIR(st.st_mode) else "file", st.st_ino))
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", spy)
+    path = write_atomic(tmp_path / "m.npz", lambda fh: fh.write(b"x"), overwrite=overwrite)
+    assert synced[0][0] == "file" and synced[-1] == ("dir", tmp_path.stat().st_ino)
+    assert path.read_bytes() == b"x"
+
+
+@posix_only
+def test_a_directory_that_cannot_be_synced_is_no_error(tmp_path, monkeypatch):
+    real_fsync = os.fsync
+
+    def no_dir_sync(fd):
+        if stat.S_ISDIR(os.fstat(fd).st_mode):
+            raise OSError(22, "Invalid argument")   # e.g. some network file systems
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", no_dir_sync)
+    assert write_atomic(tmp_path / "a.bin", lambda fh: fh.write(b"y")).read_bytes() == b"y"

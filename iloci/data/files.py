@@ -134,7 +134,8 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
     ``.NAME.<random>.tmp`` in the target's directory (the same file system,
     so the rename below is atomic). The file is flushed and fsync'ed, then
     renamed over the target with :func:`os.replace`, which is the commit
-    point: if the writer raises (any exception, including
+    point, and the directory is fsync'ed so the rename survives a power
+    cut (best effort, where the platform allows it): if the writer raises (any exception, including
     :class:`KeyboardInterrupt`) or the rename fails, the temporary file is
     removed and the old target is left untouched.
 
@@ -198,6 +199,7 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
             os.fsync(fh.fileno())
         if not overwrite:
             _commit_new(tmp, target)
+            _fsync_directory(directory)
             return target
         try:
             old_mode = stat.S_IMODE(os.stat(target).st_mode)
@@ -213,7 +215,26 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
         except OSError:
             pass
         raise
+    _fsync_directory(directory)
     return target
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Make a rename in ``directory`` durable: after a power cut, the new name is there.
+
+    Best effort: where a directory cannot be opened or synced (Windows, some
+    network file systems) the rename is still atomic, only maybe not yet on disk.
+    """
+    try:
+        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def _commit_new(tmp: Path, target: Path) -> None:
