@@ -24,7 +24,10 @@ Writes ``benchmarks/results/rnnpb.json``::
                          predicts the test sequence best). ``jax_teacher_forced``
                          repeats the JAX folds with closed_loop = 0 to show why the
                          default trains closed loop; ``jax_adam_recognition``
-                         recognizes with Adam instead of Levenberg-Marquardt.
+                         recognizes with Adam instead of Levenberg-Marquardt;
+                         ``torch_float64`` and ``jax_float64`` repeat both back
+                         ends' folds and seeds in float64.
+    naive_step_ms_by_threads   the naive reference at each torch thread count
     targets              the issue's targets and whether this run met them
 
 The naive reference is how a user would first write the model: ``nn.Linear``
@@ -34,7 +37,7 @@ used. Sequences come from the real pipeline (LASA -> preprocess -> Pinocchio
 IK -> SensorimotorEncoder); the 584-sequence rows repeat the data 4 times.
 
 Run: ``python benchmarks/rnnpb.py`` (needs iloci-torch, iloci-jax and
-iloci-pinocchio; about 6 minutes on 2 cores). ``--quick`` skips the grid's
+iloci-pinocchio; about 12 minutes on 2 cores). ``--quick`` skips the grid's
 largest shapes and runs 2 folds, for a smoke test.
 """
 
@@ -132,8 +135,11 @@ def naive_step_fn(seqs, seed: int = 0):
     return step
 
 
-def time_naive(seqs, reps: int, calls: int) -> float:
-    """Median ms per naive step, at 1 thread and at torch's default, the faster."""
+def time_naive(seqs, reps: int, calls: int, per_threads: dict | None = None) -> float:
+    """Median ms per naive step, at 1 thread and at torch's default, the faster.
+
+    ``per_threads``, if given, receives the median of each thread count.
+    """
     import torch
 
     default = torch.get_num_threads()
@@ -148,6 +154,8 @@ def time_naive(seqs, reps: int, calls: int) -> float:
             for _ in range(calls):
                 step()
             runs.append((time.perf_counter() - t0) / calls * 1e3)
+        if per_threads is not None:
+            per_threads[str(threads)] = statistics.median(runs)
         best = min(best, statistics.median(runs))
     torch.set_num_threads(default)
     return best
@@ -262,7 +270,8 @@ def main(argv=None) -> dict:
 
     print("step time at 36 x 50 ...", flush=True)
     step_ms = {b: time_train(b, paper, reps=7, epochs=200) for b in backends}
-    step_ms["naive"] = time_naive(paper, reps=5, calls=10)
+    naive_by_threads: dict[str, float] = {}
+    step_ms["naive"] = time_naive(paper, reps=5, calls=10, per_threads=naive_by_threads)
     print("  ", step_ms, flush=True)
 
     print("recognition of 146 sequences ...", flush=True)
@@ -300,6 +309,12 @@ def main(argv=None) -> dict:
                                             epochs=OFFLINE_EPOCHS)
     ccr["jax_adam_recognition"] = offline_ccr("jax", demos, motions, run_folds,
                                               epochs=OFFLINE_EPOCHS, **ADAM_RECOGNITION)
+    # the same folds and seeds in float64, where both back ends compute the
+    # same function (parity 1e-12): how much of the float32 difference between
+    # them is run-to-run spread
+    for b in backends:
+        ccr[f"{b}_float64"] = offline_ccr(b, demos, motions, run_folds, seeds=OFFLINE_SEEDS,
+                                          epochs=OFFLINE_EPOCHS, dtype="float64")
 
     fastest = min(backends, key=lambda b: step_ms[b])
     speedup = {b: step_ms["naive"] / step_ms[b] for b in backends}
@@ -311,6 +326,7 @@ def main(argv=None) -> dict:
         "settings": RNNPBParams().__dict__,
         "offline_epochs": OFFLINE_EPOCHS,
         "step_ms": step_ms,
+        "naive_step_ms_by_threads": naive_by_threads,
         "speedup_vs_naive": speedup,
         "recognize_146_s": rec,
         "recognize_146_first_call_s": rec_first,
