@@ -84,3 +84,69 @@ def test_float32_and_float64_train_alike():
     p64 = TorchRNNPB(seed=0, epochs=50, dtype="float64").train(seqs)
     assert p32.dtype == np.float64
     np.testing.assert_allclose(p32, p64, atol=1e-3)
+
+
+# -- the native float32 training kernel (_native.c) ----------------------------------
+
+from iloci_torch.rnnpb import native_kernel_available  # noqa: E402
+
+needs_native = pytest.mark.skipif(not native_kernel_available(),
+                                  reason="native kernel not built or no AVX-512 here")
+
+
+def _train_both(seqs, epochs, **params):
+    """The same training with the native kernel and with torch operations."""
+    native, ops = TorchRNNPB(seed=4, **params), TorchRNNPB(seed=4, **params)
+    ops.use_native = False
+    return native, native.train(seqs, epochs=epochs), ops, ops.train(seqs, epochs=epochs)
+
+
+def _max_weight_difference(a, b):
+    sa, sb = a.state(), b.state()
+    return max(float(np.abs(sa[k] - sb[k]).max()) for k in ("w_in", "b_hidden", "w_out", "b_out"))
+
+
+@needs_native
+@pytest.mark.parametrize("params", [
+    {},                                                       # paper sizes: 31 -> 32, 60 -> 64
+    {"closed_loop": 0.5, "warmup_epochs": 3, "learning_rate_decay": 0.5},
+    {"hidden": 20, "context": 5, "pb": 2},                   # 11 -> 16, 20 -> 32
+    {"hidden": 100, "context": 40},                          # 7 and 3 registers per row
+], ids=["paper", "teacher-forced-warmup-decay", "small", "wide"])
+def test_native_kernel_trains_like_the_torch_operations(params):
+    # lengths differ (masking), the row count is no multiple of the kernel's row block
+    seqs = synthetic_sequences(7, 6, lengths=(12, 17, 9))
+    native, pbs_native, ops, pbs_ops = _train_both(seqs, 5, **params)
+    # float32, different rounding: 5 epochs stay within a few float32 ulps of the weights
+    assert _max_weight_difference(native, ops) < 1e-5
+    np.testing.assert_allclose(pbs_native, pbs_ops, atol=1e-5)
+    assert native.train_loss_ == pytest.approx(ops.train_loss_, rel=1e-5)
+
+
+@needs_native
+def test_native_kernel_continues_from_the_current_weights():
+    seqs = synthetic_sequences(4, 6)
+    native, _, ops, _ = _train_both(seqs, 3)
+    native.train(seqs, epochs=3)
+    ops.train(seqs, epochs=3)
+    assert _max_weight_difference(native, ops) < 1e-5
+
+
+def test_sizes_beyond_the_native_kernel_use_torch_operations():
+    # 130 hidden units need 9 registers per row, more than the kernel's 8
+    seqs = synthetic_sequences(3, 6)
+    a, pbs_a, b, pbs_b = _train_both(seqs, 2, hidden=130)
+    assert _max_weight_difference(a, b) == 0.0
+    np.testing.assert_array_equal(pbs_a, pbs_b)
+
+
+@needs_native
+def test_native_divergence_leaves_the_model_unchanged():
+    from iloci.errors import IlociError
+    seqs = [s * 1e30 for s in synthetic_sequences(3, 6)]  # overflows float32
+    m = TorchRNNPB(seed=0)
+    before = m.state()
+    with pytest.raises(IlociError, match="diverged"):
+        m.train(seqs, epochs=2)
+    after = m.state()
+    assert all(np.array_equal(before[k], after[k]) for k in ("w_in", "b_hidden", "w_out"))
