@@ -150,3 +150,21 @@ def test_native_divergence_leaves_the_model_unchanged():
         m.train(seqs, epochs=2)
     after = m.state()
     assert all(np.array_equal(before[k], after[k]) for k in ("w_in", "b_hidden", "w_out"))
+
+
+def test_native_kernel_is_built_and_used_where_it_can_be():
+    # The extension is optional, so a failed build installs silently: catch
+    # that here, on machines that have a C compiler (and AVX-512 to run it).
+    import importlib.util
+    import platform
+    import shutil
+    if platform.machine() != "x86_64" or not (shutil.which("cc") or shutil.which("gcc")):
+        pytest.skip("no x86-64 C compiler: the native kernel is not expected")
+    assert importlib.util.find_spec("iloci_torch._native") is not None, \
+        "iloci_torch._native was not compiled at install time"
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            flags = fh.read()
+    except OSError:
+        pytest.skip("no /proc/cpuinfo to tell whether the CPU has AVX-512")
+    assert native_kernel_available() == (" avx512f" in flags and " fma" in flags)
