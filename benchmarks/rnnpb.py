@@ -28,6 +28,9 @@ Writes ``benchmarks/results/rnnpb.json``::
                          ``torch_float64`` and ``jax_float64`` repeat both back
                          ends' folds and seeds in float64.
     naive_step_ms_by_threads   the naive reference at each torch thread count
+    torch_native_kernel  whether torch-rnnpb trained float32 in its native kernel
+                         (``_native.c``; all torch rows above then use it)
+    torch_ops_step_ms    torch-rnnpb's paper-size step with torch operations instead
     targets              the issue's targets and whether this run met them
 
 The naive reference is how a user would first write the model: ``nn.Linear``
@@ -171,9 +174,15 @@ def model_class(backend: str):
     return JaxRNNPB
 
 
-def time_train(backend: str, seqs, reps: int, epochs: int) -> float:
-    """Median ms per training step of ``train(seqs, epochs=epochs)``."""
+def time_train(backend: str, seqs, reps: int, epochs: int, native: bool = True) -> float:
+    """Median ms per training step of ``train(seqs, epochs=epochs)``.
+
+    ``native=False`` times torch-rnnpb with torch operations instead of its
+    native kernel.
+    """
     m = model_class(backend)(seed=0)
+    if backend == "torch":
+        m.use_native = native
     m.train(seqs, epochs=2)          # compile (JAX) and allocate (torch)
     runs = []
     for _ in range(reps):
@@ -270,6 +279,8 @@ def main(argv=None) -> dict:
 
     print("step time at 36 x 50 ...", flush=True)
     step_ms = {b: time_train(b, paper, reps=7, epochs=200) for b in backends}
+    from iloci_torch.rnnpb import native_kernel_available
+    torch_ops_ms = time_train("torch", paper, reps=7, epochs=200, native=False)
     naive_by_threads: dict[str, float] = {}
     step_ms["naive"] = time_naive(paper, reps=5, calls=10, per_threads=naive_by_threads)
     print("  ", step_ms, flush=True)
@@ -327,6 +338,8 @@ def main(argv=None) -> dict:
         "offline_epochs": OFFLINE_EPOCHS,
         "step_ms": step_ms,
         "naive_step_ms_by_threads": naive_by_threads,
+        "torch_native_kernel": native_kernel_available(),
+        "torch_ops_step_ms": torch_ops_ms,
         "speedup_vs_naive": speedup,
         "recognize_146_s": rec,
         "recognize_146_first_call_s": rec_first,
