@@ -378,6 +378,6 @@ int iloci_rnnpb_train_f32(int epochs, int T, int R, int D, int C, int H, int P,
  * the functions above are called through ctypes. */
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_native",
                                     "torch-rnnpb's native training kernel (see rnnpb.py).",
-                                    -1, NULL};
+                                    -1, NULL, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__native(void) { return PyModule_Create(&module); }
