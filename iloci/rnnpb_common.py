@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from iloci.errors import InvalidInputError
+from iloci.errors import IlociError, InvalidInputError
 from iloci.params import RNNPBParams
 
 __all__ = [
@@ -61,6 +61,7 @@ __all__ = [
     "make_state",
     "read_state",
     "best_starts",
+    "diverged_error",
     "LM_DOWN",
     "LM_UP",
     "LM_MIN",
@@ -435,6 +436,12 @@ LM_DOWN, LM_UP, LM_MIN, LM_MAX, LM_TINY = 0.3, 4.0, 1e-9, 1e9, 1e-12
 #: :func:`pb_to_u`): where ``tanh`` saturates the Jacobian vanishes and a
 #: Gauss-Newton step could throw ``u`` to where ``tanh(u)`` rounds to 1.
 LM_U_MAX = float(np.arctanh(0.999))
+
+def diverged_error() -> IlociError:
+    """The error every back end raises when a training leaves non-finite weights."""
+    return IlociError("training diverged (non-finite weights); lower learning_rate "
+                      "or grad_clip. The model was left unchanged.")
+
 
 def best_starts(errors: np.ndarray, n: int) -> np.ndarray:
     """Indices of the ``n`` lowest errors per row (ties: lower index first).

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
-                                 WEIGHT_NAMES, RNNPBBase)
+                                 WEIGHT_NAMES, RNNPBBase, diverged_error)
 
 __all__ = ["JaxRNNPB"]
 
@@ -309,9 +309,7 @@ class JaxRNNPB(RNNPBBase):
                                   (p.input_size, p.hidden, p.context, p.pb))
             out = np.asarray(u_new, dtype=np.float64), float(loss)
         if not all(np.all(np.isfinite(v)) for v in w.values()):
-            from iloci.errors import IlociError
-            raise IlociError("training diverged (non-finite weights); lower learning_rate "
-                             "or grad_clip. The model was left unchanged.")
+            raise diverged_error()
         self._set_weights(w)
         return out
 

@@ -38,7 +38,7 @@ import torch
 
 from iloci.errors import IlociError
 from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
-                                 WEIGHT_NAMES, RNNPBBase, weight_shapes)
+                                 WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
 
 __all__ = ["TorchRNNPB", "native_kernel_available"]
 
@@ -380,8 +380,7 @@ class TorchRNNPB(RNNPBBase):
                 _adam(ut, gu, mu, vu, denu, t, p.pb_learning_rate * f)
         if not bool(torch.isfinite(net.flat).all()):
             net.flat.copy_(backup)
-            raise IlociError("training diverged (non-finite weights); lower learning_rate "
-                             "or grad_clip. The model was left unchanged.")
+            raise diverged_error()
         self._net64 = net if self._dtype == torch.float64 else None
         return ut.numpy().astype(np.float64), float(loss)
 
@@ -409,8 +408,7 @@ class TorchRNNPB(RNNPBBase):
         if code != 0:  # sizes beyond the kernel's registers, or no AVX-512
             return None
         if not all(np.isfinite(a).all() for a in w.values()):
-            raise IlociError("training diverged (non-finite weights); lower learning_rate "
-                             "or grad_clip. The model was left unchanged.")
+            raise diverged_error()
         for k in WEIGHT_NAMES:
             net.views[k].copy_(torch.from_numpy(w[k]))
         self._net64 = None
