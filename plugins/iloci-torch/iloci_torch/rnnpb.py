@@ -14,7 +14,8 @@ Even so, at paper size (36 sequences x 50 steps) a step issues ~450 torch
 operations of a microsecond or two each, more than their arithmetic. Float32
 training therefore runs, where it can, in ``_native.c``: the same algorithm
 in C with register-blocked AVX-512 loops, every epoch in one call (measured
-on 2026-11-23: 0.41 ms per step against 1.57 ms with torch operations).
+on 2026-11-23 by benchmarks/rnnpb.py: 0.42 ms per step against 1.48 ms with
+torch operations).
 Recognition, scoring, generation and float64 training use torch operations.
 
 Until 2026-11 the layers computed ``tanh(z)`` as ``2 sigmoid(2z) - 1``,
