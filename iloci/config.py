@@ -171,8 +171,21 @@ class EvaluationConfig:
     seed: int = 0
     #: Folds run in parallel processes.
     jobs: int = 1
+    #: ``"folds"`` (the paper's: learn one partition, then recognize the
+    #: rest without feedback) or ``"stream"`` (test-then-learn: every
+    #: demonstration is first recognized and scored, then taught).
+    protocol: str = "folds"
+    #: Concepts left out of each fold's learning set (their learning
+    #: demonstrations join the test set), to measure whether recognition
+    #: says "unknown" for what it was never taught; 0 leaves none out.
+    #: Which ones rotates from fold to fold (seeded).
+    untaught: int = 0
 
     def validate(self) -> None:
+        if self.protocol not in ("folds", "stream"):
+            raise ValueError(f"protocol must be 'folds' or 'stream', got {self.protocol!r}")
+        if self.untaught < 0:
+            raise ValueError(f"untaught must be >= 0, got {self.untaught}")
         if self.folds < 1:
             raise ValueError(f"folds must be >= 1, got {self.folds}")
         if not 0 < self.train_fraction < 1:

@@ -54,7 +54,8 @@ def test_every_output_file_exists_and_parses(run_dir):
     metrics = json.loads((run_dir / "metrics.json").read_text())
     for key in ("ccr_mean", "ccr_std", "ccr_folds", "wall_seconds", "interactions_per_demo",
                 "exemplars", "prototypes", "concepts", "generation_error", "config", "seed",
-                "versions", "baseline"):
+                "versions", "baseline", "ccr_matched", "ccr_source", "purity",
+                "named_concepts"):
         assert key in metrics, key
     assert len(metrics["ccr_folds"]) == 2
     assert all(0.0 <= c <= 1.0 for c in metrics["ccr_folds"])
@@ -68,6 +69,9 @@ def test_every_output_file_exists_and_parses(run_dir):
         assert len(f["predicted"]) == len(f["true"]) == len(f["test"]) > 0
         assert f["exemplars"] + f["prototypes"] == f["entries"] >= f["concepts"] >= 1
         assert set(f["shapes"]) <= {"GShape", "Angle", "Sshape"}
+        # the robot's own labels are scored; an oracle keeps every robot concept pure
+        assert len(f["robot_predicted"]) == len(f["test"])
+        assert f["purity"] == 1.0 and f["ccr"] == f["ccr_source"] == f["ccr_matched"]
     report = (run_dir / "report.md").read_text()
     figures = sorted((run_dir / "figures").glob("*.png"))
     names = {p.name for p in figures}
@@ -78,7 +82,7 @@ def test_every_output_file_exists_and_parses(run_dir):
         with Image.open(p) as im:
             im.verify()
             assert min(im.size) >= 200
-    assert "CCR" in report and "DTW" in report
+    assert "CCR" in report and "DTW" in report and "purity" in report
 
 
 def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir):
@@ -88,6 +92,49 @@ def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir):
         assert a["predicted"] == b["predicted"]
         assert a["feedbacks"] == b["feedbacks"]
         assert a["entries"] == b["entries"]
+
+
+def test_untaught_concepts_leave_the_learning_set_for_the_test_set(small_config):
+    from iloci.config import load_config
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import fold_plan, untaught_concepts
+
+    data = tomllib.loads(SMALL)
+    data["evaluation"]["untaught"] = 1
+    config = load_config(data)
+    demos = load_lasa(["GShape", "Angle", "Sshape"])
+    plain = fold_plan(demos, load_config(tomllib.loads(SMALL)))
+    for k, (learn, test) in enumerate(fold_plan(demos, config)):
+        (left_out,) = untaught_concepts(demos, config, k)
+        assert all(demos[i].concept != left_out for i in learn)
+        assert sorted(learn + test) == list(range(len(demos)))
+        assert set(test) >= set(plain[k][1])  # the plain test set, plus the left-out ones
+    data["evaluation"]["untaught"] = 2
+    with pytest.raises(InvalidInputError, match="untaught = 2 leaves fewer than 2"):
+        untaught_concepts(demos, load_config(data), 0)
+
+
+def test_stream_protocol_scores_each_demonstration_before_teaching_it(small_config,
+                                                                       tmp_path):
+    out = tmp_path / "stream"
+    code = main(["evaluate", "--config", str(small_config), "--protocol", "stream",
+                 "--out", str(out), "--quiet"])
+    assert code == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    steps = json.loads((out / "stream.json").read_text())
+    assert metrics["protocol"] == "stream" and metrics["demonstrations"] == len(steps) == 21
+    # the first demonstration meets an empty memory; a concept's first one cannot be right
+    assert steps[0]["predicted"] == "none" and not steps[0]["correct"]
+    for s in steps:
+        if not s["seen_before"]:
+            assert not s["correct"]
+        else:
+            assert s["correct"] == (s["predicted"] == s["true"])
+    assert len(metrics["curve"]) == 21
+    assert metrics["feedbacks_per_demo"] == pytest.approx(
+        sum(len(s["feedbacks"]) for s in steps) / 21)
+    report = (out / "report.md").read_text()
+    assert "figures/stream.png" in report and (out / "figures" / "stream.png").is_file()
 
 
 def test_unknown_fold_is_a_clear_error(small_config):

@@ -18,6 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--folds", type=int, nargs="+", metavar="K",
                    help="run only these folds (0-based)")
     p.add_argument("--no-baseline", action="store_true", help="skip the DTW 1-NN baseline")
+    p.add_argument("--protocol", choices=("folds", "stream"), default=None,
+                   help="folds: the paper's k-fold experiment; stream: test-then-learn over "
+                   "every demonstration (default: evaluation.protocol)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
@@ -94,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
     from iloci.evaluation.report import headline, write_outputs
 
     config = load_config(args.config)
+    if args.protocol is not None and args.protocol != config.evaluation.protocol:
+        config = config.replace(evaluation={"protocol": args.protocol})
+    if config.evaluation.protocol == "stream":
+        return _run_stream(args, config)
     progress = None if args.quiet else Progress()
     print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
@@ -107,5 +114,32 @@ def run(args: argparse.Namespace) -> int:
         return 130
     report = write_outputs(args.out, metrics, results)
     print(headline(metrics))
+    print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
+    return 0
+
+
+def _run_stream(args: argparse.Namespace, config) -> int:
+    from iloci.evaluation.report import stream_headline, write_stream_outputs
+    from iloci.evaluation.stream import run_stream
+
+    print(f"iloci evaluate: stream protocol (test-then-learn) over LASA, seed "
+          f"{config.seed}, perceptual model {config.perceptual_model.name}, teacher "
+          f"{config.teacher.name}", file=sys.stderr)
+    last = [-1]
+
+    def progress(msg: dict) -> None:
+        quarter = int(10 * (msg["step"] + 1) / msg["total"])
+        if not args.quiet and quarter != last[0]:
+            last[0] = quarter
+            print(f"stream {msg['step'] + 1}/{msg['total']} demos", file=sys.stderr,
+                  flush=True)
+
+    try:
+        metrics, steps = run_stream(config, progress=progress)
+    except KeyboardInterrupt:
+        print("\ninterrupted: nothing written.", file=sys.stderr)
+        return 130
+    report = write_stream_outputs(args.out, metrics, steps)
+    print(stream_headline(metrics))
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
     return 0

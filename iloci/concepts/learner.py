@@ -113,6 +113,9 @@ class Recognition:
     sources : tuple of str
         Every demonstration the nearest entry stands for.
     pb_obs : ndarray, shape (P,)
+    error : float
+        Closed-loop prediction error (mean squared, encoded units) of the
+        sequence from PB_obs: how well the network can reproduce it at all.
     """
 
     demo: str
@@ -123,6 +126,7 @@ class Recognition:
     source: str
     sources: tuple[str, ...]
     pb_obs: np.ndarray = field(repr=False)
+    error: float = float("nan")
 
 
 def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
@@ -444,6 +448,7 @@ class Learner:
         if not seqs:
             return []
         pb_obs = self.recognize_pbs(seqs)
+        errors = np.asarray(self.model.prediction_error(seqs, pb_obs), dtype=np.float64)
         pbs_rec = self.memory.pbs_rec
         dist = np.linalg.norm(pb_obs[:, None, :] - pbs_rec[None, :, :], axis=2)
         labels = self.memory.concept_labels
@@ -452,5 +457,6 @@ class Learner:
         for b, i in enumerate(nearest):
             e = self.memory.entries[int(i)]
             out.append(Recognition(keys[b], e.concept, float(conf[b]), float(dist[b, i]),
-                                   int(i), e.source, tuple(e.sources), pb_obs[b].copy()))
+                                   int(i), e.source, tuple(e.sources), pb_obs[b].copy(),
+                                   float(errors[b])))
         return out

@@ -204,8 +204,8 @@ class Memory:
         self.concept_count += 1
         return f"c{self.concept_count}"
 
-    def label_concepts(self, concept_of_key: Any) -> dict[str, str | None]:
-        """Name each of the robot's concepts by its demonstrations' true concepts.
+    def concept_members(self, concept_of_key: Any) -> dict[str, list[str | None]]:
+        """The true concept of every demonstration each of the robot's concepts stands for.
 
         Parameters
         ----------
@@ -216,19 +216,30 @@ class Memory:
         Returns
         -------
         dict
-            Robot label -> the most frequent true concept among the sources
-            of its entries (ties: the first seen), ``None`` if none is known.
+            Robot label -> one true concept (or ``None``) per source
+            demonstration of its entries, in entry order.
         """
-        out: dict[str, str | None] = {}
-        for label in self.concepts():
-            counts: dict[str, int] = {}
-            for i in self.indices_of(label):
-                for key in self.entries[i].sources:
-                    c = concept_of_key(key)
-                    if c is not None:
-                        counts[c] = counts.get(c, 0) + 1
-            out[label] = max(counts, key=counts.__getitem__) if counts else None
-        return out
+        return {label: [concept_of_key(key) for i in self.indices_of(label)
+                        for key in self.entries[i].sources]
+                for label in self.concepts()}
+
+    def label_concepts(self, concept_of_key: Any) -> dict[str, str | None]:
+        """Name each of the robot's concepts by its demonstrations' true concepts.
+
+        Parameters
+        ----------
+        concept_of_key : callable
+            As for :meth:`concept_members`.
+
+        Returns
+        -------
+        dict
+            Robot label -> the most frequent true concept among the sources
+            of its entries (ties: the first seen), ``None`` if none is known
+            (:func:`iloci.evaluation.metrics.majority_names`).
+        """
+        from iloci.evaluation.metrics import majority_names
+        return majority_names(self.concept_members(concept_of_key))
 
     def copy(self) -> Memory:
         enc = None

@@ -31,8 +31,8 @@ import numpy as np
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
-from iloci.evaluation.metrics import (confidence_matrix, confusion_matrix,
-                                      correct_classification_rate, mean_std)
+from iloci.evaluation.metrics import (correct_classification_rate, majority_names,
+                                      matched_names, mean_std, purity)
 from iloci.hookspecs import hookimpl
 
 __all__ = ["FoldResult", "run_fold", "evaluate", "fold_plan", "summarize"]
@@ -46,6 +46,7 @@ class FoldResult:
     learn: list[str]
     test: list[str]
     true: list[str]
+    #: True concept named by each answer's robot concept (majority naming).
     predicted: list[str]
     confidence: list[float]
     ccr: float
@@ -61,6 +62,29 @@ class FoldResult:
     rehearsal_seconds: float
     wall_seconds: float
     skipped: list[list[str]] = field(default_factory=list)
+    #: The robot's own label of each answer.
+    robot_predicted: list[str] = field(default_factory=list)
+    #: Scored with one-to-one naming of robot concepts.
+    matched_predicted: list[str] = field(default_factory=list)
+    ccr_matched: float = float("nan")
+    #: True concept of the answering entry's own source demonstration (the
+    #: scoring before robot labels were scored; equal to ``predicted`` when
+    #: every robot concept is pure).
+    source_predicted: list[str] = field(default_factory=list)
+    ccr_source: float = float("nan")
+    #: Concept purity of the memory (:func:`~iloci.evaluation.metrics.purity`).
+    purity: float = float("nan")
+    #: Distinct true concepts among the memory's robot concepts.
+    named_concepts: int = 0
+    #: Per test demonstration: was its true concept in the learning set;
+    #: PB distance to the nearest PB_rec; prediction error from PB_obs.
+    taught: list[bool] = field(default_factory=list)
+    distance: list[float] = field(default_factory=list)
+    error: list[float] = field(default_factory=list)
+    #: Per memory entry: PB_rec distance to the nearest entry of another
+    #: concept; generation error (the memory's own scales).
+    memory_other_distance: list[float] = field(default_factory=list)
+    memory_generation_error: list[float] = field(default_factory=list)
     baseline_predicted: list[str] = field(default_factory=list)
     baseline_ccr: float = float("nan")
     baseline_seconds: float = float("nan")
@@ -75,15 +99,51 @@ class FoldResult:
         return dict(self.__dict__)
 
 
+def untaught_concepts(demos: Sequence[Any], config: Config, fold: int) -> list[str]:
+    """The concepts left out of fold ``fold``'s learning set (``[evaluation] untaught``).
+
+    The sorted true concepts are shuffled once per seed and fold ``k``
+    leaves out the ``untaught`` concepts after the first ``k * untaught``
+    (cyclically), so 5 folds of 4 leave out 20 different concepts.
+
+    Raises
+    ------
+    InvalidInputError
+        ``untaught`` leaves fewer than two concepts to learn.
+    """
+    n = config.evaluation.untaught
+    if not n:
+        return []
+    concepts = sorted({d.concept or _true_concept(d.key, {}) for d in demos})
+    if n > len(concepts) - 2:
+        raise InvalidInputError(f"[evaluation] untaught = {n} leaves fewer than 2 of the "
+                                f"{len(concepts)} concepts to learn; use at most "
+                                f"{len(concepts) - 2}.")
+    order = list(np.random.default_rng([config.evaluation.seed, 2]).permutation(concepts))
+    return [str(order[(fold * n + i) % len(order)]) for i in range(n)]
+
+
 def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], list[int]]]:
-    """(learning indices in presentation order, test indices) per fold."""
+    """(learning indices in presentation order, test indices) per fold.
+
+    With ``[evaluation] untaught``, the learning demonstrations of each
+    fold's :func:`untaught_concepts` move to the end of its test set.
+    """
     from iloci.evaluation.folds import lasa_folds
     ev = config.evaluation
     plan = []
     for k, (learn, test) in enumerate(lasa_folds(demos, ev.folds, ev.seed)):
         # presentation order: seeded per fold, independent of the split's draws
         rng = np.random.default_rng([ev.seed, k, 1])
-        plan.append(([int(i) for i in rng.permutation(learn)], [int(i) for i in test]))
+        order = [int(i) for i in rng.permutation(learn)]
+        test_idx = [int(i) for i in test]
+        left_out = set(untaught_concepts(demos, config, k))
+        if left_out:
+            out = [i for i in order
+                   if (demos[i].concept or _true_concept(demos[i].key, {})) in left_out]
+            order = [i for i in order if i not in set(out)]
+            test_idx += sorted(out)
+        plan.append((order, test_idx))
     return plan
 
 
@@ -150,9 +210,15 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     wall = time.perf_counter() - t0
     known = {d.key: d.concept for d in list(learn) + list(test) if d.concept}
     true = [d.concept or _true_concept(d.key, known) for d in test]
-    predicted = [_true_concept(r.source, known) for r in recs]
     mem = agent.memory
     entries = mem.entries
+    members = mem.concept_members(lambda k: _true_concept(k, known))
+    majority, matched = majority_names(members), matched_names(members)
+    robot = [r.concept for r in recs]
+    # an answer whose robot concept has no true name keeps its robot label: never correct
+    predicted = [majority.get(c) or c for c in robot]
+    matched_pred = [matched.get(c) or c for c in robot]
+    source_pred = [_true_concept(r.source, known) for r in recs]
     res = FoldResult(
         fold=fold,
         learn=[d.key for d in learn],
@@ -173,19 +239,30 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         rehearsal_seconds=float(sum(r.seconds for r in report.rehearsals)),
         wall_seconds=wall,
         skipped=[list(s) for s in report.skipped],
+        robot_predicted=robot,
+        matched_predicted=matched_pred,
+        ccr_matched=correct_classification_rate(true, matched_pred),
+        source_predicted=source_pred,
+        ccr_source=correct_classification_rate(true, source_pred),
+        purity=purity(members),
+        named_concepts=len({n for n in majority.values() if n is not None}),
+        taught=[t in {d.concept or _true_concept(d.key, known) for d in learn} for t in true],
+        distance=[float(r.distance) for r in recs],
+        error=[float(r.error) for r in recs],
+        memory_other_distance=_other_concept_distances(mem),
+        memory_generation_error=[float(e.generation_error) for e in entries],
     )
     if details:
-        names = mem.label_concepts(lambda k: _true_concept(k, known))
         for e in entries:
             res.pb_points.append([float(x) for x in e.pb_rec])
-            res.pb_concepts.append(names.get(e.concept) or e.concept)
+            res.pb_concepts.append(majority.get(e.concept) or e.concept)
             res.pb_kinds.append("exemplar" if e.num_samples == 1 else "prototype")
         for r, c in zip(recs, true):
             res.pb_points.append([float(x) for x in r.pb_obs])
             res.pb_concepts.append(c)
             res.pb_kinds.append("test")
         for label in mem.concepts():
-            name = names.get(label) or label
+            name = majority.get(label) or label
             if name in res.shapes:
                 continue
             # what the robot drew: executed in the simulator when one is configured
@@ -198,6 +275,17 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         res.baseline_seconds = time.perf_counter() - tb
         res.baseline_ccr = correct_classification_rate(true, res.baseline_predicted)
     return res
+
+
+def _other_concept_distances(mem: Any) -> list[float]:
+    """PB_rec distance of each entry to the nearest entry of another concept (inf: none)."""
+    if not len(mem):
+        return []
+    x = mem.pbs_rec
+    lab = np.asarray(mem.concept_labels)
+    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
+    d = np.where(lab[:, None] != lab[None, :], d, np.inf)
+    return [float(v) for v in d.min(axis=1)]
 
 
 def _worker_init() -> None:
@@ -342,6 +430,10 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
         "ccr_folds": [r["ccr"] for r in results],
         "wall_seconds": wall_seconds,
         "jobs": jobs,
+        "ccr_matched": ms("ccr_matched"),
+        "ccr_source": ms("ccr_source"),
+        "purity": ms("purity"),
+        "named_concepts": ms("named_concepts"),
         "interactions_per_demo": ms("interactions_per_demo"),
         "exemplars": ms("exemplars"),
         "prototypes": ms("prototypes"),
@@ -349,7 +441,8 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
         "concepts": ms("concepts"),
         "generation_error": ms("generation_error"),
         "fold_wall_seconds": [r["wall_seconds"] for r in results],
-        "folds": [{k: r[k] for k in ("fold", "ccr", "interactions_per_demo", "exemplars",
+        "folds": [{k: r[k] for k in ("fold", "ccr", "ccr_matched", "ccr_source", "purity",
+                                       "named_concepts", "interactions_per_demo", "exemplars",
                                        "prototypes", "entries", "concepts",
                                        "generation_error", "rehearsals", "rehearsal_seconds",
                                        "wall_seconds", "baseline_ccr", "skipped")}

@@ -12,7 +12,8 @@ import numpy as np
 from iloci.data.files import write_text_atomic
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
-__all__ = ["write_outputs", "write_json_atomic", "headline"]
+__all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
+           "stream_headline"]
 
 
 def write_json_atomic(path: str | Path, data: Any) -> Path:
@@ -43,6 +44,15 @@ def headline(metrics: dict[str, Any]) -> str:
         rows.append(f"| DTW 1-NN baseline | {_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])} | "
                     + ", ".join(_pct(c) for c in b["ccr_folds"]) + " |")
     m = metrics
+    if "purity" in m:
+        rows += [
+            "",
+            f"robot's own labels scored: {m['concepts']['mean']:.1f} robot concepts naming "
+            f"{m['named_concepts']['mean']:.1f} true concepts, concept purity "
+            f"{_pct(m['purity']['mean'])} %, one-to-one CCR "
+            f"{_pct(m['ccr_matched']['mean'])} %, nearest entry's source CCR "
+            f"{_pct(m['ccr_source']['mean'])} %",
+        ]
     rows += [
         "",
         f"interactions per learning demo {m['interactions_per_demo']['mean']:.2f}; memory "
@@ -123,22 +133,28 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
         "",
         "## Per fold",
         "",
-        "| fold | learn | test | CCR % | DTW 1-NN % | interactions/demo | exemplars | "
-        "prototypes | concepts | generation error | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| fold | learn | test | CCR % | one-to-one CCR % | purity % | DTW 1-NN % | "
+        "interactions/demo | exemplars | prototypes | concepts | generation error | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for f in m["folds"]:
         lines.append(
             f"| {f['fold']} | {f['learn']} | {f['test']} | {_pct(f['ccr'])} | "
+            f"{_pct(f.get('ccr_matched', float('nan')))} | "
+            f"{_pct(f.get('purity', float('nan')))} | "
             f"{_pct(f['baseline_ccr']) if np.isfinite(f['baseline_ccr']) else '-'} | "
             f"{f['interactions_per_demo']:.2f} | {f['exemplars']} | {f['prototypes']} | "
             f"{f['concepts']} | {f['generation_error']:.4f} | {f['wall_seconds']:.1f} |")
     lines += [
         "",
-        "A test demonstration counts as correct when the memory entry nearest to its "
-        "PB_obs stands for a demonstration of the same concept (what the oracle teacher "
-        "would reward). Confidence is the margin `1 - d_best / d_other` (see "
-        "`iloci.concepts.learner.Recognition`).",
+        "The robot answers with its own concept label (the concept of the memory entry "
+        "nearest to the test demonstration's PB_obs). Each robot concept is named by the "
+        "true concept of most of the demonstrations its entries stand for; an answer is "
+        "correct when its name is the demonstration's true concept (CCR). One-to-one CCR "
+        "names robot concepts by a maximum matching instead, so a concept the teacher's "
+        "errors split in two counts only once; purity is the fraction of the memory's "
+        "demonstrations that belong to their robot concept's majority. Confidence is the "
+        "margin `1 - d_best / d_other` (see `iloci.concepts.learner.Recognition`).",
         "",
         "## Confusion and confidence",
         "",
@@ -176,6 +192,63 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
         lines += ["## Baseline", "", m["baseline"]["method"] + " on the same folds: "
                   f"{_pct(m['baseline']['ccr_mean'])} ± {_pct(m['baseline']['ccr_std'])} %."]
         lines += baseline_rows
+    report = out / "report.md"
+    write_text_atomic(report, "\n".join(lines) + "\n")
+    return report
+
+
+def stream_headline(metrics: dict[str, Any]) -> str:
+    """The stream protocol's summary (Markdown), also printed by ``iloci evaluate``."""
+    m = metrics
+    k = m["first_scored"]
+    return "\n".join([
+        "| measure | value |",
+        "|---|---|",
+        f"| first guess right, demonstrations {k}-{m['demonstrations']} | "
+        f"{_pct(m['first_guess'])} % |",
+        f"| ... of concepts already taught | {_pct(m['first_guess_seen'])} % "
+        f"({m['unseen_after_first_scored']} first-of-their-concept demonstrations after {k}) |",
+        f"| first guess right, all demonstrations | {_pct(m['first_guess_all'])} % |",
+        f"| teacher feedbacks per demonstration | {m['feedbacks_per_demo']:.2f} "
+        f"(from {k}: {m['feedbacks_per_demo_late']:.2f}) |",
+        f"| robot concepts at the end | {m['concepts']} (purity {_pct(m['purity'])} %) |",
+        f"| wall time | {m['wall_seconds']:.0f} s |",
+    ])
+
+
+def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
+                         steps: list[dict]) -> Path:
+    """Write the stream protocol's metrics.json, stream.json, figure and report.md."""
+    from iloci.evaluation import figures
+
+    out = Path(out_dir)
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "metrics.json", metrics)
+    write_json_atomic(out / "stream.json", steps)
+    figures.plot_stream([s["correct"] for s in steps], [len(s["feedbacks"]) for s in steps],
+                        fig_dir / "stream.png", first_scored=metrics["first_scored"])
+    backends = ", ".join(f"{k} = {v['name']}" for k, v in metrics["config"].items()
+                         if isinstance(v, dict) and "name" in v)
+    lines = [
+        "# iloci evaluation report: stream protocol",
+        "",
+        f"Test-then-learn over {metrics['demonstrations']} LASA demonstrations in a seeded "
+        f"order (seed {metrics['seed']}; back ends: {backends}). Each demonstration is first "
+        "recognized without feedback and scored, then taught with the teacher's feedback. "
+        "The robot's answer is its own concept label, named by the true concept of most of "
+        "the demonstrations that concept stands for at that moment; an \"unknown\" answer is "
+        "right exactly when the robot was never taught the demonstration's concept.",
+        "",
+        "## Headline",
+        "",
+        stream_headline(metrics),
+        "",
+        "## Along the stream",
+        "",
+        "![stream](figures/stream.png)",
+        "",
+    ]
     report = out / "report.md"
     write_text_atomic(report, "\n".join(lines) + "\n")
     return report
