@@ -102,8 +102,21 @@ class LearnerConfig:
     #: let regenerated patterns drift further from what was demonstrated:
     #: on LASA fold 0, 500 epochs gave 90 % CCR where 1500 gave 99 %.
     rehearsal_epochs: int = 0
+    #: Recognition answers "unknown" when its familiarity (see
+    #: ``iloci.concepts.learner.familiarity``: 1 on a stored PB_rec, 0.5 at
+    #: the memory's typical distance between neighbouring concepts) is below
+    #: this; 0 never does (the paper always names a concept).
+    unknown_below: float = 0.0
+    #: Novelty answer: when a demonstration's familiarity is below this, the
+    #: robot first imitates it back as something new; "yes" founds the new
+    #: concept in one interaction, "no" sends it back to guessing. 0 never
+    #: does (the paper tries every known concept before founding one).
+    novelty_below: float = 0.0
 
     def validate(self) -> None:
+        for name in ("unknown_below", "novelty_below"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         if self.k_cutoff < 0:
             raise ValueError(f"k_cutoff must be >= 0, got {self.k_cutoff}")
         if self.num_threshold < 1:

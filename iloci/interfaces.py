@@ -185,6 +185,15 @@ class Response:
         What the simulator executed, when one is configured.
     attempt : int
         1 for the first guess on this demonstration, 2 for the second, ...
+    novel : bool
+        The novelty answer: the robot finds the demonstration unlike every
+        concept it knows and imitates it back as something new (``motion``
+        is its reproduction of what it saw; ``concept`` the label the new
+        concept would get; ``source`` is ``None``; ``sources`` every
+        demonstration its memory stands for, i.e. what it claims the
+        demonstration is none of). +1 means "yes, that is new": the robot
+        founds the concept; -1 sends it back to guessing among what it
+        knows.
     """
 
     concept: str
@@ -195,6 +204,7 @@ class Response:
     execution: Execution | None = None
     attempt: int = 1
     extra: Mapping[str, Any] = field(default_factory=dict)
+    novel: bool = False
 
     @property
     def drawing(self) -> np.ndarray:

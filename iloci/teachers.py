@@ -75,7 +75,16 @@ class OracleTeacher:
         return c
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
+        """+1 iff the answer is right.
+
+        A concept answer is right when its source demonstration has the
+        demonstration's true concept; a novelty answer (``response.novel``)
+        when no demonstration the robot's memory stands for
+        (``response.sources``) has it.
+        """
         truth = self.true_concept(demo)
+        if response.novel:
+            return -1 if any(self.concept_of_key(k) == truth for k in response.sources) else 1
         if response.source is None:
             raise FeedbackError("oracle teacher needs Response.source (the demonstration "
                                 "the answering entry stands for).")
@@ -150,7 +159,8 @@ class ConsoleTeacher:
         axes[1].plot(drawing[:, 0], drawing[:, 1], "b-")
         axes[1].plot(*drawing[0], "go")
         drawn = "drew" if response.execution is not None else "generated"
-        axes[1].set_title(f"robot {drawn}: concept {response.concept}")
+        axes[1].set_title("robot: something new?" if response.novel
+                          else f"robot {drawn}: concept {response.concept}")
         for ax in axes:
             ax.set_aspect("equal", adjustable="datalim")
         fig.tight_layout()
@@ -172,11 +182,17 @@ class ConsoleTeacher:
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
         picture = self._picture(demo, response)
-        prompt = (f"\nDemonstration {demo.key}: the robot thinks it is concept "
-                  f"{response.concept!r} (attempt {response.attempt})")
+        if response.novel:
+            prompt = (f"\nDemonstration {demo.key}: the robot thinks it is something new, "
+                      f"none of the {len(set(response.sources))} demonstration(s) it has "
+                      "learned, and drew it back as it saw it")
+        else:
+            prompt = (f"\nDemonstration {demo.key}: the robot thinks it is concept "
+                      f"{response.concept!r} (attempt {response.attempt})")
         if picture:
             prompt += f"; its drawing is in {picture}"
-        prompt += ".\nIs that right? [y/n] "
+        prompt += (".\nIs it a new concept? [y/n] " if response.novel
+                   else ".\nIs that right? [y/n] ")
         while True:
             if self._ask is not None:
                 answer = self._ask(prompt)

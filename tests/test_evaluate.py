@@ -85,13 +85,18 @@ def test_every_output_file_exists_and_parses(run_dir):
     assert "CCR" in report and "DTW" in report and "purity" in report
 
 
-def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir):
+def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir, tmp_path):
+    import iloci
+
     serial = json.loads((run_dir / "folds.json").read_text())
-    _, parallel = evaluate(small_config, jobs=2, baseline=False)
+    _, parallel = evaluate(small_config, jobs=2, baseline=False, memory_dir=str(tmp_path))
     for a, b in zip(serial, parallel):
         assert a["predicted"] == b["predicted"]
         assert a["feedbacks"] == b["feedbacks"]
         assert a["entries"] == b["entries"]
+        # each fold's learned robot was kept, and answers as it did in the fold
+        agent = iloci.Agent.load(tmp_path / f"fold-{b['fold']}.npz")
+        assert len(agent.memory) == b["entries"]
 
 
 def test_untaught_concepts_leave_the_learning_set_for_the_test_set(small_config):

@@ -372,3 +372,42 @@ def test_response_is_performed_in_the_simulator(lasa):
     assert np.all(response.joint_path >= lower) and np.all(response.joint_path <= upper)
     # the arm starts where the entry's pattern starts
     np.testing.assert_allclose(ex.joint_path[0], response.joint_path[0], atol=1e-6)
+
+
+# -- the novelty answer and "unknown" -------------------------------------------------
+
+def test_novelty_answer_founds_a_concept_in_one_interaction_or_goes_back_to_guessing(lasa):
+    rec = Recorder()
+    agent = make_agent(rec, novelty_below=1.0)  # every demonstration looks new
+    teacher = ScriptedTeacher([-1, 1, -1, 1])
+    agent.teacher = teacher
+    agent.learn(lasa["GShape/0"])
+    # one entry cannot calibrate "unlike": the robot guesses as the paper's does
+    second = agent.learn(lasa["Angle/0"])
+    assert second.feedbacks == (-1,) and not teacher.responses[0].novel
+    third = agent.learn(lasa["Sine/0"])
+    assert (third.action, third.feedbacks, third.concept) == ("new_concept", (1,), "c3")
+    novel = teacher.responses[1]
+    assert novel.novel and novel.source is None and novel.concept == "c3"
+    assert set(novel.sources) == {"GShape/0", "Angle/0"}
+    assert 0 < novel.extra["familiarity"] < 1
+    seq, start = agent.memory.encoder.encode(agent.motion(lasa["Sine/0"]))
+    # it imitated the demonstration back as it perceived it
+    np.testing.assert_allclose(novel.motion, agent.memory.encoder.decode(seq, start)[0])
+    fourth = agent.learn(lasa["GShape/1"])
+    assert fourth.feedbacks == (-1, 1) and fourth.action in ("strengthen", "new_exemplar")
+    assert teacher.responses[2].novel and not teacher.responses[3].novel
+    assert [e.extra.get("novel") for e in rec.interactions[-2:]] == [True, None]
+    assert fourth.first_guess_correct is False and third.first_guess_correct is True
+
+
+def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
+    agent = make_agent(unknown_below=0.999)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    recs = agent.recognize([lasa["GShape/1"], lasa["Sine/0"]])
+    for r in recs:
+        assert 0 < r.familiarity <= 1 and r.unknown == (r.familiarity < 0.999)
+        assert np.isfinite(r.error) and r.error >= 0
+    off = make_agent()
+    off.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert not any(r.unknown for r in off.recognize([lasa["Sine/0"]]))

@@ -18,6 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--folds", type=int, nargs="+", metavar="K",
                    help="run only these folds (0-based)")
     p.add_argument("--no-baseline", action="store_true", help="skip the DTW 1-NN baseline")
+    p.add_argument("--memories", metavar="DIR",
+                   help="also save each fold's learned robot as DIR/fold-K.npz")
     p.add_argument("--protocol", choices=("folds", "stream"), default=None,
                    help="folds: the paper's k-fold experiment; stream: test-then-learn over "
                    "every demonstration (default: evaluation.protocol)")
@@ -108,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
           f"jobs {args.jobs or config.evaluation.jobs}", file=sys.stderr)
     try:
         metrics, results = evaluate(config, jobs=args.jobs, progress=progress,
-                                    folds=args.folds, baseline=not args.no_baseline)
+                                    folds=args.folds, baseline=not args.no_baseline,
+                                    memory_dir=args.memories)
     except KeyboardInterrupt:
         print("\ninterrupted: workers stopped, nothing written.", file=sys.stderr)
         return 130

@@ -43,7 +43,8 @@ from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Respons
                               Teacher)
 from iloci.teachers import check_feedback
 
-__all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "ik_joint_limits"]
+__all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "familiarity",
+           "novelty_scale", "ik_joint_limits"]
 
 #: Actions the learner takes on a feedback (InteractionEvent.action).
 ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept")
@@ -127,6 +128,12 @@ class Recognition:
     sources: tuple[str, ...]
     pb_obs: np.ndarray = field(repr=False)
     error: float = float("nan")
+    #: How much the demonstration is like what the memory holds (see
+    #: :func:`familiarity`); NaN when the memory cannot calibrate it.
+    familiarity: float = float("nan")
+    #: True when ``familiarity`` is below ``[learner] unknown_below``: the
+    #: robot answers "I don't know" (``concept`` is still the nearest one).
+    unknown: bool = False
 
 
 def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
@@ -137,6 +144,59 @@ def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
     if ik_solver is None or not hasattr(ik_solver, "lower"):
         return None
     return np.asarray(ik_solver.lower), np.asarray(ik_solver.upper)
+
+
+def novelty_scale(pbs_rec: np.ndarray, labels: Sequence[str]) -> float:
+    """The memory's own distance scale: how far apart its neighbouring concepts lie.
+
+    The median, over entries, of the PB distance from an entry's PB_rec to
+    the nearest PB_rec of another concept (with a single concept: to the
+    nearest other entry). This project's calibration of "unlike everything
+    in memory"; the paper has none.
+
+    Parameters
+    ----------
+    pbs_rec : ndarray, shape (M, P)
+    labels : sequence of str, length M
+
+    Returns
+    -------
+    float
+        NaN when the memory holds fewer than two entries (nothing to
+        calibrate on).
+    """
+    x = np.asarray(pbs_rec, dtype=np.float64)
+    if len(x) < 2:
+        return float("nan")
+    lab = np.asarray(labels)
+    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
+    np.fill_diagonal(d, np.inf)
+    other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
+    if np.all(np.isinf(other)):
+        other = d.min(axis=1)
+    other = other[np.isfinite(other)]
+    return float(np.median(other)) if other.size else float("nan")
+
+
+def familiarity(distance: np.ndarray | float, scale: float) -> np.ndarray:
+    """``scale / (scale + distance)``: 1 on a stored PB_rec, 0.5 at the memory's scale.
+
+    Parameters
+    ----------
+    distance : float or ndarray
+        PB distance from PB_obs to the nearest PB_rec.
+    scale : float
+        :func:`novelty_scale` of the memory.
+
+    Returns
+    -------
+    ndarray (or 0-d)
+        In (0, 1]; NaN where ``scale`` is NaN or not positive.
+    """
+    d = np.asarray(distance, dtype=np.float64)
+    if not np.isfinite(scale) or scale <= 0:
+        return np.full(d.shape, np.nan)
+    return scale / (scale + d)
 
 
 def confidence(distances: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -289,6 +349,35 @@ class Learner:
                         extra={"entry": index, "generation_error": entry.generation_error,
                                "clipped": clipped})
 
+    def respond_novel(self, sequence: np.ndarray, start: np.ndarray, dt: float,
+                      attempt: int = 1, fam: float = float("nan")) -> Response:
+        """The novelty answer: the demonstration imitated back as something new.
+
+        The robot performs the demonstration as it perceived it (its encoded
+        sequence decoded, joints clipped to the limits; executed when a
+        simulator is set), labelled with the concept it would found.
+
+        Returns
+        -------
+        Response
+            ``novel=True``, ``source=None``, ``sources`` every demonstration
+            the memory stands for; ``extra["familiarity"]``.
+        """
+        encoder = self.memory.encoder
+        if encoder is None:
+            raise NotFittedError("the memory has no fitted sensorimotor encoder.")
+        plane, joints = encoder.decode(sequence, start)
+        if self.joint_limits is not None:
+            lower, upper = (np.asarray(a, dtype=np.float64) for a in self.joint_limits)
+            joints = np.clip(joints, lower, upper)
+        execution = None
+        if self.simulator is not None:
+            execution = self.simulator.execute(joints, dt)
+        sources = tuple(dict.fromkeys(k for e in self.memory.entries for k in e.sources))
+        return Response(concept=f"c{self.memory.concept_count + 1}", motion=plane,
+                        joint_path=joints, source=None, sources=sources, execution=execution,
+                        attempt=attempt, extra={"familiarity": fam}, novel=True)
+
     # -- learning phase ------------------------------------------------------------
     def learn(self, demo: Demonstration, sequence: np.ndarray, start: np.ndarray,
               dt: float) -> LearnOutcome:
@@ -348,16 +437,34 @@ class Learner:
         labels = mem.concept_labels
         tried: list[str] = []
         attempt = 0
+        novel_fb = 0
+        if self.config.novelty_below > 0:
+            fam = float(familiarity(distances.min(), novelty_scale(mem.pbs_rec, labels)))
+            if fam < self.config.novelty_below:
+                attempt = 1
+                response = self.respond_novel(seq, start, dt, attempt, fam)
+                novel_fb = check_feedback(self.teacher.feedback(demo, response), self.teacher)
+                feedbacks.append(novel_fb)
+                if novel_fb == -1:
+                    ev = InteractionEvent(demo=key, step=step, attempt=1, guessed=None,
+                                          tried=(), answered=None, feedback=-1,
+                                          action="next_guess",
+                                          extra={"novel": True, "familiarity": fam})
+                    events.append(ev)
+                    self._emit_interaction(ev)
         while True:
             untried = [i for i, c in enumerate(labels) if c not in tried]
-            if not untried:
+            if novel_fb == 1 or not untried:
                 label = mem.new_concept_label()
                 rehearsals.append(self._rehearse("new_concept", seq, new_entry(pb_obs, label)))
                 mem.demonstrations_seen += 1
-                ev = InteractionEvent(demo=key, step=step, attempt=attempt + 1, guessed=None,
-                                      tried=tuple(tried), answered=None, feedback=0,
+                ev = InteractionEvent(demo=key, step=step,
+                                      attempt=attempt if novel_fb == 1 else attempt + 1,
+                                      guessed=None, tried=tuple(tried), answered=None,
+                                      feedback=novel_fb if novel_fb == 1 else 0,
                                       action="new_concept",
-                                      extra={"concept": label, "entries": len(mem)})
+                                      extra={"concept": label, "entries": len(mem),
+                                             "novel": novel_fb == 1})
                 events.append(ev)
                 self._emit_interaction(ev)
                 return LearnOutcome(key, label, "new_concept", tuple(feedbacks), tuple(events),
@@ -453,10 +560,13 @@ class Learner:
         dist = np.linalg.norm(pb_obs[:, None, :] - pbs_rec[None, :, :], axis=2)
         labels = self.memory.concept_labels
         nearest, conf = confidence(dist, labels)
+        fam = familiarity(dist[np.arange(len(dist)), nearest], novelty_scale(pbs_rec, labels))
+        below = self.config.unknown_below
         out = []
         for b, i in enumerate(nearest):
             e = self.memory.entries[int(i)]
             out.append(Recognition(keys[b], e.concept, float(conf[b]), float(dist[b, i]),
                                    int(i), e.source, tuple(e.sources), pb_obs[b].copy(),
-                                   float(errors[b])))
+                                   float(errors[b]), float(fam[b]),
+                                   bool(below > 0 and fam[b] < below)))
         return out

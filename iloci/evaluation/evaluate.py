@@ -31,7 +31,7 @@ import numpy as np
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
-from iloci.evaluation.metrics import (correct_classification_rate, majority_names,
+from iloci.evaluation.metrics import (auroc, correct_classification_rate, majority_names,
                                       matched_names, mean_std, purity)
 from iloci.hookspecs import hookimpl
 
@@ -81,6 +81,9 @@ class FoldResult:
     taught: list[bool] = field(default_factory=list)
     distance: list[float] = field(default_factory=list)
     error: list[float] = field(default_factory=list)
+    #: Recognition's familiarity and whether it answered "unknown".
+    familiarity: list[float] = field(default_factory=list)
+    unknown: list[bool] = field(default_factory=list)
     #: Per memory entry: PB_rec distance to the nearest entry of another
     #: concept; generation error (the memory's own scales).
     memory_other_distance: list[float] = field(default_factory=list)
@@ -174,7 +177,8 @@ def _true_concept(key: str, fallback: dict[str, str]) -> str:
 
 def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Sequence[Any], *,
              send: Callable[[dict], None] | None = None, baseline: bool = True,
-             details: bool = True, plugin_manager: Any = None) -> FoldResult:
+             details: bool = True, plugin_manager: Any = None,
+             memory_dir: str | None = None) -> FoldResult:
     """Teach a fresh agent ``learn`` (in order), recognize ``test``; one fold.
 
     Parameters
@@ -192,6 +196,10 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         Resolves the config's component names; its observers see this
         fold's learning events. Defaults to
         :func:`~iloci.plugins.get_plugin_manager`.
+    memory_dir : str, optional
+        Save the fold's learned agent there as ``fold-K.npz``
+        (:meth:`~iloci.agent.Agent.save`), e.g. to study recognition later
+        without learning again.
     """
     from iloci.agent import learn_and_recognize
     from iloci.plugins import get_plugin_manager, get_registry
@@ -208,6 +216,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         if observer is not None:
             pm.unregister(observer)
     wall = time.perf_counter() - t0
+    if memory_dir:
+        agent.save(os.path.join(memory_dir, f"fold-{fold}.npz"))
     known = {d.key: d.concept for d in list(learn) + list(test) if d.concept}
     true = [d.concept or _true_concept(d.key, known) for d in test]
     mem = agent.memory
@@ -216,8 +226,10 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     majority, matched = majority_names(members), matched_names(members)
     robot = [r.concept for r in recs]
     # an answer whose robot concept has no true name keeps its robot label: never correct
-    predicted = [majority.get(c) or c for c in robot]
-    matched_pred = [matched.get(c) or c for c in robot]
+    predicted = ["unknown" if r.unknown else majority.get(r.concept) or r.concept
+                 for r in recs]
+    matched_pred = ["unknown" if r.unknown else matched.get(r.concept) or r.concept
+                    for r in recs]
     source_pred = [_true_concept(r.source, known) for r in recs]
     res = FoldResult(
         fold=fold,
@@ -249,6 +261,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         taught=[t in {d.concept or _true_concept(d.key, known) for d in learn} for t in true],
         distance=[float(r.distance) for r in recs],
         error=[float(r.error) for r in recs],
+        familiarity=[float(r.familiarity) for r in recs],
+        unknown=[bool(r.unknown) for r in recs],
         memory_other_distance=_other_concept_distances(mem),
         memory_generation_error=[float(e.generation_error) for e in entries],
     )
@@ -382,7 +396,8 @@ def _resolved_specs(config: Config, pm: Any) -> list[Any]:
 
 def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
                         test_idx: list[int], shapes: list[str], queue: Any,
-                        baseline: bool, specs: Sequence[Any] | None = None) -> dict:
+                        baseline: bool, specs: Sequence[Any] | None = None,
+                        memory_dir: str | None = None) -> dict:
     from iloci.data import load_lasa
     from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
     demos = load_lasa(shapes or None)
@@ -398,7 +413,7 @@ def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
     send({"kind": "fold_start", "fold": fold, "total": len(learn_idx)})
     res = run_fold(config_dict, fold, [demos[i] for i in learn_idx],
                    [demos[i] for i in test_idx], send=send, baseline=baseline,
-                   plugin_manager=pm)
+                   plugin_manager=pm, memory_dir=memory_dir)
     return res.to_dict()
 
 
@@ -453,6 +468,22 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
         "versions": _versions(),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
+    taught = [t for r in results for t in r.get("taught", [])]
+    if taught and not all(taught):
+        fam = [x for r in results for x in r["familiarity"]]
+        unk = [u for r in results for u in r["unknown"]]
+        out["untaught"] = {
+            "concepts": config.evaluation.untaught,
+            "familiarity_auroc": auroc([f for f, t in zip(fam, taught) if t],
+                                       [f for f, t in zip(fam, taught) if not t]),
+            "margin_auroc": auroc(
+                [c for r in results for c, t in zip(r["confidence"], r["taught"]) if t],
+                [c for r in results for c, t in zip(r["confidence"], r["taught"]) if not t]),
+            "untaught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught)
+                                                        if not t])),
+            "taught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught) if t])),
+            "taught_demos": int(sum(taught)), "untaught_demos": int(len(taught) - sum(taught)),
+        }
     if all(r.get("baseline_predicted") for r in results):
         bm, bs = mean_std([r["baseline_ccr"] for r in results])
         out["baseline"] = {"method": "DTW 1-NN (dtaidistance), positions resampled to 50",
@@ -465,7 +496,8 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
 def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
-             plugin_manager: Any = None) -> tuple[dict[str, Any], list[dict]]:
+             plugin_manager: Any = None,
+             memory_dir: str | None = None) -> tuple[dict[str, Any], list[dict]]:
     """Run the k-fold protocol; return (metrics, per-fold results).
 
     Parameters
@@ -485,6 +517,8 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         only on this manager can be evaluated) and receives
         ``iloci_on_fold_finished``; with ``jobs == 1`` also the learning
         events. Defaults to :func:`~iloci.plugins.get_plugin_manager`.
+    memory_dir : str, optional
+        Save each fold's learned agent there as ``fold-K.npz``.
 
     Notes
     -----
@@ -535,7 +569,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
             res = run_fold(config, k, [demos[i] for i in learn_idx],
                            [demos[i] for i in test_idx], send=emit, baseline=baseline,
-                           plugin_manager=pm)
+                           plugin_manager=pm, memory_dir=memory_dir)
             results.append(res.to_dict())
             pm.hook.iloci_on_fold_finished(event=_fold_event(results[-1]))
             emit({"kind": "fold_done", "fold": k, "ccr": res.ccr,
@@ -551,7 +585,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             for k in wanted:
                 learn_idx, test_idx = plan[k]
                 futures[pool.submit(_run_fold_in_worker, cfg_dict, k, learn_idx, test_idx,
-                                    shapes, queue, baseline, specs)] = k
+                                    shapes, queue, baseline, specs, memory_dir)] = k
                 emit({"kind": "fold_queued", "fold": k, "total": len(learn_idx)})
             pending = set(futures)
             while pending:

@@ -53,6 +53,16 @@ def headline(metrics: dict[str, Any]) -> str:
             f"{_pct(m['ccr_matched']['mean'])} %, nearest entry's source CCR "
             f"{_pct(m['ccr_source']['mean'])} %",
         ]
+    u = m.get("untaught")
+    if u:
+        rows += [
+            "",
+            f"{u['concepts']} concept(s) left out of each fold's learning: familiarity AUROC "
+            f"taught vs untaught {u['familiarity_auroc']:.3f} (margin confidence "
+            f"{u['margin_auroc']:.3f}); answered unknown: untaught "
+            f"{_pct(u['untaught_answered_unknown'])} %, taught "
+            f"{_pct(u['taught_answered_unknown'])} %",
+        ]
     rows += [
         "",
         f"interactions per learning demo {m['interactions_per_demo']['mean']:.2f}; memory "
