@@ -112,6 +112,12 @@ class LearnerConfig:
     #: concept in one interaction, "no" sends it back to guessing. 0 never
     #: does (the paper tries every known concept before founding one).
     novelty_below: float = 0.0
+    #: A reward that comes after a "no" for the same demonstration goes
+    #: against the robot's own ranking of its concepts; with this on, the
+    #: robot asks once more and keeps the reward only when the teacher
+    #: confirms it, so one slip of the teacher cannot merge two concepts.
+    #: Off: the paper's protocol (every reward is final).
+    confirm_rewards: bool = False
 
     def validate(self) -> None:
         for name in ("unknown_below", "novelty_below"):

@@ -411,3 +411,21 @@ def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
     off = make_agent()
     off.teach([lasa["GShape/0"], lasa["Angle/0"]])
     assert not any(r.unknown for r in off.recognize([lasa["Sine/0"]]))
+
+
+@pytest.mark.parametrize("confirmation", [-1, 1])
+def test_a_reward_after_a_no_is_kept_only_when_the_teacher_confirms_it(lasa, confirmation):
+    rec = Recorder()
+    agent = make_agent(rec, confirm_rewards=True)
+    agent.teacher = ScriptedTeacher([-1, -1, 1, confirmation])
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])  # -1: a second concept
+    outcome = agent.learn(lasa["Angle/1"])
+    assert outcome.feedbacks == (-1, 1, confirmation)
+    actions = [e.action for e in rec.interactions if e.demo == "Angle/1"]
+    assert actions[:2] == ["next_guess", "confirm"]
+    if confirmation == 1:
+        assert outcome.action in ("strengthen", "new_exemplar")
+        assert len(agent.memory.concepts()) == 2
+    else:  # the slip is caught: no merge, a concept of its own
+        assert outcome.action == "new_concept" and len(agent.memory.concepts()) == 3

@@ -29,7 +29,7 @@ confidence).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -47,7 +47,7 @@ __all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "familiarity"
            "novelty_scale", "ik_joint_limits"]
 
 #: Actions the learner takes on a feedback (InteractionEvent.action).
-ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept")
+ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept", "confirm")
 
 
 @dataclass(frozen=True)
@@ -484,6 +484,18 @@ class Learner:
             extra: dict[str, Any] = {"nearest_entry": nearest,
                                      "nearest_distance": float(distances[nearest]),
                                      "answer_entry": answer}
+            if fb == 1 and self.config.confirm_rewards and -1 in feedbacks[:-1]:
+                # a reward after a "no" goes against the robot's own ranking: a
+                # teacher's slip here would merge two concepts, so it is kept
+                # only when the teacher confirms it (asked once more)
+                ev = InteractionEvent(action="confirm", extra=extra, **common)
+                events.append(ev)
+                self._emit_interaction(ev)
+                attempt += 1
+                again = replace(response, attempt=attempt)
+                fb = check_feedback(self.teacher.feedback(demo, again), self.teacher)
+                feedbacks.append(fb)
+                common.update(attempt=attempt, feedback=fb)
             if fb == -1:
                 ev = InteractionEvent(action="next_guess", extra=extra, **common)
                 events.append(ev)
