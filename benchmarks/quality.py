@@ -43,28 +43,39 @@ import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "quality.json"
 
-#: The settings the project recommends (``[learner]`` keys), measured here.
-BEST: dict[str, Any] = {}
+#: The settings this issue recommends (``[learner]`` keys), measured here as ``best``.
+BEST: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True}}
 
 #: The paper's learning phase: every setting of this issue off.
-PAPER: dict[str, Any] = {"learner": {"novelty_below": 0.0, "unknown_below": 0.0}}
+PAPER: dict[str, Any] = {"learner": {"novelty_below": 0.0, "unknown_below": 0.0,
+                                     "confirm_rewards": False}}
 
-#: row name -> (protocol/teacher/learner changes on top of the base config).
+
+def _with(*parts: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for part in parts:
+        for sec, values in part.items():
+            out[sec] = {**out.get(sec, {}), **values}
+    return out
+
+
+#: row name -> changes on top of the base config.
 ROWS: dict[str, dict[str, Any]] = {
-    "default": {},
+    "best": BEST,
     "paper": PAPER,
-    "untaught": {"evaluation": {"untaught": 4}},
-    "noisy-0.05": {"teacher": {"name": "noisy", "p": 0.05}},
-    "noisy-0.1": {"teacher": {"name": "noisy", "p": 0.1}},
-    "noisy-0.2": {"teacher": {"name": "noisy", "p": 0.2}},
-    "paper-noisy-0.1": {**PAPER, "teacher": {"name": "noisy", "p": 0.1}},
-    "stream": {"evaluation": {"protocol": "stream"}},
-    "paper-stream": {**PAPER, "evaluation": {"protocol": "stream"}},
+    "novelty-only": _with(BEST, {"learner": {"confirm_rewards": False}}),
+    "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
+    "noisy-0.05": _with(BEST, {"teacher": {"name": "noisy", "p": 0.05}}),
+    "noisy-0.1": _with(BEST, {"teacher": {"name": "noisy", "p": 0.1}}),
+    "noisy-0.2": _with(BEST, {"teacher": {"name": "noisy", "p": 0.2}}),
+    "paper-noisy-0.1": _with(PAPER, {"teacher": {"name": "noisy", "p": 0.1}}),
+    "stream": _with(BEST, {"evaluation": {"protocol": "stream"}}),
+    "paper-stream": _with(PAPER, {"evaluation": {"protocol": "stream"}}),
 }
 
 #: Rows run by default, in order (the cheap, decisive ones first).
-DEFAULT_ROWS = ("default", "paper", "noisy-0.1", "untaught", "noisy-0.05", "noisy-0.2",
-                "paper-noisy-0.1", "stream", "paper-stream")
+DEFAULT_ROWS = ("best", "paper", "noisy-0.1", "untaught", "paper-noisy-0.1", "noisy-0.05",
+                "noisy-0.2", "stream", "paper-stream")
 
 
 def _merge(base: dict, changes: dict) -> dict:
@@ -102,8 +113,8 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
                "feedbacks": [len(s["feedbacks"]) for s in steps]}
     else:
         from iloci.evaluation.evaluate import evaluate
-        metrics, results = evaluate(config, jobs=jobs,
-                                    baseline=row == "default" and seed is not None)
+        metrics, results = evaluate(config, jobs=jobs, baseline=row == "best",
+                                    memory_dir=str(cache / f"{row}-seed{seed}-memories"))
         out = {"row": row, "seed": seed, "protocol": "folds", "metrics": {
             k: v for k, v in metrics.items() if k not in ("versions", "machine")},
             "folds": [{k: r[k] for k in (
@@ -231,11 +242,11 @@ def main(argv: list[str] | None = None) -> dict:
         "sensorimotor": base["sensorimotor"],
         "seeds": args.seeds,
     }
-    if "default" in runs:
-        d = summarize_folds(runs["default"])
+    if "best" in runs:
+        d = summarize_folds(runs["best"])
         out["ccr"] = d["ccr"]
         out["feedbacks_per_demo"] = d["feedbacks_per_demo"]
-        base_runs = [r for r in runs["default"] if all(
+        base_runs = [r for r in runs["best"] if all(
             np.isfinite(f["baseline_ccr"]) for f in r["folds"])]
         if base_runs:
             out["dtw_ccr"] = _ms(_folds(base_runs, "baseline_ccr")) | {
@@ -243,8 +254,8 @@ def main(argv: list[str] | None = None) -> dict:
                           for r in base_runs}}
     noisy = {}
     for row in rows:
-        if row.startswith("noisy-") or row == "default":
-            p = 0.0 if row == "default" else float(row.split("-")[1])
+        if row.startswith("noisy-") or row == "best":
+            p = 0.0 if row == "best" else float(row.split("-")[1])
             s = summarize_folds(runs[row])
             noisy[str(p)] = {k: s[k] for k in ("ccr", "ccr_matched", "purity", "concepts",
                                                 "feedbacks_per_demo")}
@@ -252,9 +263,9 @@ def main(argv: list[str] | None = None) -> dict:
         out["noisy"] = dict(sorted(noisy.items(), key=lambda kv: float(kv[0])))
         ps = sorted(float(p) for p in noisy)
         fig = Path(args.out).with_name("quality_noisy.png")
-        figures.plot_noisy(ps, [_folds(runs["default" if p == 0 else f"noisy-{p:g}"], "ccr")
+        figures.plot_noisy(ps, [_folds(runs["best" if p == 0 else f"noisy-{p:g}"], "ccr")
                                 for p in ps],
-                           [_folds(runs["default" if p == 0 else f"noisy-{p:g}"],
+                           [_folds(runs["best" if p == 0 else f"noisy-{p:g}"],
                                    "interactions_per_demo") for p in ps], fig)
         out["noisy_figure"] = fig.name
     if "untaught" in runs:

@@ -103,9 +103,10 @@ class LearnerConfig:
     #: on LASA fold 0, 500 epochs gave 90 % CCR where 1500 gave 99 %.
     rehearsal_epochs: int = 0
     #: Recognition answers "unknown" when its familiarity (see
-    #: ``iloci.concepts.learner.familiarity``: 1 on a stored PB_rec, 0.5 at
-    #: the memory's typical distance between neighbouring concepts) is below
-    #: this; 0 never does (the paper always names a concept).
+    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration the
+    #: network reproduces well, 0.5 when it reproduces it as badly as one
+    #: known concept reproduces its neighbour) is below this; 0 never does
+    #: (the paper always names a concept).
     unknown_below: float = 0.0
     #: Novelty answer: when a demonstration's familiarity is below this, the
     #: robot first imitates it back as something new; "yes" founds the new

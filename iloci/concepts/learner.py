@@ -128,8 +128,9 @@ class Recognition:
     sources: tuple[str, ...]
     pb_obs: np.ndarray = field(repr=False)
     error: float = float("nan")
-    #: How much the demonstration is like what the memory holds (see
-    #: :func:`familiarity`); NaN when the memory cannot calibrate it.
+    #: How well the network reproduces the demonstration against the memory's
+    #: own error scale (:func:`familiarity`); NaN when the memory cannot
+    #: calibrate it (fewer than two concepts).
     familiarity: float = float("nan")
     #: True when ``familiarity`` is below ``[learner] unknown_below``: the
     #: robot answers "I don't know" (``concept`` is still the nearest one).
@@ -146,45 +147,49 @@ def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
     return np.asarray(ik_solver.lower), np.asarray(ik_solver.upper)
 
 
-def novelty_scale(pbs_rec: np.ndarray, labels: Sequence[str]) -> float:
-    """The memory's own distance scale: how far apart its neighbouring concepts lie.
+def novelty_scale(model: PerceptualModel, memory: Memory) -> float:
+    """The memory's own prediction-error scale for "unlike everything it knows".
 
-    The median, over entries, of the PB distance from an entry's PB_rec to
-    the nearest PB_rec of another concept (with a single concept: to the
-    nearest other entry). This project's calibration of "unlike everything
-    in memory"; the paper has none.
+    Each entry's pattern is regenerated from its PB (what the network
+    knows) and its closed-loop prediction error is measured under the PB
+    of the nearest entry (by PB_rec) of *another* concept: how badly one
+    known concept reproduces its neighbour. The median over entries is the
+    scale. This is the project's calibration; the paper has none.
 
     Parameters
     ----------
-    pbs_rec : ndarray, shape (M, P)
-    labels : sequence of str, length M
+    model : PerceptualModel
+    memory : Memory
 
     Returns
     -------
     float
-        NaN when the memory holds fewer than two entries (nothing to
-        calibrate on).
+        Mean squared error, encoded units; NaN when the memory holds fewer
+        than two concepts (nothing to calibrate on).
     """
-    x = np.asarray(pbs_rec, dtype=np.float64)
-    if len(x) < 2:
+    entries = memory.entries
+    labels = np.asarray(memory.concept_labels)
+    if len(set(labels.tolist())) < 2:
         return float("nan")
-    lab = np.asarray(labels)
-    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
-    np.fill_diagonal(d, np.inf)
-    other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
-    if np.all(np.isinf(other)):
-        other = d.min(axis=1)
-    other = other[np.isfinite(other)]
-    return float(np.median(other)) if other.size else float("nan")
+    rec = memory.pbs_rec
+    d = np.linalg.norm(rec[:, None, :] - rec[None, :, :], axis=2)
+    other = np.where(labels[:, None] != labels[None, :], d, np.inf).argmin(axis=1)
+    patterns = rehearsal.regenerate(model, entries)
+    errors = np.asarray(model.prediction_error(patterns, memory.pbs[other]), dtype=np.float64)
+    errors = errors[np.isfinite(errors)]
+    return float(np.median(errors)) if errors.size else float("nan")
 
 
-def familiarity(distance: np.ndarray | float, scale: float) -> np.ndarray:
-    """``scale / (scale + distance)``: 1 on a stored PB_rec, 0.5 at the memory's scale.
+def familiarity(error: np.ndarray | float, scale: float) -> np.ndarray:
+    """``scale / (scale + error)``: near 1 for what the network reproduces, 0.5 at the scale.
 
     Parameters
     ----------
-    distance : float or ndarray
-        PB distance from PB_obs to the nearest PB_rec.
+    error : float or ndarray
+        Closed-loop prediction error of a demonstration from its PB_obs
+        (how well the network can reproduce it at all; on LASA it separated
+        taught from untaught concepts better than the PB distance: AUROC
+        0.95 against 0.86, 5 folds, 4 of 22 concepts left out).
     scale : float
         :func:`novelty_scale` of the memory.
 
@@ -193,10 +198,10 @@ def familiarity(distance: np.ndarray | float, scale: float) -> np.ndarray:
     ndarray (or 0-d)
         In (0, 1]; NaN where ``scale`` is NaN or not positive.
     """
-    d = np.asarray(distance, dtype=np.float64)
+    e = np.asarray(error, dtype=np.float64)
     if not np.isfinite(scale) or scale <= 0:
-        return np.full(d.shape, np.nan)
-    return scale / (scale + d)
+        return np.full(e.shape, np.nan)
+    return scale / (scale + np.maximum(e, 0.0))
 
 
 def confidence(distances: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -439,7 +444,8 @@ class Learner:
         attempt = 0
         novel_fb = 0
         if self.config.novelty_below > 0:
-            fam = float(familiarity(distances.min(), novelty_scale(mem.pbs_rec, labels)))
+            error = float(np.asarray(self.model.prediction_error([seq], pb_obs[None]))[0])
+            fam = float(familiarity(error, novelty_scale(self.model, mem)))
             if fam < self.config.novelty_below:
                 attempt = 1
                 response = self.respond_novel(seq, start, dt, attempt, fam)
@@ -572,7 +578,7 @@ class Learner:
         dist = np.linalg.norm(pb_obs[:, None, :] - pbs_rec[None, :, :], axis=2)
         labels = self.memory.concept_labels
         nearest, conf = confidence(dist, labels)
-        fam = familiarity(dist[np.arange(len(dist)), nearest], novelty_scale(pbs_rec, labels))
+        fam = familiarity(errors, novelty_scale(self.model, self.memory))
         below = self.config.unknown_below
         out = []
         for b, i in enumerate(nearest):
