@@ -44,11 +44,12 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results" / "quality.json"
 
 #: The settings this issue recommends (``[learner]`` keys), measured here as ``best``.
-BEST: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True}}
+BEST: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True,
+                                    "decision": "reproduction"}}
 
 #: The paper's learning phase: every setting of this issue off.
 PAPER: dict[str, Any] = {"learner": {"novelty_below": 0.0, "unknown_below": 0.0,
-                                     "confirm_rewards": False}}
+                                     "confirm_rewards": False, "decision": "pb_distance"}}
 
 
 def _with(*parts: dict[str, Any]) -> dict[str, Any]:
@@ -64,6 +65,8 @@ ROWS: dict[str, dict[str, Any]] = {
     "best": BEST,
     "paper": PAPER,
     "novelty-only": _with(BEST, {"learner": {"confirm_rewards": False}}),
+    "pb-decision": _with(BEST, {"learner": {"decision": "pb_distance"}}),
+    "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
     "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
     "noisy-0.05": _with(BEST, {"teacher": {"name": "noisy", "p": 0.05}}),
     "noisy-0.1": _with(BEST, {"teacher": {"name": "noisy", "p": 0.1}}),
@@ -74,8 +77,9 @@ ROWS: dict[str, dict[str, Any]] = {
 }
 
 #: Rows run by default, in order (the cheap, decisive ones first).
-DEFAULT_ROWS = ("best", "paper", "noisy-0.1", "untaught", "paper-noisy-0.1", "noisy-0.05",
-                "noisy-0.2", "stream", "paper-stream")
+DEFAULT_ROWS = ("best", "paper", "pb-decision", "noisy-0.1", "untaught", "paper-noisy-0.1",
+                "noisy-0.05", "noisy-0.2", "reproduction-only", "novelty-only", "stream",
+                "paper-stream")
 
 
 def _merge(base: dict, changes: dict) -> dict:

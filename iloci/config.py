@@ -109,8 +109,18 @@ class LearnerConfig:
     #: confirms it, so one slip of the teacher cannot merge two concepts.
     #: Off: the paper's protocol (every reward is final).
     confirm_rewards: bool = False
+    #: What ranks the robot's concepts for a demonstration, in recognition
+    #: and in the order of its guesses: ``"pb_distance"`` (the paper: the
+    #: concept of the PB_rec nearest to PB_obs) or ``"reproduction"`` (the
+    #: concept of the entry whose PB, generated closed-loop from the
+    #: demonstration's first step, reproduces it with the lowest prediction
+    #: error; the confidence margin is then taken on those errors).
+    decision: str = "pb_distance"
 
     def validate(self) -> None:
+        if self.decision not in ("pb_distance", "reproduction"):
+            raise ValueError("decision must be 'pb_distance' or 'reproduction', got "
+                             f"{self.decision!r}")
         for name in ("unknown_below", "novelty_below"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")

@@ -429,3 +429,22 @@ def test_a_reward_after_a_no_is_kept_only_when_the_teacher_confirms_it(lasa, con
         assert len(agent.memory.concepts()) == 2
     else:  # the slip is caught: no merge, a concept of its own
         assert outcome.action == "new_concept" and len(agent.memory.concepts()) == 3
+
+
+def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa):
+    agent = make_agent(decision="reproduction")
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    demos = [lasa["GShape/2"], lasa["Sine/3"]]
+    seqs = [agent._encode(agent.motion(d))[0] for d in demos]
+    errors = agent.learner.entry_errors(seqs)
+    assert errors.shape == (2, len(agent.memory))
+    # each pair's error is the model's own prediction error from that entry's PB
+    for b, seq in enumerate(seqs):
+        for m, e in enumerate(agent.memory.entries):
+            assert errors[b, m] == pytest.approx(
+                agent.perceptual_model.prediction_error([seq], e.pb[None])[0], rel=1e-5)
+    for r, row in zip(agent.recognize(demos), errors):
+        assert r.entry == int(np.argmin(row))
+        assert r.concept == agent.memory.entries[r.entry].concept
+    with pytest.raises(iloci.errors.ConfigError, match="decision must be"):
+        iloci.build(small_config(decision="nearest"))

@@ -103,11 +103,14 @@ class Recognition:
         values near 1 mean it lies much closer to the answer. 1 when the
         memory holds a single concept. (The paper reports a confidence per
         answer without defining it; this margin is the project's
-        definition.)
+        definition.) With ``[learner] decision = "reproduction"`` the same
+        margin is taken on the entries' prediction errors
+        (:meth:`Learner.entry_errors`) instead of PB distances.
     distance : float
-        ``d_best``.
+        PB distance from PB_obs to the answering entry's PB_rec.
     entry : int
-        Index of the nearest entry in ``Memory.entries`` at recognition time.
+        Index of the answering entry in ``Memory.entries`` at recognition
+        time (the nearest one, or the best reproducing one).
     source : str
         Key of the demonstration the nearest entry holds.
     sources : tuple of str
@@ -312,6 +315,23 @@ class Learner:
         return np.asarray(self.model.recognize(list(sequences), candidate_pbs=self.memory.pbs),
                           dtype=np.float64).reshape(len(sequences), -1)
 
+    def entry_errors(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
+        """How well each entry's PB reproduces each sequence, shape (B, M).
+
+        The closed-loop prediction error (mean squared, encoded units) of
+        sequence ``b`` generated from entry ``m``'s PB, starting from the
+        sequence's own first step: ``[learner] decision = "reproduction"``
+        answers with the entry of lowest error (one batched call of the
+        model's ``prediction_error`` over every pair).
+        """
+        seqs = list(sequences)
+        pbs = self.memory.pbs
+        m = len(pbs)
+        pairs = [s for s in seqs for _ in range(m)]
+        errors = np.asarray(self.model.prediction_error(pairs, np.tile(pbs, (len(seqs), 1))),
+                            dtype=np.float64)
+        return errors.reshape(len(seqs), m)
+
     def respond(self, index: int, attempt: int = 1) -> Response:
         """The robot's answer: entry ``index`` regenerated, decoded and performed.
 
@@ -439,6 +459,10 @@ class Learner:
         pb_obs = self.recognize_pbs([seq])[0]
         distances = np.linalg.norm(mem.pbs_rec - pb_obs, axis=1)
         labels = mem.concept_labels
+        # what orders the guesses: PB distance (the paper) or how well each
+        # entry's PB reproduces the demonstration ([learner] decision)
+        ranking = (self.entry_errors([seq])[0] if self.config.decision == "reproduction"
+                   else distances)
         tried: list[str] = []
         attempt = 0
         novel_fb = 0
@@ -475,7 +499,7 @@ class Learner:
                 return LearnOutcome(key, label, "new_concept", tuple(feedbacks), tuple(events),
                                     tuple(rehearsals))
             attempt += 1
-            nearest = min(untried, key=lambda i: distances[i])
+            nearest = min(untried, key=lambda i: ranking[i])
             guess = labels[nearest]
             members = [i for i, c in enumerate(labels) if c == guess]
             answer = min(members, key=lambda i: mem.entries[i].generation_error)
@@ -576,7 +600,9 @@ class Learner:
         pbs_rec = self.memory.pbs_rec
         dist = np.linalg.norm(pb_obs[:, None, :] - pbs_rec[None, :, :], axis=2)
         labels = self.memory.concept_labels
-        nearest, conf = confidence(dist, labels)
+        ranking = (self.entry_errors(seqs) if self.config.decision == "reproduction"
+                   else dist)
+        nearest, conf = confidence(ranking, labels)
         fam = familiarity(errors, novelty_scale(self.model, self.memory))
         below = self.config.unknown_below
         out = []
