@@ -195,7 +195,9 @@ class Agent:
         ----------
         demos : iterable
             Each a :class:`~iloci.interfaces.Demonstration`, a path to a
-            ``.npy`` / ``.csv`` trajectory, or an (N, 2) array.
+            ``.npy`` / ``.csv`` trajectory, or an (N, 2) array. Files of
+            one name in different folders get distinct keys (``circle/0``,
+            ``circle/1``; see :func:`~iloci.data.files.trajectory_files`).
         on_change : callable, optional
             Called with each :class:`~iloci.concepts.learner.LearnOutcome`
             after the memory changed (e.g. to save it).
@@ -222,8 +224,14 @@ class Agent:
         t0 = time.perf_counter()
         skipped: list[tuple[str, str]] = []
 
+        from iloci.data.files import TrajectoryFile, trajectory_files
+        numbered: dict[str, dict[str, int]] = {}  # files of one stem: distinct keys
+
         def prepared(items: Iterable[Any]):
             for i, item in enumerate(items):
+                if isinstance(item, (str, os.PathLike)) and not isinstance(item,
+                                                                          TrajectoryFile):
+                    item = trajectory_files([item], numbered)[0]
                 name = _describe(item, i)
                 try:
                     demo = _as_demonstration(item, i)

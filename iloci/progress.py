@@ -17,10 +17,10 @@ point, is therefore a different stream, which is taught from its start
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
 import contextlib
 import hashlib
 import os
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +28,15 @@ import numpy as np
 
 from iloci.errors import IlociError
 
-__all__ = ["MemoryLockedError", "PROGRESS_KEY", "item_digest", "prefix_digest",
-           "progress_record", "resume_point", "teaching_lock"]
+__all__ = [
+    "PROGRESS_KEY",
+    "MemoryLockedError",
+    "item_digest",
+    "prefix_digest",
+    "progress_record",
+    "resume_point",
+    "teaching_lock",
+]
 
 #: Header key of the progress record in a memory file.
 PROGRESS_KEY = "teach_progress"

@@ -24,8 +24,14 @@ import pytest
 from iloci.config import _PLAIN_SECTIONS, load_config
 from iloci.data import load_trajectory
 from iloci.data.files import shared_stems, trajectory_files
-from iloci.errors import (ConfigError, InvalidDemonstrationError, MissingBackendError,
-                          PluginError, PluginNotLoadedError, UnknownComponentError)
+from iloci.errors import (
+    ConfigError,
+    InvalidDemonstrationError,
+    MissingBackendError,
+    PluginError,
+    PluginNotLoadedError,
+    UnknownComponentError,
+)
 from iloci.plugins import PluginInfo, PluginLoadWarning, get_plugin_manager, get_registry
 from iloci.registry import Registry
 
@@ -408,6 +414,8 @@ def test_evaluate_checks_its_report_libraries_before_fold_0(monkeypatch):
 
 
 def test_evaluate_refuses_an_unwritable_out_dir_before_fold_0(tmp_path, cli):
+    for plugin in ("iloci_jax", "iloci_scipy", "iloci_pinocchio"):  # the default config's
+        pytest.importorskip(plugin)
     blocker = tmp_path / "file"
     blocker.write_text("")
     out = cli("evaluate", "--out", str(blocker / "sub"), "--quiet")
@@ -416,3 +424,19 @@ def test_evaluate_refuses_an_unwritable_out_dir_before_fold_0(tmp_path, cli):
 
 if sys.platform == "win32":  # pragma: no cover
     pytest.skip("POSIX paths", allow_module_level=True)
+
+
+def test_agent_teach_numbers_files_of_one_name_too(tmp_path):
+    from iloci.agent import _as_demonstration
+    from iloci.data.files import TrajectoryFile
+    seen: dict = {}
+    paths = []
+    for person in ("s01", "s02"):
+        (tmp_path / person).mkdir()
+        p = tmp_path / person / "circle.csv"
+        p.write_text("x,y\n0,0\n1,1\n2,0\n")
+        paths.append(p)
+    files = [trajectory_files([p], seen)[0] for p in paths + paths[:1]]
+    assert [f.key for f in files] == ["circle/0", "circle/1", "circle/0"]
+    assert all(isinstance(f, TrajectoryFile) for f in files)
+    assert _as_demonstration(files[1], 0).key == "circle/1"

@@ -10,8 +10,14 @@ import numpy as np
 import pytest
 
 from iloci.data import load_lasa
-from iloci.progress import (MemoryLockedError, item_digest, prefix_digest, progress_record,
-                            resume_point, teaching_lock)
+from iloci.progress import (
+    MemoryLockedError,
+    item_digest,
+    prefix_digest,
+    progress_record,
+    resume_point,
+    teaching_lock,
+)
 
 
 def test_item_digest_is_what_the_item_teaches(tmp_path):

@@ -346,3 +346,17 @@ def test_memory_conflicts_cover_component_memory_keys():
     del saved["perceptual_model"]["pb"]  # a key the saved config leaves out: its default
     assert memory_conflicts(saved, cfg) == [
         "perceptual_model.pb = 4 in the memory, 3 in the config"]
+
+
+def test_teach_gives_files_of_one_name_distinct_keys(tmp_path):
+    import math
+    agent = _agent_with()
+    paths = []
+    for person, r in (("s01", 1.0), ("s02", 2.0)):
+        (tmp_path / person).mkdir()
+        p = tmp_path / person / "circle.csv"
+        p.write_text("x,y\n" + "\n".join(f"{r * math.cos(a)},{r * math.sin(a)}"
+                                          for a in np.linspace(0, 6, 40)))
+        paths.append(str(p))
+    report = agent.teach(paths)
+    assert [o.demo for o in report.outcomes] == ["circle/0", "circle/1"]

@@ -22,17 +22,17 @@ import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-from hypothesis.extra import numpy as hnp  # noqa: E402
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
-from iloci.cli import main as cli_main  # noqa: E402
-from iloci.concepts.memory import Entry, Memory, load_memory, save_memory  # noqa: E402
-from iloci.config import load_config  # noqa: E402
-from iloci.data import load_trajectory  # noqa: E402
-from iloci.errors import IlociError  # noqa: E402
-from iloci.interfaces import Demonstration  # noqa: E402
-from iloci.sensorimotor.encoding import SensorimotorEncoder  # noqa: E402
+from iloci.cli import main as cli_main
+from iloci.concepts.memory import Entry, Memory, load_memory, save_memory
+from iloci.config import load_config
+from iloci.data import load_trajectory
+from iloci.errors import IlociError
+from iloci.interfaces import Demonstration
+from iloci.sensorimotor.encoding import SensorimotorEncoder
 
 FS = settings(suppress_health_check=[HealthCheck.function_scoped_fixture,
                                      HealthCheck.too_slow], deadline=None)
@@ -177,29 +177,38 @@ def test_any_config_mapping_gives_a_config_or_an_iloci_error(data):
     result_or_iloci_error(load_config, data)
 
 
-def _toml_text(data: dict) -> str:
-    import tomli_w
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v) if -2**63 <= v < 2**63 else json.dumps(str(v))
+    if isinstance(v, float):
+        return {"nan": "nan", "inf": "inf", "-inf": "-inf"}.get(repr(v), repr(v))
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(type(v))
 
-    def clean(v):  # TOML has no None and no ints beyond 64 bits
-        if isinstance(v, dict):
-            return {k: clean(x) for k, x in v.items()}
-        if isinstance(v, list):
-            return [clean(x) for x in v]
-        if isinstance(v, int) and not isinstance(v, bool) and not -2**63 <= v < 2**63:
-            return str(v)
-        return v
-    try:
-        return tomli_w.dumps({k: (v if isinstance(v, dict) else {"v": v})
-                              for k, v in clean(data).items()})
-    except (TypeError, ValueError):
-        return ""
+
+def _toml_text(data: dict) -> str:
+    """TOML text of a config mapping (a non-table section value is written as a key)."""
+    lines = []
+    for sec, values in data.items():
+        if isinstance(values, dict):
+            lines.append(f"[{sec}]")
+            lines += [f"{k} = {_toml_value(v)}" for k, v in values.items()]
+        else:
+            lines.insert(0, f"{sec} = {_toml_value(values)}")
+    return "\n".join(lines) + "\n"
 
 
 @FS
 @given(text=st.one_of(config_dicts().map(_toml_text), st.text(max_size=200)),
        encoding=ENCODING)
 def test_any_config_file_exits_0_or_2(tmp_path_factory, capsys, text, encoding):
-    pytest.importorskip("tomli_w")
     f = tmp_path_factory.mktemp("cfg") / "c.toml"
     try:
         f.write_bytes(text.encode(encoding))

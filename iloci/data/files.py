@@ -146,7 +146,8 @@ class TrajectoryFile:
         return load_trajectory(self.path, shape=self.shape, index=self.index)
 
 
-def trajectory_files(paths: Iterable[str | os.PathLike[str]]) -> list[TrajectoryFile]:
+def trajectory_files(paths: Iterable[str | os.PathLike[str]],
+                     seen: dict[str, dict[str, int]] | None = None) -> list[TrajectoryFile]:
     """Stream items for trajectory files, with a distinct key per distinct file.
 
     Files whose names share a stem (``s01/circle.csv``, ``s02/circle.csv``:
@@ -157,13 +158,16 @@ def trajectory_files(paths: Iterable[str | os.PathLike[str]]) -> list[Trajectory
     Parameters
     ----------
     paths : iterable of path-like
+    seen : dict, optional
+        Numbering state (stem -> file -> index) to continue from, for a
+        stream whose files arrive one at a time; updated in place.
 
     Returns
     -------
     list of TrajectoryFile
         One per path, in order.
     """
-    seen: dict[str, dict[str, int]] = {}
+    seen = {} if seen is None else seen
     out = []
     for path in paths:
         p = Path(path)
