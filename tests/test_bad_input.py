@@ -41,7 +41,8 @@ from iloci.registry import Registry
 def test_toml_with_utf8_byte_order_mark_is_read(tmp_path):
     f = tmp_path / "bom.toml"
     f.write_bytes(codecs.BOM_UTF8 + b"[learner]\nk_cutoff = 0.7\n")
-    assert load_config(f).learner.k_cutoff == 0.7
+    from iloci.config import COMPONENT_SECTIONS  # no back end looked up: runs in bare too
+    assert load_config(f, supplied=COMPONENT_SECTIONS).learner.k_cutoff == 0.7
 
 
 def test_toml_in_utf16_says_so(tmp_path):
@@ -71,7 +72,7 @@ def _every_float_setting() -> list[tuple[str, dict, str]]:
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_no_float_setting_takes_nan_or_inf(bad):
     settings = _every_float_setting()
-    assert len(settings) >= 5  # the plain sections alone have several
+    assert len(settings) >= 4  # k_cutoff, similarity_threshold, train_fraction, noisy p
     for sec, base, key in settings:
         with pytest.raises(ConfigError, match=rf"{sec}\.{key} must be a finite number") as e:
             load_config({sec: {**base, key: bad}})
@@ -296,10 +297,11 @@ def test_plugin_with_a_misnamed_hook_argument_is_skipped_and_listed(site, cli):
     assert out.returncode == 0, out.stderr
     assert "failed: plugin 'badarg' (iloci-badarg)" in out.stdout
     assert "warning: iloci plugin 'badarg'" in out.stderr and "Traceback" not in out.stderr
-    ok = site / "ok.toml"
-    ok.write_text("[teacher]\nname = 'kind'\n")
-    out = cli("config", "show", str(ok), env=env)
-    assert out.returncode == 0, out.stderr
+    if _defaults_installed():
+        ok = site / "ok.toml"
+        ok.write_text("[teacher]\nname = 'kind'\n")
+        out = cli("config", "check", str(ok), env=env)
+        assert out.returncode == 0, out.stderr
 
 
 def test_plugin_failing_in_its_registration_hook_is_isolated(site):
@@ -369,7 +371,18 @@ def test_first_party_back_end_not_loaded_is_not_called_not_installed(status, mat
         Registry().get("clusterer", "scipy")
 
 
+def _defaults_installed() -> bool:
+    """Whether the default config's back ends are installed (not in `tox -e bare`)."""
+    try:
+        load_config(None)
+    except MissingBackendError:
+        return False
+    return True
+
+
 def test_config_check_reports_a_back_end_library_that_is_missing(site, cli):
+    if not _defaults_installed():
+        pytest.skip("the default config's back ends are not installed")
     _fake_distribution(site, "iloci-needs", "iloci_needs", "needs", """
         from iloci import hookimpl
 
