@@ -26,7 +26,7 @@ import pluggy
 
 from iloci import hookspecs
 from iloci.errors import PluginError
-from iloci.interfaces import KINDS
+from iloci.interfaces import COMPONENT_KINDS
 from iloci.registry import Registry
 
 __all__ = [
@@ -45,15 +45,6 @@ DEFAULT_PLUGINS = ("iloci.teachers",)
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
-
-_REGISTRATION_HOOKS = {
-    "perceptual_model": "iloci_register_perceptual_models",
-    "clusterer": "iloci_register_clusterers",
-    "teacher": "iloci_register_teachers",
-    "ik_solver": "iloci_register_ik_solvers",
-    "simulator": "iloci_register_simulators",
-}
-
 
 class PluginLoadWarning(UserWarning):
     """An installed plugin failed to import or to register; it was skipped."""
@@ -279,15 +270,15 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
         info = pm.iloci_plugin_info = {}  # type: ignore[attr-defined]
     registry = Registry()
     failed: set[str] = set()
-    for kind in KINDS:
-        caller = getattr(pm.hook, _REGISTRATION_HOOKS[kind])
+    for kind in COMPONENT_KINDS.values():
+        caller = getattr(pm.hook, kind.hook)
         # registration order: built-ins first, then installed plugins, then the
         # caller's, so a name registered twice is blamed on the later plugin
         for impl in caller.get_hookimpls():
             if impl.plugin_name in failed:
                 continue
             pinfo = info.get(impl.plugin_name, PluginInfo(impl.plugin_name, None, None))
-            view = registry.view(kind, plugin=impl.plugin_name,
+            view = registry.view(kind.name, plugin=impl.plugin_name,
                                  distribution=pinfo.distribution, version=pinfo.version)
             try:
                 impl.function(**{arg: view for arg in impl.argnames})

@@ -41,8 +41,8 @@ from iloci.registry import Registry
 def test_toml_with_utf8_byte_order_mark_is_read(tmp_path):
     f = tmp_path / "bom.toml"
     f.write_bytes(codecs.BOM_UTF8 + b"[learner]\nk_cutoff = 0.7\n")
-    from iloci.config import COMPONENT_SECTIONS  # no back end looked up: runs in bare too
-    assert load_config(f, supplied=COMPONENT_SECTIONS).learner.k_cutoff == 0.7
+    from iloci.interfaces import COMPONENT_KINDS  # no back end looked up: runs in bare too
+    assert load_config(f, supplied=COMPONENT_KINDS).learner.k_cutoff == 0.7
 
 
 def test_toml_in_utf16_says_so(tmp_path):
@@ -60,10 +60,10 @@ def _float_fields(cls: type) -> list[str]:
 def _every_float_setting() -> list[tuple[str, dict, str]]:
     """(section, other keys, key) of every float setting, plain and registered schemas."""
     out = [(sec, {}, key) for sec, cls in _PLAIN_SECTIONS.items() for key in _float_fields(cls)]
-    from iloci.config import COMPONENT_SECTIONS
+    from iloci.interfaces import COMPONENT_KINDS
     registry = get_registry()
-    for sec, kind in COMPONENT_SECTIONS.items():
-        for spec in registry.specs(kind):
+    for sec in COMPONENT_KINDS:
+        for spec in registry.specs(sec):
             if spec.params is not None:
                 out += [(sec, {"name": spec.name}, key) for key in _float_fields(spec.params)]
     return out
@@ -113,7 +113,6 @@ def test_out_of_range_or_mistyped_values_name_their_key(section, values, match):
 
 
 def test_input_size_must_match_the_encoding():
-    from iloci.config import COMPONENT_SECTIONS  # noqa: F401
     registry = get_registry()
     models = registry.names("perceptual_model")
     if not models:
