@@ -449,8 +449,8 @@ def _check_overrides(overrides: dict[str, Any]) -> None:
 def _describe(item: Any, i: int) -> str:
     if isinstance(item, Demonstration):
         return repr(item.key)
-    if hasattr(item, "key") and isinstance(item, os.PathLike):
-        return f"{str(os.fspath(item))!r} ({item.key})"
+    if isinstance(item, os.PathLike):  # a TrajectoryFile too: named by its path
+        return repr(os.fspath(item))
     if isinstance(item, (str, os.PathLike)):
         return repr(str(item))
     return f"#{i} of the stream"
