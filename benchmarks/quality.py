@@ -68,6 +68,7 @@ ROWS: dict[str, dict[str, Any]] = {
     "pb-decision": _with(BEST, {"learner": {"decision": "pb_distance"}}),
     "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
     "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
+    "paper-untaught": _with(PAPER, {"evaluation": {"untaught": 4}}),
     "noisy-0.05": _with(BEST, {"teacher": {"name": "noisy", "p": 0.05}}),
     "noisy-0.1": _with(BEST, {"teacher": {"name": "noisy", "p": 0.1}}),
     "noisy-0.2": _with(BEST, {"teacher": {"name": "noisy", "p": 0.2}}),
@@ -93,21 +94,22 @@ def _merge(base: dict, changes: dict) -> dict:
     return out
 
 
-def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool) -> dict:
-    """One (row, seed) run, from the cache when there."""
+def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool,
+            cached_only: bool = False) -> dict | None:
+    """One (row, seed) run, from the cache when there (``None``: not cached, not run)."""
     from iloci.config import load_config
 
     data = _merge(base, ROWS[row])
     data.setdefault("evaluation", {})["seed"] = seed
-    if "teacher" in ROWS[row]:
-        data["teacher"] = {**data["teacher"], "seed": seed} if data["teacher"].get(
-            "name") == "noisy" else data["teacher"]
+    # the noisy teacher's draws are seeded by the config's seed
     config = load_config(data)
     key = cache / f"{row}-seed{seed}.json"
     if key.is_file() and not fresh:
         cached = json.loads(key.read_text())
         if cached.get("config") == config.to_dict():
             return cached
+    if cached_only:
+        return None
     t0 = time.perf_counter()
     if config.evaluation.protocol == "stream":
         from iloci.evaluation.stream import run_stream
@@ -134,13 +136,16 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
 
 
 def _folds(runs: list[dict], key: str) -> list[float]:
-    return [f[key] for r in runs for f in r["folds"]]
+    return [f.get(key, float("nan")) for r in runs for f in r["folds"]]
 
 
 def _ms(values: list[float]) -> dict[str, float]:
     a = np.asarray(values, dtype=float)
-    return {"mean": float(np.nanmean(a)), "std": float(np.nanstd(a)),
-            "min": float(np.nanmin(a)), "n": int(a.size)}
+    a = a[np.isfinite(a)]
+    if not a.size:
+        return {"mean": None, "std": None, "min": None, "n": 0}
+    return {"mean": float(a.mean()), "std": float(a.std()), "min": float(a.min()),
+            "n": int(a.size)}
 
 
 def summarize_folds(runs: list[dict]) -> dict[str, Any]:
@@ -157,30 +162,44 @@ def summarize_folds(runs: list[dict]) -> dict[str, Any]:
     }
 
 
+def _unknown_score(f: dict) -> tuple[str, list[float]]:
+    """Familiarity when the run recorded it, else the negative prediction error."""
+    if f.get("familiarity") and all(np.isfinite(f["familiarity"])):
+        return "familiarity", list(f["familiarity"])
+    return "-prediction_error", [-e for e in f["error"]]
+
+
 def summarize_unknown(runs: list[dict]) -> dict[str, Any]:
     from iloci.evaluation.metrics import auroc
-    taught, untaught = [], []
+    taught, untaught, names, per_seed = [], [], set(), {}
     for r in runs:
+        tt, uu = [], []
         for f in r["folds"]:
-            for t, fam in zip(f["taught"], f.get("familiarity", f["confidence"])):
-                (taught if t else untaught).append(fam)
-    per_seed = {}
-    for r in runs:
-        tt = [x for f in r["folds"] for t, x in zip(f["taught"], f.get(
-            "familiarity", f["confidence"])) if t]
-        uu = [x for f in r["folds"] for t, x in zip(f["taught"], f.get(
-            "familiarity", f["confidence"])) if not t]
+            name, score = _unknown_score(f)
+            names.add(name)
+            for t, x in zip(f["taught"], score):
+                (tt if t else uu).append(x)
         per_seed[str(r["seed"])] = auroc(tt, uu)
+        taught += tt
+        untaught += uu
     unknown_t = [u for r in runs for f in r["folds"] for t, u in zip(
         f["taught"], f.get("unknown", [False] * len(f["taught"]))) if t]
     unknown_u = [u for r in runs for f in r["folds"] for t, u in zip(
         f["taught"], f.get("unknown", [False] * len(f["taught"]))) if not t]
-    right_t = [p == tr for r in runs for f in r["folds"] for t, p, tr in zip(
-        f["taught"], f["predicted"], f["true"]) if t]
-    return {"auroc": auroc(taught, untaught), "auroc_seeds": per_seed,
+    return {"auroc": auroc(taught, untaught), "score": sorted(names),
+            "auroc_seeds": per_seed,
+            "auroc_pb_distance": auroc(
+                [-d for r in runs for f in r["folds"] for t, d in zip(f["taught"], f["distance"])
+                 if t],
+                [-d for r in runs for f in r["folds"] for t, d in zip(f["taught"], f["distance"])
+                 if not t]),
+            "auroc_margin_confidence": auroc(
+                [c for r in runs for f in r["folds"] for t, c in zip(f["taught"],
+                                                                     f["confidence"]) if t],
+                [c for r in runs for f in r["folds"] for t, c in zip(f["taught"],
+                                                                     f["confidence"]) if not t]),
             "untaught_answered_unknown": float(np.mean(unknown_u)) if unknown_u else None,
             "taught_answered_unknown": float(np.mean(unknown_t)) if unknown_t else None,
-            "taught_ccr": float(np.mean(right_t)) if right_t else None,
             "taught_demos": len(taught), "untaught_demos": len(untaught),
             "seeds": [r["seed"] for r in runs]}
 
@@ -210,6 +229,8 @@ def main(argv: list[str] | None = None) -> dict:
                     help=f"comma-separated rows of {', '.join(ROWS)}")
     ap.add_argument("--cache", default="runs/quality-cache", help="per-run result cache")
     ap.add_argument("--fresh", action="store_true", help="ignore cached runs")
+    ap.add_argument("--cached-only", action="store_true",
+                    help="summarise the cached runs only; run nothing")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
 
@@ -230,7 +251,10 @@ def main(argv: list[str] | None = None) -> dict:
     for row in rows:
         for seed in args.seeds:
             print(f"[quality] {row} seed {seed} ...", file=sys.stderr, flush=True)
-            r = run_one(base, row, seed, args.jobs, cache, args.fresh)
+            r = run_one(base, row, seed, args.jobs, cache, args.fresh, args.cached_only)
+            if r is None:
+                print(f"[quality] {row} seed {seed}: not cached, skipped", file=sys.stderr)
+                continue
             runs.setdefault(row, []).append(r)
             m = r["metrics"]
             print(f"[quality] {row} seed {seed}: "
@@ -246,6 +270,8 @@ def main(argv: list[str] | None = None) -> dict:
         "sensorimotor": base["sensorimotor"],
         "seeds": args.seeds,
     }
+    rows = [r for r in rows if r in runs]
+    out["rows_run"] = {r: [x["seed"] for x in runs[r]] for r in rows}
     if "best" in runs:
         d = summarize_folds(runs["best"])
         out["ccr"] = d["ccr"]
@@ -259,7 +285,7 @@ def main(argv: list[str] | None = None) -> dict:
     noisy = {}
     for row in rows:
         if row.startswith("noisy-") or row == "best":
-            p = 0.0 if row == "best" else float(row.split("-")[1])
+            p = 0.0 if row == "best" else float(row.split("-", 1)[1])
             s = summarize_folds(runs[row])
             noisy[str(p)] = {k: s[k] for k in ("ccr", "ccr_matched", "purity", "concepts",
                                                 "feedbacks_per_demo")}
@@ -272,8 +298,10 @@ def main(argv: list[str] | None = None) -> dict:
                            [_folds(runs["best" if p == 0 else f"noisy-{p:g}"],
                                    "interactions_per_demo") for p in ps], fig)
         out["noisy_figure"] = fig.name
-    if "untaught" in runs:
-        out["unknown_auroc"] = summarize_unknown(runs["untaught"])
+    for row in ("untaught", "paper-untaught"):
+        if row in runs:
+            out["unknown_auroc"] = summarize_unknown(runs[row]) | {"row": row}
+            break
     if "stream" in runs:
         out["stream"] = summarize_stream(runs["stream"])
     out["ablation"] = {}
