@@ -275,8 +275,14 @@ class Agent:
         return out[0] if single else out
 
     def respond(self, concept: str):
-        """Perform ``concept``: its entry of lowest generation error, as a Response."""
-        return self.learner.respond(self.memory.performer_of(concept))
+        """Perform ``concept``: its entry of lowest generation error, as a Response.
+
+        See :func:`~iloci.concepts.learner.perform`; executed on the
+        configured simulator, if any.
+        """
+        from iloci.concepts.learner import ik_joint_limits, perform
+        return perform(self.memory, self.perceptual_model, self.memory.performer_of(concept),
+                       joint_limits=ik_joint_limits(self.ik_solver), simulator=self.simulator)
 
     # -- persistence --------------------------------------------------------------------
     def save(self, path: str | os.PathLike[str]) -> Path:

@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "demonstration's PB. Confidence is 1 - d_best / d_other, the margin to "
                     "the nearest entry of another concept (0: ambiguous, 1: clear).")
     p.add_argument("files", nargs="+", metavar="FILE",
-                   help=".npy/.csv trajectory files, or LASA demonstrations as SHAPE/INDEX")
+                   help=".npy/.csv trajectory files, or LASA demonstrations as SHAPE/INDEX "
+                        "(SHAPE alone: its first)")
     p.add_argument("--memory", metavar="FILE", required=True,
                    help="memory file written by `iloci teach`")
     p.add_argument("--json", action="store_true", help="print one JSON object per line")
@@ -25,11 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from iloci.agent import Agent
-    from iloci.commands.teach import resolve_demos
-    from iloci.data import load_trajectory
+    from iloci.data.streams import resolve_demo
 
     agent = Agent.load(args.memory)
-    demos = [load_trajectory(d) if isinstance(d, str) else d for d in resolve_demos(args.files)]
+    demos = [resolve_demo(token) for token in args.files]
     for r in agent.recognize(demos):
         if args.json:
             print(json.dumps({"demo": r.demo, "concept": r.concept,

@@ -1,4 +1,4 @@
-"""``iloci show SHAPE``: one demonstration through the sensorimotor path, as a figure.
+"""``iloci show SHAPE/INDEX``: one demonstration through the sensorimotor path, as a figure.
 
 Three panels: the raw pen path (teacher's frame), the path fitted into the
 robot's drawing plane with the forward kinematics of the IK solution over
@@ -25,10 +25,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "sees it: the raw pen path, the path fitted into the drawing plane with "
                     "the forward kinematics of the IK solution over it, and the joint "
                     "angles over time.")
-    p.add_argument("shape", metavar="SHAPE",
-                   help="LASA shape name (e.g. GShape) or a .npy/.csv trajectory file")
-    p.add_argument("--demo", type=int, default=0, metavar="I",
-                   help="demonstration index of a LASA shape, 0..6 (default 0)")
+    p.add_argument("shape", metavar="DEMO",
+                   help="LASA demonstration as SHAPE/INDEX (e.g. GShape/3) or SHAPE (its "
+                        "first, or --demo), or a .npy/.csv trajectory file")
+    p.add_argument("--demo", type=int, default=None, metavar="I",
+                   help="demonstration index of a LASA SHAPE, 0..6 (default 0)")
     p.add_argument("--out", metavar="FILE.png",
                    help="image to write (default: SHAPE-I.png in the current directory)")
     p.add_argument("--config", metavar="FILE",
@@ -37,19 +38,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _load_demo(shape: str, demo: int):
-    from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa, load_trajectory
+def _load_demo(token: str, demo: int | None):
+    """The demonstration ``SHAPE/INDEX``, ``SHAPE`` with ``--demo`` (default 0), or a file."""
     from iloci.data.lasa import DEMOS_PER_SHAPE
+    from iloci.data.streams import resolve_demo
 
-    if shape in LASA_SHAPES or shape in MULTI_MODEL_SHAPES:
-        if not 0 <= demo < DEMOS_PER_SHAPE:
-            raise InvalidInputError(f"--demo must be 0..{DEMOS_PER_SHAPE - 1} for a LASA "
-                                    f"shape, got {demo}.")
-        return load_lasa([shape])[demo]
-    if Path(shape).suffix.lower() in (".npy", ".csv") or Path(shape).is_file():
-        return load_trajectory(shape)
-    load_lasa([shape])  # raises the unknown-shape error with "did you mean"
-    raise AssertionError("unreachable")
+    if demo is None:
+        return resolve_demo(token)
+    if Path(token).suffix.lower() in (".npy", ".csv") or Path(token).is_file():
+        raise InvalidInputError(f"--demo picks a demonstration of a LASA shape; {token!r} "
+                                "is a trajectory file (drop --demo).")
+    if "/" in token:
+        raise InvalidInputError(f"give the demonstration once: {token!r} or --demo {demo}, "
+                                "not both.")
+    if not 0 <= demo < DEMOS_PER_SHAPE:
+        raise InvalidInputError(f"--demo must be 0..{DEMOS_PER_SHAPE - 1} for a LASA "
+                                f"shape, got {demo}.")
+    return resolve_demo(f"{token}/{demo}")
 
 
 def _components(config_file: str | None):

@@ -7,16 +7,11 @@ interrupted session loses at most the demonstration being taught.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
 from pathlib import Path
 import sys
 import warnings
 
-import numpy as np
-
-from iloci.errors import InvalidInputError
-
-__all__ = ["register", "run", "resolve_demos", "default_stream"]
+__all__ = ["register", "run"]
 
 #: Memory file used when ``--memory`` is not given.
 DEFAULT_MEMORY = "iloci-memory.npz"
@@ -43,56 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def default_stream(config) -> list:
-    """A seeded LASA learning stream: part of each shape's demonstrations, shuffled.
-
-    ``round(train_fraction * 7)`` (at least 1) demonstrations of each of the
-    config's ``[data] shapes`` (all 26 when empty), chosen and ordered at
-    random with ``[evaluation] seed``.
-    """
-    from iloci.data import LASA_SHAPES, load_lasa
-    from iloci.data.lasa import DEMOS_PER_SHAPE
-
-    shapes = list(config.data.shapes) or list(LASA_SHAPES)
-    rng = np.random.default_rng(config.evaluation.seed)
-    per_shape = max(1, round(config.evaluation.train_fraction * DEMOS_PER_SHAPE))
-    demos = []
-    for shape in shapes:
-        own = load_lasa([shape])
-        demos.extend(own[i] for i in sorted(rng.choice(len(own), per_shape, replace=False)))
-    return [demos[i] for i in rng.permutation(len(demos))]
-
-
-def resolve_demos(tokens: Sequence[str]) -> list:
-    """Stream items for the command-line tokens.
-
-    ``SHAPE/INDEX`` and ``SHAPE`` name LASA demonstrations (checked now:
-    a misspelt name is an error); anything else is a trajectory file,
-    passed on as a path so a bad file is skipped when its turn comes.
-    """
-    from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa
-    from iloci.data.lasa import DEMOS_PER_SHAPE
-
-    items: list = []
-    for tok in tokens:
-        path = Path(tok)
-        if path.suffix.lower() in (".npy", ".csv") or path.is_file():
-            items.append(tok)
-            continue
-        shape, sep, index = tok.partition("/")
-        if shape not in LASA_SHAPES + MULTI_MODEL_SHAPES:
-            load_lasa([shape])  # raises the unknown-shape error with "did you mean"
-        demos = load_lasa([shape])
-        if not sep:
-            items.extend(demos)
-            continue
-        if not index.isdigit() or not 0 <= int(index) < DEMOS_PER_SHAPE:
-            raise InvalidInputError(f"{tok!r}: the demonstration index must be 0.."
-                                    f"{DEMOS_PER_SHAPE - 1}, as in {shape}/3.")
-        items.append(demos[int(index)])
-    return items
-
-
 def _describe(outcome) -> str:
     steps = []
     for ev in outcome.events:
@@ -113,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from iloci.agent import Agent, SkippedDemonstrationWarning, build
     from iloci.concepts.memory import load_memory
     from iloci.config import load_config
+    from iloci.data.streams import default_stream, resolve_demos
 
     memory_path = Path(args.memory)
     header = load_memory(memory_path)[2] if memory_path.exists() else None
