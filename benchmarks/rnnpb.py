@@ -16,7 +16,7 @@ Writes ``benchmarks/results/rnnpb.json``::
     recognize_146_s_adam the same with recognition_method = "adam" (200 steps,
                          gradient descent on the PB, as in Tani's RNNPB)
     offline_ccr          per back end: correct classification rate per fold of
-                         DESIGN.md section 6 (mean over 3 network seeds; each
+                         docs/method.md's "Evaluation protocol" (mean over 3 network seeds; each
                          run in ``runs``) and mean +- std over folds; each test demo is
                          classified by its nearest PB_rec (PB_rec = recognize() of
                          the learning sequences); also the rate of the
@@ -213,7 +213,7 @@ def offline_ccr(backend: str, demos, motions, folds, seeds=(0,), **params) -> di
     rate is the mean over those runs: a training is chaotic, so a change in
     the last bit of the arithmetic moves one run's rate by several points.
     """
-    concepts = np.array([d.concept for d in demos])
+    concepts = np.array([d.true_concept for d in demos])
     runs = []                                   # one dict per (fold, seed)
     for k, (learn, test) in enumerate(folds):
         seqs = encoded(motions, learn)

@@ -1,6 +1,8 @@
-"""``iloci show SHAPE/INDEX``: one demonstration through the sensorimotor path, as a figure.
+"""``iloci show``: a demonstration through the sensorimotor path, as a figure; or a memory.
 
-Three panels: the raw pen path (teacher's frame), the path fitted into the
+``iloci show MEMORY.npz`` prints what a taught memory holds (entries,
+exemplars, prototypes and concepts, counted as every other output counts
+them). ``iloci show SHAPE/INDEX`` draws three panels: the raw pen path (teacher's frame), the path fitted into the
 robot's drawing plane with the forward kinematics of the IK solution over
 it, and the joint angles over time.
 """
@@ -27,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "angles over time.")
     p.add_argument("shape", metavar="DEMO",
                    help="LASA demonstration as SHAPE/INDEX (e.g. GShape/3) or SHAPE (its "
-                        "first, or --demo), or a .npy/.csv trajectory file")
+                        "first, or --demo), or a .npy/.csv trajectory file; or a memory "
+                        "file (.npz) written by `iloci teach`, to print what it holds")
     p.add_argument("--demo", type=int, default=None, metavar="I",
                    help="demonstration index of a LASA SHAPE, 0..6 (default 0)")
     p.add_argument("--out", metavar="FILE.png",
@@ -72,6 +75,9 @@ def _components(config_file: str | None):
 def run(args: argparse.Namespace) -> int:
     from iloci.sensorimotor.pipeline import to_motion
 
+    if Path(args.shape).suffix.lower() == ".npz":
+        return _show_memory(args)
+
     demo = _load_demo(args.shape, args.demo)
     ik, sm = _components(args.config)
     motion = to_motion(demo, sm, ik)
@@ -85,6 +91,21 @@ def run(args: argparse.Namespace) -> int:
           f"FK error max {err.max() * 1000:.4f} mm; joints within limits: "
           f"{'yes' if inside else 'NO'}")
     print(f"wrote {out}")
+    return 0
+
+
+def _show_memory(args: argparse.Namespace) -> int:
+    from iloci.concepts.memory import load_memory
+
+    if args.demo is not None or args.out or args.config:
+        raise InvalidInputError("--demo, --out and --config apply to a demonstration, not to "
+                                f"a memory file ({args.shape}).")
+    memory, _, header = load_memory(args.shape)
+    config = header.get("config") if isinstance(header.get("config"), dict) else {}
+    names = ", ".join(f"{sec} = {v['name']}" for sec, v in config.items()
+                      if isinstance(v, dict) and "name" in v)
+    print(f"{args.shape}: {names or 'no saved config'}")
+    print(memory.summary())
     return 0
 
 

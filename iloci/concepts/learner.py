@@ -1,6 +1,6 @@
 """ILoCI's learning phase, one demonstration at a time, and its inference phase.
 
-Learning (DESIGN.md section 5, the paper's "Learning Phase")::
+Learning (docs/method.md, "Learning phase"; the paper's "Learning Phase")::
 
     PB_obs = recognize(sequence)                   (multi-start from the stored PBs)
     tried = {}

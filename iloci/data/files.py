@@ -22,7 +22,7 @@ _TIME_NAMES = ("t", "time", "times", "timestamp")
 
 
 def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
-                    concept: str | None = None, index: int = 0) -> Demonstration:
+                    true_concept: str | None = None, index: int = 0) -> Demonstration:
     """Read one pen trajectory from a file.
 
     Two layouts, in either format:
@@ -41,8 +41,8 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
     path : str or path-like
     shape : str, optional
         Name of the drawn shape; defaults to the file's stem.
-    concept : str, optional
-        The true concept, if known.
+    true_concept : str, optional
+        The true concept, if known (see :class:`~iloci.interfaces.Demonstration`).
     index : int
         Demonstration index (the key is ``"SHAPE/INDEX"``).
 
@@ -93,7 +93,7 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
         times = arr[:, tcol]
         arr = np.delete(arr, tcol, axis=1)
     return Demonstration(positions=arr, times=times, shape=name, index=index,
-                         concept=concept)
+                         true_concept=true_concept)
 
 
 def _read_csv(p: Path) -> tuple[np.ndarray, list[str] | None]:

@@ -229,7 +229,7 @@ CLUSTERER_CHECKS = [cl_protocol, cl_shapes_and_labels, cl_complete_link, cl_dete
 def _demo(shape: str = "GShape", index: int = 0, concept: str | None = "GShape") -> Demonstration:
     t = np.linspace(0, 1, 30)
     pos = np.column_stack([np.cos(3 * t + index), np.sin(2 * t)])
-    return Demonstration(pos, t, shape=shape, index=index, concept=concept)
+    return Demonstration(pos, t, shape=shape, index=index, true_concept=concept)
 
 
 def _response(source: str) -> Response:

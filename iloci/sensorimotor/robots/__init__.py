@@ -182,7 +182,7 @@ class Robot:
 
 def _nao_v32_right_arm() -> Robot:
     path = Path(str(resources.files("iloci.sensorimotor.robots") / "nao_v32_right_arm.urdf"))
-    # limits as in the URDF (DESIGN.md section 7), rad
+    # limits as in the URDF (docs/method.md, "The robot"), rad
     lower = np.array([-2.0856685, -1.6493361, -2.0856685, 0.0087266])
     upper = np.array([2.0856685, -0.0087266, 2.0856685, 1.5620696])
     for a in (lower, upper):
