@@ -56,6 +56,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
 #: Training epochs of the offline accuracy check (other settings: defaults).
@@ -226,7 +227,7 @@ def offline_ccr(backend: str, demos, motions, folds, seeds=(0,), **params) -> di
             pb_rec = m.recognize(L)
             pb_obs = m.recognize(T)
             seconds = time.perf_counter() - t0
-            nearest = np.linalg.norm(pb_obs[:, None] - pb_rec[None], axis=-1).argmin(axis=1)
+            nearest = cdist(pb_obs, pb_rec).argmin(axis=1)
             ccr = float(np.mean(concepts[learn][nearest] == concepts[test]))
             # the stored PB under which the network predicts the test sequence best
             errors = np.stack([m.prediction_error(T, np.repeat(pb[None], len(T), axis=0))

@@ -22,6 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from iloci.errors import FeedbackError, InvalidDemonstrationError
+from iloci.validation import check_array
 
 __all__ = [
     "Demonstration",
@@ -38,22 +39,6 @@ __all__ = [
     "check_feedback",
     "unmet_members",
 ]
-
-def _check_finite_2d(name: str, arr: Any, width: int) -> np.ndarray:
-    try:
-        a = np.asarray(arr, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidDemonstrationError(
-            f"{name} must be a numeric array of shape (N, {width}); could not "
-            f"convert it ({exc})."
-        ) from None
-    if a.ndim != 2 or a.shape[1] != width:
-        raise InvalidDemonstrationError(
-            f"{name} must have shape (N, {width}), got {a.shape}. Pass one row "
-            f"per sample with {width} columns."
-        )
-    return a
-
 
 @dataclass(frozen=True, eq=False, init=False)
 class Demonstration:
@@ -117,7 +102,9 @@ class Demonstration:
 
     def __post_init__(self) -> None:
         label = f"demonstration {self.key!r}"
-        pos = _check_finite_2d(f"positions of {label}", self.positions, 2)
+        pos = check_array(self.positions, f"positions of {label}", ("N", 2), finite=False,
+                          error=InvalidDemonstrationError,
+                          hint=" Pass one row per sample with 2 columns.")
         if len(pos) < 3:
             raise InvalidDemonstrationError(
                 f"{label} has {len(pos)} point(s); at least 3 are needed to "

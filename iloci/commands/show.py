@@ -2,9 +2,10 @@
 
 ``iloci show MEMORY.npz`` prints what a taught memory holds (entries,
 exemplars, prototypes and concepts, counted as every other output counts
-them). ``iloci show SHAPE/INDEX`` draws three panels: the raw pen path (teacher's frame), the path fitted into the
-robot's drawing plane with the forward kinematics of the IK solution over
-it, and the joint angles over time.
+them). ``iloci show SHAPE/INDEX`` draws three panels: the raw pen path
+(teacher's frame), the path fitted into the robot's drawing plane with the
+forward kinematics of the IK solution over it, and the joint angles over
+time.
 """
 
 from __future__ import annotations

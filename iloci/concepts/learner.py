@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from iloci.concepts import clustering, rehearsal
 from iloci.concepts.memory import Entry, Memory
@@ -474,7 +475,7 @@ class Learner:
             return []
         pb_obs = self.recognize_pbs(seqs)
         pbs_rec = self.memory.pbs_rec
-        dist = np.linalg.norm(pb_obs[:, None, :] - pbs_rec[None, :, :], axis=2)
+        dist = cdist(pb_obs, pbs_rec, "euclidean")
         labels = self.memory.concept_labels
         nearest, conf = confidence(dist, labels)
         out = []

@@ -29,8 +29,7 @@ import numpy as np
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
-from iloci.evaluation.metrics import (confidence_matrix, confusion_matrix,
-                                      correct_classification_rate, mean_std)
+from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
 __all__ = ["Evaluation", "FoldResult", "evaluate", "fold_plan", "memory_counts", "run_fold",
