@@ -182,11 +182,11 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         "",
     ]
     if have_pb:
-        lines += [f"## PB space (fold {first['fold']})", "",
+        lines += [f"## PB space (fold {first.fold})", "",
                   "Memory PB_rec (large: prototypes, medium: exemplars) and test PB_obs "
                   "(small), by non-metric MDS; one marker per true concept.", "",
                   "![PB space](figures/pb_space.png)", ""]
-    if first.get("shapes"):
+    if first.shapes:
         lines += ["## Regenerated shapes", "",
                   "Each concept's lowest-generation-error entry, generated closed-loop from "
                   "its PB and decoded to the drawing plane (green: start).", "",
