@@ -455,3 +455,27 @@ def test_agent_teach_numbers_files_of_one_name_too(tmp_path):
     assert [f.key for f in files] == ["circle/0", "circle/1", "circle/0"]
     assert all(isinstance(f, TrajectoryFile) for f in files)
     assert _as_demonstration(files[1], 0).key == "circle/1"
+
+
+def test_evaluate_checks_every_back_end_before_fold_0(monkeypatch):
+    """A configured component whose library is missing stops evaluate() before any data."""
+    from iloci import hookimpl
+    from iloci.evaluation import evaluate as ev
+
+    class NeedsLib:
+        @hookimpl
+        def iloci_register_teachers(self, registry):
+            registry.add("needy", "x_mod:T", requires=("no_such_module_xyz",),
+                         install="pip install no-such-module-xyz")
+
+    pm = get_plugin_manager(plugins=[NeedsLib()])
+    if not _defaults_installed():
+        pytest.skip("the default config's back ends are not installed")
+    config = load_config({"teacher": {"name": "needy"}}, registry=get_registry(pm))
+
+    def no_data(*a, **k):
+        raise AssertionError("LASA was loaded before the back ends were checked")
+
+    monkeypatch.setattr("iloci.data.load_lasa", no_data)
+    with pytest.raises(MissingBackendError, match="teacher 'needy' needs no_such_module_xyz"):
+        ev.evaluate(config, plugin_manager=pm, jobs=1)

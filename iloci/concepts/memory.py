@@ -44,8 +44,10 @@ import hashlib
 import json
 import os
 from pathlib import Path
+import struct
 from typing import Any
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -413,7 +415,11 @@ def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndar
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, zlib.error,
+            struct.error, OverflowError,
+            # a damaged zip directory can claim a compression method zipfile lacks
+            # (NotImplementedError) or an encrypted member (RuntimeError)
+            NotImplementedError, RuntimeError) as exc:
         raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
                               f"or not an iloci memory ({type(exc).__name__}: {exc}).") from None
     raw = arrays.pop("__header__", None)
