@@ -125,9 +125,10 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
             k: v for k, v in metrics.items() if k not in ("versions", "machine")},
             "folds": [{k: r[k] for k in (
                 "fold", "ccr", "ccr_matched", "ccr_source", "purity", "concepts",
-                "named_concepts", "interactions_per_demo", "baseline_ccr", "true",
+                "named_concepts", "interactions_per_demo", "baseline_ccr", "true_concepts",
                 "predicted", "robot_predicted", "taught", "confidence", "distance", "error",
-                "familiarity", "unknown", "first_guess") if k in r} for r in results]}
+                "familiarity", "unknown", "first_guess") if k in r}
+                for r in (f.to_dict() for f in results)]}
     out["config"] = config.to_dict()
     out["seconds"] = time.perf_counter() - t0
     cache.mkdir(parents=True, exist_ok=True)

@@ -224,7 +224,7 @@ def test_teach_names_files_of_one_name(tmp_path, cli):
         (tmp_path / person).mkdir()
         (tmp_path / person / "circle.csv").write_text(
             "x,y\n" + "\n".join(f"{x},{y}" for x, y in CIRCLE))
-    from iloci.commands.teach import resolve_demos
+    from iloci.data.streams import resolve_demos
     items = resolve_demos([str(tmp_path / "s01/circle.csv"), "GShape/1",
                            str(tmp_path / "s02/circle.csv")])
     assert [getattr(i, "key", None) for i in items] == ["circle/0", "GShape/1", "circle/1"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import tomllib
@@ -15,7 +16,7 @@ pytest.importorskip("matplotlib")
 
 from iloci.cli import main  # noqa: E402
 from iloci.errors import InvalidInputError, MissingBackendError  # noqa: E402
-from iloci.evaluation.evaluate import evaluate  # noqa: E402
+from iloci.evaluation.evaluate import FoldResult, evaluate  # noqa: E402
 
 SMALL = """
 [perceptual_model]
@@ -66,8 +67,9 @@ def test_every_output_file_exists_and_parses(run_dir):
     assert [f["fold"] for f in folds] == [0, 1]
     for f in folds:
         # every learning demo got at least one interaction; each test demo one answer
-        assert len(f["predicted"]) == len(f["true"]) == len(f["test"]) > 0
-        assert f["exemplars"] + f["prototypes"] == f["entries"] >= f["concepts"] >= 1
+        assert len(f["predicted"]) == len(f["true_concepts"]) == len(f["test"]) > 0
+        assert f["entries"] >= f["concepts"] >= 1
+        assert set(f) == {fl.name for fl in dataclasses.fields(FoldResult)}
         assert set(f["shapes"]) <= {"GShape", "Angle", "Sshape"}
         # the robot's own labels are scored; an oracle keeps every robot concept pure
         assert len(f["robot_predicted"]) == len(f["test"])
@@ -91,12 +93,10 @@ def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir, t
     serial = json.loads((run_dir / "folds.json").read_text())
     _, parallel = evaluate(small_config, jobs=2, baseline=False, memory_dir=str(tmp_path))
     for a, b in zip(serial, parallel):
-        assert a["predicted"] == b["predicted"]
-        assert a["feedbacks"] == b["feedbacks"]
-        assert a["entries"] == b["entries"]
+        _same_fold(b, a)
         # each fold's learned robot was kept, and answers as it did in the fold
-        agent = iloci.Agent.load(tmp_path / f"fold-{b['fold']}.npz")
-        assert len(agent.memory) == b["entries"]
+        agent = iloci.Agent.load(tmp_path / f"fold-{b.fold}.npz")
+        assert len(agent.memory) == b.entries
 
 
 def test_untaught_concepts_leave_the_learning_set_for_the_test_set(small_config):
@@ -111,7 +111,7 @@ def test_untaught_concepts_leave_the_learning_set_for_the_test_set(small_config)
     plain = fold_plan(demos, load_config(tomllib.loads(SMALL)))
     for k, (learn, test) in enumerate(fold_plan(demos, config)):
         (left_out,) = untaught_concepts(demos, config, k)
-        assert all(demos[i].concept != left_out for i in learn)
+        assert all(demos[i].true_concept != left_out for i in learn)
         assert sorted(learn + test) == list(range(len(demos)))
         assert set(test) >= set(plain[k][1])  # the plain test set, plus the left-out ones
     data["evaluation"]["untaught"] = 2
@@ -168,11 +168,13 @@ def _house_config() -> dict:
     return data
 
 
-def _same_fold(a: dict, b: dict) -> None:
-    assert a["fold"] == b["fold"]
-    assert a["predicted"] == b["predicted"]
-    assert a["feedbacks"] == b["feedbacks"]
-    assert a["entries"] == b["entries"]
+def _same_fold(a, b: dict) -> None:
+    """``a``, a FoldResult, ran the fold that ``b``, its folds.json entry, records."""
+    assert isinstance(a, FoldResult)
+    assert a.fold == b["fold"]
+    assert a.predicted == b["predicted"]
+    assert a.feedbacks == b["feedbacks"]
+    assert a.entries == b["entries"]
 
 
 def test_evaluate_resolves_names_through_the_given_plugin_manager(run_dir):

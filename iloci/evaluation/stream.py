@@ -115,7 +115,7 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     if limit is not None:
         order = order[:limit]
     stream = [demos[i] for i in order]
-    known = {d.key: d.concept for d in stream if d.concept}
+    known = {d.key: d.true_concept for d in stream if d.true_concept}
 
     def truth(key: str) -> str:
         return _true_concept(key, known)
@@ -129,7 +129,7 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     for i, (demo, motion) in enumerate(zip(stream, motions)):
         ts = time.perf_counter()
         seq, start = agent._encode(motion)
-        true = demo.concept or truth(demo.key)
+        true = demo.true_concept or truth(demo.key)
         mem = agent.memory
         names = majority_names(mem.concept_members(truth)) if len(mem) else {}
         seen = true in set(names.values())
