@@ -280,7 +280,7 @@ def _simulator_name(args: argparse.Namespace, saved: dict) -> str:
     return name if name != "none" else "pybullet"
 
 
-def _saved_name(saved: dict, section: str) -> object:
+def _saved_name(saved: dict, section: str) -> str:
     """The component name ``section`` of a memory's saved config gives (default if none)."""
     from iloci.config import DEFAULT_NAMES
 
@@ -369,7 +369,7 @@ def build_performer(memory_path: str | os.PathLike[str], *, registry=None,
             specs[section] = _saved_section(saved, section, registry, source)
         except (MissingBackendError, UnknownComponentError) as exc:
             # not installed: a first-party back end, or a third-party one
-            raise _why_needed(exc, section, _saved_name(saved, section), source)
+            raise _why_needed(exc, section, _saved_name(saved, section), source) from exc
     sensorimotor = validate_dataclass(SensorimotorConfig, dict(saved.get("sensorimotor") or {}),
                                       section="sensorimotor", source=source)
     seed = validate_dataclass(EvaluationConfig, dict(saved.get("evaluation") or {}),
@@ -379,7 +379,7 @@ def build_performer(memory_path: str | os.PathLike[str], *, registry=None,
         try:
             components[section] = registry.build(spec.kind, spec.name, params, seed=seed)
         except MissingBackendError as exc:  # registered, but its library is missing
-            raise _why_needed(exc, section, spec.name, source)
+            raise _why_needed(exc, section, spec.name, source) from exc
     model = components["perceptual_model"]
     if net_state:
         try:
@@ -405,7 +405,8 @@ def run(args: argparse.Namespace) -> int:
                                 f"{out}.")
     loaded = load_memory(args.memory)
     header = loaded[2]
-    saved = header.get("config") if isinstance(header.get("config"), dict) else {}
+    config = header.get("config")
+    saved: dict = config if isinstance(config, dict) else {}
     name = _simulator_name(args, saved)
     registry = get_registry()
     # resolve the names before loading the network: a typo fails fast, with "did you mean"

@@ -10,11 +10,15 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 import sys
+from typing import TYPE_CHECKING
 import warnings
 
 import numpy as np
 
 from iloci.errors import InvalidInputError
+
+if TYPE_CHECKING:  # pragma: no cover - for annotations only
+    from iloci.interfaces import Demonstration
 
 __all__ = ["register", "run", "resolve_demos", "default_stream"]
 
@@ -56,7 +60,7 @@ def default_stream(config) -> list:
     shapes = list(config.data.shapes) or list(LASA_SHAPES)
     rng = np.random.default_rng(config.evaluation.seed)
     per_shape = max(1, round(config.evaluation.train_fraction * DEMOS_PER_SHAPE))
-    demos = []
+    demos: list[Demonstration] = []
     for shape in shapes:
         own = load_lasa([shape])
         demos.extend(own[i] for i in sorted(rng.choice(len(own), per_shape, replace=False)))

@@ -228,8 +228,8 @@ class Learner:
         if new_entry is not None:
             self.memory.entries.append(new_entry)
         rehearsal.apply(result, self.memory.entries)
-        event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0, loss=result.loss,
-                               seconds=result.seconds, reason=reason,
+        event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0,
+                               loss=result.loss, seconds=result.seconds, reason=reason,
                                extra={"concepts": len(self.memory.concepts())})
         if self.hook is not None:
             self.hook.iloci_on_rehearsal(event=event)

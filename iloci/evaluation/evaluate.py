@@ -31,8 +31,7 @@ import numpy as np
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
-from iloci.evaluation.metrics import (confidence_matrix, confusion_matrix,
-                                      correct_classification_rate, mean_std)
+from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
 __all__ = ["FoldResult", "run_fold", "evaluate", "fold_plan", "summarize"]
@@ -467,11 +466,11 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
                 while not queue.empty():
                     emit(queue.get())
                 for fut in done:
-                    res = fut.result()
-                    results.append(res)
-                    pm.hook.iloci_on_fold_finished(event=_fold_event(res))
-                    emit({"kind": "fold_done", "fold": res["fold"], "ccr": res["ccr"],
-                          "seconds": res["wall_seconds"]})
+                    out = fut.result()
+                    results.append(out)
+                    pm.hook.iloci_on_fold_finished(event=_fold_event(out))
+                    emit({"kind": "fold_done", "fold": out["fold"], "ccr": out["ccr"],
+                          "seconds": out["wall_seconds"]})
         except BaseException:
             for proc in list(getattr(pool, "_processes", {}).values()):
                 proc.terminate()
