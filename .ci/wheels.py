@@ -61,7 +61,7 @@ def smoke() -> None:
 
     names = [md.distribution(n) for n in ("iloci", "iloci-torch", "iloci-jax", "iloci-scipy",
                                           "iloci-sklearn", "iloci-pinocchio",
-                                          "iloci-pybullet", "iloci-mujoco")]
+                                          "iloci-pybullet", "iloci-mujoco", "iloci-ray")]
     for d in names:
         direct = d.read_text("direct_url.json")
         if direct and json.loads(direct).get("dir_info", {}).get("editable"):
@@ -73,6 +73,9 @@ def smoke() -> None:
                 "print('iloci', iloci.__version__, 'from', iloci.__file__)")
         subprocess.run([sys.executable, "-c", code], cwd=tmp, check=True)
         subprocess.run(["iloci", "plugins"], cwd=tmp, check=True)
+        # a plugin's command is on the command line
+        subprocess.run(["iloci", "sweep", "--help"], cwd=tmp, check=True,
+                       stdout=subprocess.DEVNULL)
         subprocess.run(["iloci", "evaluate", "--config", str(ROOT / "docs/examples/tiny.toml"),
                         "--folds", "0", "--jobs", "1", "--no-baseline", "--quiet",
                         "--out", str(Path(tmp) / "run")], cwd=tmp, check=True)

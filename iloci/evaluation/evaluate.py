@@ -7,22 +7,20 @@ when the demonstration its nearest memory entry stands for has the same
 true concept (what an oracle teacher would reward). The DTW 1-NN baseline
 runs on the same folds.
 
-Folds run in parallel processes (``jobs``); progress (per fold and per
-interaction, with ETA) is reported through a callback fed by the
-``iloci_on_interaction`` observer hook.
+Folds run in parallel (``jobs``) on an executor
+(:mod:`iloci.evaluation.executors`: worker processes on this machine, or Ray
+with the ``iloci-ray`` plugin); progress (per fold and per interaction) is
+reported through a callback fed by the ``iloci_on_interaction`` observer
+hook.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-import concurrent.futures as cf
 from dataclasses import dataclass, field
 import importlib.metadata as md
-import multiprocessing as mp
 import os
 import platform
-import signal
-import threading
 import time
 from typing import Any
 
@@ -31,6 +29,7 @@ import numpy as np
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
+from iloci.evaluation.executors import LocalExecutor, make_executor
 from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
@@ -199,22 +198,6 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     return res
 
 
-def _worker_init() -> None:
-    # The parent handles Ctrl-C and terminates the workers.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    # A parent killed outright (SIGKILL, SIGTERM) cannot stop its workers;
-    # they notice they were orphaned and exit instead of computing on.
-    parent = os.getppid()
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="iloci-orphan-watch").start()
-
-
 class _ResolvedComponents:
     """Plugin registering components another plugin manager resolved.
 
@@ -292,8 +275,13 @@ def _resolved_specs(config: Config, pm: Any) -> list[Any]:
 
 
 def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
-                        test_idx: list[int], shapes: list[str], queue: Any,
-                        baseline: bool, specs: Sequence[Any] | None = None) -> dict:
+                        test_idx: list[int], shapes: list[str], baseline: bool,
+                        specs: Sequence[Any] | None, queue: Any) -> dict:
+    """One fold in an executor's worker: the fold's result as a dict.
+
+    ``queue.put`` (any object with one; None: no progress) receives the
+    fold's progress messages.
+    """
     from iloci.data import load_lasa
     from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
     demos = load_lasa(shapes or None)
@@ -371,14 +359,16 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
 def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
-             plugin_manager: Any = None) -> tuple[dict[str, Any], list[dict]]:
+             plugin_manager: Any = None, executor: str = "local",
+             address: str | None = None) -> tuple[dict[str, Any], list[dict]]:
     """Run the k-fold protocol; return (metrics, per-fold results).
 
     Parameters
     ----------
     config : Config, path, mapping or None
     jobs : int, optional
-        Parallel processes (default ``config.evaluation.jobs``).
+        Folds run at once (default ``config.evaluation.jobs``). With
+        ``executor="local"`` and ``jobs == 1`` they run in this process.
     progress : callable, optional
         Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
         "rehearsal"|"fold_done", "fold": k, ...}``.
@@ -391,10 +381,20 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         only on this manager can be evaluated) and receives
         ``iloci_on_fold_finished``; with ``jobs == 1`` also the learning
         events. Defaults to :func:`~iloci.plugins.get_plugin_manager`.
+    executor : str
+        Where the folds run (:func:`~iloci.evaluation.executors.make_executor`):
+        ``"local"`` (worker processes of joblib's loky pool) or ``"ray"``
+        (the ``iloci-ray`` plugin).
+    address : str, optional
+        The executor's engine (e.g. a running Ray cluster, ``HOST:PORT``).
 
     Notes
     -----
-    With ``jobs > 1`` the folds run in spawned worker processes, which
+    Results do not depend on the executor or ``jobs``: each fold's seeds
+    come from the config and the fold index.
+
+    In parallel (``jobs > 1`` or an executor other than ``local``) the
+    folds run in worker processes, which
     cannot receive a plugin manager (its plugin objects do not pickle).
     Without ``plugin_manager``, each worker builds the default one from the
     installed plugins, as the parent does. With one, the parent resolves
@@ -409,8 +409,10 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     Raises
     ------
     InvalidInputError
-        Bad ``jobs`` or fold, or (``jobs > 1``) a component resolved
-        through ``plugin_manager`` that cannot be sent to a worker.
+        Bad ``jobs``, fold or executor, or (in parallel) a component
+        resolved through ``plugin_manager`` that cannot be sent to a worker.
+    MissingBackendError
+        ``executor="ray"`` without the ``iloci-ray`` plugin.
     KeyboardInterrupt
         Re-raised after the workers are stopped.
     """
@@ -422,8 +424,13 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     jobs = int(jobs or config.evaluation.jobs)
     if jobs < 1:
         raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
+    runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
+    serial = jobs == 1 and isinstance(runner, LocalExecutor)
+    if serial:
+        runner = None  # in this process: the observers see every learning event
     # resolved (and checked to pickle) before any data is loaded or fold run
-    specs = _resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
+    specs = (_resolved_specs(config, pm) if not serial and plugin_manager is not None
+             else None)
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
     plan = fold_plan(demos, config)
@@ -435,7 +442,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     t0 = time.perf_counter()
     results: list[dict] = []
     cfg_dict = config.to_dict()
-    if jobs == 1:
+    if runner is None:
         for k in wanted:
             learn_idx, test_idx = plan[k]
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
@@ -447,38 +454,16 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             emit({"kind": "fold_done", "fold": k, "ccr": res.ccr,
                   "seconds": res.wall_seconds})
     else:
-        ctx = mp.get_context("spawn")  # no fork: torch/JAX threads do not survive it
-        manager = ctx.Manager()
-        queue = manager.Queue()
-        pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(wanted)), mp_context=ctx,
-                                      initializer=_worker_init)
-        try:
-            futures = {}
-            for k in wanted:
-                learn_idx, test_idx = plan[k]
-                futures[pool.submit(_run_fold_in_worker, cfg_dict, k, learn_idx, test_idx,
-                                    shapes, queue, baseline, specs)] = k
-                emit({"kind": "fold_queued", "fold": k, "total": len(learn_idx)})
-            pending = set(futures)
-            while pending:
-                done, pending = cf.wait(pending, timeout=0.2,
-                                        return_when=cf.FIRST_COMPLETED)
-                while not queue.empty():
-                    emit(queue.get())
-                for fut in done:
-                    out = fut.result()
-                    results.append(out)
-                    pm.hook.iloci_on_fold_finished(event=_fold_event(out))
-                    emit({"kind": "fold_done", "fold": out["fold"], "ccr": out["ccr"],
-                          "seconds": out["wall_seconds"]})
-        except BaseException:
-            for proc in list(getattr(pool, "_processes", {}).values()):
-                proc.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            manager.shutdown()
-            raise
-        pool.shutdown()
-        manager.shutdown()
+        calls = []
+        for k in wanted:
+            learn_idx, test_idx = plan[k]
+            calls.append((cfg_dict, k, learn_idx, test_idx, shapes, baseline, specs))
+            emit({"kind": "fold_queued", "fold": k, "total": len(learn_idx)})
+        for out in runner.run(_run_fold_in_worker, calls, emit):
+            results.append(out)
+            pm.hook.iloci_on_fold_finished(event=_fold_event(out))
+            emit({"kind": "fold_done", "fold": out["fold"], "ccr": out["ccr"],
+                  "seconds": out["wall_seconds"]})
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r["fold"])
     return summarize(results, config, wall, jobs), results
