@@ -7,6 +7,7 @@ interrupted session loses at most the demonstration being taught.
 from __future__ import annotations
 
 import argparse
+import contextlib
 from collections.abc import Sequence
 from pathlib import Path
 import sys
@@ -117,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
     from iloci.agent import Agent, SkippedDemonstrationWarning, build
     from iloci.concepts.memory import load_memory
     from iloci.config import load_config
+    from iloci.progress import Bars
 
     memory_path = Path(args.memory)
     header = load_memory(memory_path)[2] if memory_path.exists() else None
@@ -133,14 +135,32 @@ def run(args: argparse.Namespace) -> int:
     if header is not None:
         print(f"continuing from {memory_path}: {agent.memory.summary().splitlines()[0]}")
 
+    # A bar over the stream on a terminal or in a notebook (stderr); a log gets
+    # the line per demonstration below and nothing else. None with the
+    # console teacher, whose questions need the terminal.
+    bars = Bars(unit="demos") if cfg.teacher.name != "console" else None
+    if bars is not None and not bars.live:
+        bars = None
+    shown = 0
+
+    def advance() -> None:
+        nonlocal shown
+        shown += 1
+        if bars is not None:
+            bars.update("teach", shown)
+
     def save(outcome) -> None:
         agent.save(memory_path)
         print(_describe(outcome), flush=True)
+        advance()
 
     def show_skip(message, category, filename, lineno, file=None, line=None) -> None:
         print(f"warning: {message}", file=sys.stderr, flush=True)
+        advance()
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), bars or contextlib.nullcontext():
+        if bars is not None:
+            bars.add("teach", "teaching", len(items))
         warnings.simplefilter("always", SkippedDemonstrationWarning)
         warnings.showwarning = show_skip
         report = agent.teach(items, on_change=save)
