@@ -28,7 +28,7 @@ skips every run whose file exists. ``OUT/results.csv`` has a row per run,
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 import hashlib
 import itertools
