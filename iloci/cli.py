@@ -6,7 +6,7 @@ invalid input, missing back end); 1 any other failure; 130 interrupted.
 Each subcommand lives in a module of :mod:`iloci.commands` with a
 ``register(subparsers)`` function that adds its parser and sets
 ``func(args) -> int``. Plugins add theirs through the
-``iloci_register_commands`` hook (e.g. ``iloci sweep`` from ``iloci-ray``).
+``iloci_add_commands`` hook (e.g. ``iloci sweep`` from ``iloci-ray``).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     Parameters
     ----------
     plugin_manager : pluggy.PluginManager, optional
-        Whose ``iloci_register_commands`` implementations add commands
+        Whose ``iloci_add_commands`` implementations add commands
         (default :func:`~iloci.plugins.get_plugin_manager`).
 
     Raises
@@ -63,7 +63,7 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
         importlib.import_module(mod).register(sub)
     pm = plugin_manager or get_plugin_manager()
     try:
-        pm.hook.iloci_register_commands(subparsers=sub)
+        pm.hook.iloci_add_commands(subparsers=sub)
     except argparse.ArgumentError as exc:  # a name taken twice (Python >= 3.11)
         raise PluginError(f"a plugin's command clashes with another: {exc}") from exc
     return parser

@@ -119,7 +119,7 @@ def iloci_on_fold_finished(event: FoldEvent) -> None:
 # -- extensions ---------------------------------------------------------------
 
 @hookspec
-def iloci_register_commands(subparsers: argparse._SubParsersAction) -> None:
+def iloci_add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Add subcommands to the ``iloci`` command line.
 
     Called once when the command line builds its parser, after the

@@ -157,8 +157,8 @@ class Recorder:
         self.calls["iloci_on_fold_finished"].append(event)
 
     @hookimpl
-    def iloci_register_commands(self, subparsers):
-        self.calls["iloci_register_commands"].append(subparsers)
+    def iloci_add_commands(self, subparsers):
+        self.calls["iloci_add_commands"].append(subparsers)
         p = subparsers.add_parser("recorded", help="test stand-in")
         p.set_defaults(func=lambda args: 0)
 
@@ -253,7 +253,7 @@ def test_a_plugin_command_named_like_a_kernel_command_is_a_plugin_error():
 
     class Clash:
         @hookimpl
-        def iloci_register_commands(self, subparsers):
+        def iloci_add_commands(self, subparsers):
             subparsers.add_parser("evaluate")
 
     with pytest.raises(PluginError, match="clashes"):

@@ -13,7 +13,7 @@ from iloci import hookimpl
 
 
 @hookimpl
-def iloci_register_commands(subparsers) -> None:
+def iloci_add_commands(subparsers) -> None:
     from iloci_ray.command import register
     register(subparsers)
 

@@ -24,7 +24,9 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
     address : str or None
         ``HOST:PORT`` of a running cluster (``ray start --head`` prints
         it), ``"auto"`` for the one this machine runs, or None to start Ray
-        on this machine (stopped when this process exits).
+        on this machine (stopped when this process exits). A cluster with
+        token authentication needs ``RAY_AUTH_MODE=token`` in the
+        environment for an explicit ``HOST:PORT`` (Ray's rule).
     num_cpus : int, optional
         CPUs of a Ray started here (default: all); ignored with ``address``.
 
@@ -45,9 +47,15 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
     try:
         ray.init(address=address, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
+        auth = ("" if os.environ.get("RAY_AUTH_MODE") else
+                " A cluster with token authentication (Ray's default) also needs "
+                "RAY_AUTH_MODE=token in this environment (the token is read from "
+                "RAY_AUTH_TOKEN or ~/.ray/auth_token): Ray never sends it to an address "
+                "given explicitly unless told to.")
         raise InvalidInputError(f"no Ray cluster at {address!r}: {exc}. Start one with "
                                 "`ray start --head` and pass the address it prints "
-                                "(HOST:PORT), or omit --address to start Ray here.") from exc
+                                "(HOST:PORT), or omit --address to start Ray here." + auth
+                                ) from exc
     return ray
 
 
