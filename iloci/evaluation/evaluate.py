@@ -265,11 +265,13 @@ def _resolved_specs(config: Config, pm: Any) -> list[Any]:
         specs.append(spec)
     if problems:
         raise InvalidInputError(
-            "jobs > 1 runs each fold in a worker process, which builds the components "
+            "in parallel (jobs > 1, or an executor other than 'local') each fold runs in "
+            "a worker process, which builds the components "
             "the given plugin_manager resolved from their pickled registry entries, and "
             "these do not pickle: " + "; ".join(problems) + ". Register the factory as a "
             "'module:attribute' string (or a module-level callable) and the params "
-            "schema as a module-level dataclass, or evaluate with jobs=1.")
+            "schema as a module-level dataclass, or evaluate with jobs=1 and the local "
+            "executor.")
     return specs
 
 

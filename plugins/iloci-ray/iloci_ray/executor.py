@@ -39,6 +39,8 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
 
     if ray.is_initialized():
         return ray
+    if address not in (None, "auto"):
+        _check_reachable(address)
     env = {k: os.environ.get(k, v) for k, v in TASK_ENV.items()}
     kwargs: dict[str, Any] = {"runtime_env": {"env_vars": env}, "include_dashboard": False,
                               "logging_level": logging.WARNING, "log_to_driver": True}
@@ -57,6 +59,23 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
                                 "(HOST:PORT), or omit --address to start Ray here." + auth
                                 ) from exc
     return ray
+
+
+def _check_reachable(address: str, timeout: float = 5.0) -> None:
+    """Fail fast when nothing listens at ``HOST:PORT`` (ray.init retries for minutes)."""
+    import socket
+
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isdigit():
+        raise InvalidInputError(f"--address must be HOST:PORT (e.g. 10.0.0.5:6379), got "
+                                f"{address!r}.")
+    host = host.removeprefix("ray://").strip("[]")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise InvalidInputError(f"no Ray cluster at {address!r}: {exc}. Start one with "
+                                "`ray start --head` and pass the address it prints "
+                                "(HOST:PORT), or omit --address to start Ray here.") from None
 
 
 def unwrap(exc: BaseException) -> BaseException:
