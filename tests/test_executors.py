@@ -33,6 +33,20 @@ def fail(x, queue):
 def sleep_forever(path, queue):
     open(os.path.join(path, str(os.getpid())), "w").close()
     time.sleep(120)
+
+
+def children(pid):
+    """Process ids whose parent is ``pid`` (Linux /proc)."""
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    if int(fh.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        out.append(int(d))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
 '''
 
 
@@ -79,6 +93,9 @@ def test_workers_die_with_a_parent_killed_outright(tmp_path, worker_module):
             time.sleep(0.2)
         workers = [int(p.name) for p in pids_dir.iterdir()]
         assert len(workers) == 2, "the workers did not start"
+        # and every other process it started (the message queue's server)
+        workers += [p for p in worker_module.children(parent.pid) if p not in workers]
+        assert len(workers) >= 3
     finally:
         parent.send_signal(signal.SIGKILL)
         parent.wait()

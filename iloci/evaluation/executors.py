@@ -48,6 +48,7 @@ class FoldExecutor(Protocol):
 
 
 def _worker_init() -> None:
+    """Initializer of the pool's workers and of the message queue's server."""
     # The parent handles Ctrl-C and stops the workers.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if sys.platform.startswith("linux"):
@@ -88,10 +89,13 @@ class LocalExecutor:
     def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
             emit: Callable[[dict], None]) -> Iterator[Any]:
         import multiprocessing as mp
+        from multiprocessing.managers import SyncManager
 
         from joblib.externals.loky import get_reusable_executor
 
-        manager = mp.get_context("spawn").Manager()
+        # the queue's server process dies with this one too (_worker_init)
+        manager = SyncManager(ctx=mp.get_context("spawn"))
+        manager.start(_worker_init)
         queue = manager.Queue()
         env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
         pool = get_reusable_executor(max_workers=min(self.jobs, max(1, len(calls))),
