@@ -152,14 +152,14 @@ def test_evaluate_on_ray_gives_the_local_results(ray_local):
 
 
 def test_an_iloci_error_in_a_ray_task_reaches_the_caller_as_itself(ray_local):
+    from iloci.config import load_config
+    from iloci.evaluation.evaluate import _run_fold_in_worker
     from iloci_ray.executor import RayExecutor
 
-    with pytest.raises(InvalidInputError, match="bad fold 7"):
-        list(RayExecutor(1).run(_raise_invalid, [(7,)], lambda m: None))
-
-
-def _raise_invalid(k, queue):
-    raise InvalidInputError(f"bad fold {k}")
+    # a fold whose data the worker cannot load: the worker raises the error
+    call = (load_config(TINY).to_dict(), 0, [0], [1], ["NoSuchShape"], False, None)
+    with pytest.raises(InvalidInputError, match="unknown LASA shape 'NoSuchShape'"):
+        list(RayExecutor(1).run(_run_fold_in_worker, [call], lambda m: None))
 
 
 def test_no_cluster_at_the_address_is_a_clear_error(tmp_path, cli):

@@ -45,6 +45,9 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
     kwargs: dict[str, Any] = {"runtime_env": {"env_vars": env}, "include_dashboard": False,
                               "logging_level": logging.WARNING, "log_to_driver": True}
     if address is None:
+        # "local": a new Ray of this process's own, never a cluster that
+        # happens to run on this machine (what ray.init() would join)
+        address = "local"
         kwargs["num_cpus"] = num_cpus
     try:
         ray.init(address=address, **kwargs)
