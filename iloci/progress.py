@@ -1,119 +1,139 @@
-"""Progress display for the command line (rich): a terminal, a log file, a notebook.
+"""Progress through a learning stream, kept in the memory file, and the memory's lock.
 
-* On a terminal, live bars redrawn in place (one per fold or one per sweep,
-  with elapsed time and the estimate of what remains).
-* In a Jupyter notebook, the same bars as a live output cell (rich detects
-  the notebook).
-* Written to a file or a pipe (a log), no bars and no terminal codes: one
-  plain line at each milestone (a fold started, each quarter of it, done
-  with its result), so ``tail -f`` shows the run advancing.
+``iloci teach`` saves the memory after every demonstration that changed it
+(atomically: a kill at any moment leaves the previous file or the new one).
+With each save it records how far through its stream it got: the number of
+stream items consumed and a digest of those items. Run again with the same
+stream, it finds that the recorded digest is that of the stream's first
+items and skips them, so no demonstration is learned twice and the memory
+ends as an uninterrupted run's would.
 
-:class:`Bars` is the building block; :class:`FoldProgress` turns the
-progress messages of :func:`iloci.evaluation.evaluate.evaluate` into bars.
+The digest of an item is what it *is*, not where it came from: a
+demonstration's key, concept, positions and times; a trajectory file's key
+and bytes. Editing a file, or reordering the stream before the recorded
+point, is therefore a different stream, which is taught from its start
+(continuing the memory, as ``iloci teach`` always does).
 """
 
 from __future__ import annotations
 
-import sys
-from typing import Any, TextIO
+import contextlib
+import hashlib
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
 
-from rich.console import Console
-from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn,
-                           TimeElapsedColumn, TimeRemainingColumn)
+import numpy as np
 
-__all__ = ["Bars", "FoldProgress"]
+from iloci.errors import IlociError
+
+__all__ = [
+    "PROGRESS_KEY",
+    "MemoryLockedError",
+    "item_digest",
+    "prefix_digest",
+    "progress_record",
+    "resume_point",
+    "teaching_lock",
+]
+
+#: Header key of the progress record in a memory file.
+PROGRESS_KEY = "teach_progress"
 
 
-class Bars:
-    """Named progress bars on ``stream`` (default stderr); a context manager.
+class MemoryLockedError(IlociError, RuntimeError):
+    """Another process is teaching the same memory file."""
+
+
+def item_digest(item: Any) -> str:
+    """A digest (hex) of one stream item: a Demonstration, a trajectory file, or an array.
+
+    Two items get one digest exactly when they would teach the same thing.
+    """
+    from iloci.interfaces import Demonstration
+    h = hashlib.sha256()
+    if isinstance(item, Demonstration):
+        h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.concept).encode())
+        h.update(np.ascontiguousarray(item.positions, dtype=np.float64).tobytes())
+        h.update(np.ascontiguousarray(item.times, dtype=np.float64).tobytes())
+    elif isinstance(item, (str, os.PathLike)):
+        key = getattr(item, "key", None) or Path(item).stem
+        h.update(b"file\0" + str(key).encode() + b"\0")
+        try:
+            h.update(Path(os.fspath(item)).read_bytes())
+        except OSError as exc:
+            h.update(f"unreadable: {type(exc).__name__}".encode())
+    else:
+        try:
+            arr = np.asarray(item, dtype=np.float64)
+        except (TypeError, ValueError):
+            h.update(b"other\0" + repr(item).encode())
+        else:
+            h.update(b"array\0" + repr(arr.shape).encode() + arr.tobytes())
+    return h.hexdigest()
+
+
+def prefix_digest(digests: Sequence[str], n: int) -> str:
+    """Digest of the first ``n`` item digests, in order."""
+    h = hashlib.sha256(b"iloci-stream-v1")
+    for d in digests[:n]:
+        h.update(bytes.fromhex(d))
+    return h.hexdigest()
+
+
+def progress_record(digests: Sequence[str], consumed: int) -> dict[str, Any]:
+    """The header value recording that the first ``consumed`` items were taught."""
+    return {"items": int(consumed), "of": len(digests),
+            "digest": prefix_digest(digests, consumed)}
+
+
+def resume_point(record: Any, digests: Sequence[str]) -> int:
+    """How many leading items of a stream are already taught (0: none, or another stream).
 
     Parameters
     ----------
-    stream : file, optional
-        Where to draw. A terminal (or a notebook) gets live bars; anything
-        else gets a plain line per :meth:`update` that passes a quarter of
-        the bar, and per :meth:`log`.
-    unit : str
-        What the bars count ("demos", "runs"), shown after ``n/total``.
+    record : mapping or None
+        The memory header's :data:`PROGRESS_KEY` value.
+    digests : sequence of str
+        :func:`item_digest` of each item of the stream about to be taught.
     """
-
-    def __init__(self, stream: TextIO | None = None, *, unit: str = "") -> None:
-        self.console = Console(file=stream if stream is not None else sys.stderr,
-                               highlight=False)
-        self.live = self.console.is_terminal or self.console.is_jupyter
-        self.unit = unit
-        self._progress = Progress(
-            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-            TextColumn(unit), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-            TextColumn("{task.fields[status]}"), console=self.console,
-            disable=not self.live, refresh_per_second=4)
-        self._tasks: dict[Any, TaskID] = {}
-        self._quarter: dict[Any, int] = {}
-
-    def __enter__(self) -> Bars:
-        self._progress.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._progress.stop()
-
-    def add(self, key: Any, description: str, total: int, *, start: bool = True) -> None:
-        """A bar for ``key`` (once; later calls change its total)."""
-        if key in self._tasks:
-            self._progress.update(self._tasks[key], total=max(1, total))
-            if start:
-                self._progress.start_task(self._tasks[key])
-            return
-        self._tasks[key] = self._progress.add_task(description, total=max(1, total),
-                                                   status="", start=start)
-
-    def total(self, key: Any) -> int:
-        """The total of ``key``'s bar."""
-        task = self._tasks[key]
-        return int(self._progress.tasks[self._progress.task_ids.index(task)].total or 0)
-
-    def update(self, key: Any, completed: int, status: str = "", *,
-               milestone: bool = False) -> None:
-        """Set ``key``'s bar to ``completed``.
-
-        A log gets a line when a quarter of the bar is passed, or when
-        ``milestone`` is true (e.g. a fold's result).
-        """
-        task = self._tasks[key]
-        self._progress.update(task, completed=completed, status=status)
-        if not self.live:
-            t = self._progress.tasks[self._progress.task_ids.index(task)]
-            quarter = int(4 * completed / (t.total or 1))
-            if milestone or quarter != self._quarter.get(key, -1):
-                self._quarter[key] = quarter
-                self.log(f"{t.description}: {completed}/{int(t.total or 0)} {self.unit}"
-                         + (f"  {status}" if status else ""))
-
-    def log(self, line: str) -> None:
-        """A line of text: above the live bars, or as a line of the log."""
-        self.console.print(line, markup=False, highlight=False, soft_wrap=True)
+    if not isinstance(record, Mapping):
+        return 0
+    n = record.get("items")
+    if not isinstance(n, int) or isinstance(n, bool) or not 0 < n <= len(digests):
+        return 0
+    return n if record.get("digest") == prefix_digest(digests, n) else 0
 
 
-class FoldProgress(Bars):
-    """A bar per evaluation fold, fed by evaluate()'s progress messages.
+@contextlib.contextmanager
+def teaching_lock(memory: str | os.PathLike[str]) -> Iterator[Path]:
+    """Hold ``MEMORY.lock`` while teaching ``memory``; never wait for it.
 
-    Call it with each message dict (``kind``: ``fold_queued``,
-    ``fold_start``, ``interaction``, ``rehearsal``, ``fold_done``).
+    The lock is an OS file lock (:mod:`filelock`), released by the kernel
+    when its process dies, even by ``kill -9``: a crashed session never
+    leaves the memory locked. The empty lock file itself may stay.
+
+    Raises
+    ------
+    MemoryLockedError
+        Another process holds the lock.
     """
-
-    def __init__(self, stream: TextIO | None = None) -> None:
-        super().__init__(stream, unit="demos")
-
-    def __call__(self, msg: dict) -> None:
-        k, kind = msg["fold"], msg["kind"]
-        if kind == "fold_queued":
-            self.add(k, f"fold {k}", msg["total"], start=False)
-            self._progress.update(self._tasks[k], status="waiting for a worker")
-        elif kind == "fold_start":
-            self.add(k, f"fold {k}", msg["total"])
-            self.update(k, 0, "learning")
-        elif kind == "interaction":
-            self.update(k, msg["step"] + 1, "learning")
-        elif kind == "fold_done":
-            self.update(k, self.total(k), f"done in {msg['seconds']:.0f} s, "
-                                          f"CCR {100 * msg['ccr']:.1f} %", milestone=True)
+    from filelock import FileLock, Timeout
+    path = Path(os.fspath(memory))
+    lock_path = path.with_name(path.name + ".lock")
+    lock = FileLock(lock_path, timeout=0)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise MemoryLockedError(
+            f"the memory {path} is being taught by another process (it holds {lock_path}); "
+            "wait for it to finish, or teach another --memory file. Nothing was changed."
+        ) from None
+    except OSError as exc:
+        raise MemoryLockedError(f"cannot lock the memory {path} ({lock_path}: "
+                                f"{exc.strerror or exc}).") from None
+    try:
+        yield lock_path
+    finally:
+        lock.release()

@@ -16,7 +16,7 @@ import pytest
 from iloci.errors import InvalidInputError, MissingBackendError, UnknownComponentError
 from iloci.evaluation.executors import LocalExecutor, make_executor
 from iloci.plugins import get_plugin_manager
-from iloci.progress import FoldProgress
+from iloci.display import FoldProgress
 
 # Worker functions live in a module the workers import by name.
 WORKER = '''

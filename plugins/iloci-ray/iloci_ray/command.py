@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from iloci.errors import InvalidInputError
-    from iloci.progress import Bars
+    from iloci.display import Bars
     from iloci_ray.report import write_report
     from iloci_ray.sweep import check_out, load_spec, plan_runs, run_sweep
 
