@@ -166,3 +166,13 @@ def test_no_cluster_at_the_address_is_a_clear_error(tmp_path, cli):
     spec = write(tmp_path, SMALL + '[values]\n"learner.k_cutoff" = [0.5]\n')
     r = cli("sweep", str(spec), "--address", "127.0.0.1:1", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "no Ray cluster at '127.0.0.1:1'" in r.stderr
+
+
+def test_a_swept_component_name_keeps_what_the_base_wrote_and_takes_its_defaults(tmp_path):
+    pytest.importorskip("iloci_sklearn")
+    spec = load_spec(write(tmp_path, SMALL + '[values]\n"clusterer.name" = ["scipy", '
+                           '"sklearn"]\n'))
+    runs = plan_runs(spec)
+    assert [r.config["clusterer"]["name"] for r in runs] == ["scipy", "sklearn"]
+    assert all(r.config["perceptual_model"]["epochs"] == 60 for r in runs)
+    assert runs[0].key != runs[1].key

@@ -107,12 +107,16 @@ def load_spec(path: str | Path) -> SweepSpec:
                      f"{sorted(_SPEC_KEYS)}.")
     base: dict[str, Any] = {}
     if "base" in raw:
+        # what the base file says (checked by loading it), not its resolved
+        # values: a component changed by [config] or [values] then takes its
+        # own defaults for what the base leaves out
         base_path = (path.parent / str(raw["base"])).resolve()
-        base = load_config(base_path).to_dict()
+        load_config(base_path)
+        base = tomllib.loads(base_path.read_text(encoding="utf-8"))
     for sec, value in dict(raw.get("config", {})).items():
         if not isinstance(value, dict):
             raise _error(source, f"[config] {sec} must be a table of values.")
-        base.setdefault(sec, {}).update(value)
+        _update(base, sec, value)
     values = raw.get("values")
     if not isinstance(values, dict) or not values:
         raise _error(source, "[values] must name at least one swept key, e.g. "
@@ -187,12 +191,27 @@ def _resolve(spec: SweepSpec, setting: Mapping[str, Any], seed: int) -> dict[str
     data = json.loads(json.dumps(spec.base))
     for dotted, value in setting.items():
         sec, key = dotted.split(".")
-        data.setdefault(sec, {})[key] = value
+        _update(data, sec, {key: value})
     data.setdefault("evaluation", {})["seed"] = seed
     try:
         return load_config(data).to_dict()
     except ConfigError as exc:
         raise _error(spec.source, f"setting {dict(setting)}: {exc}") from None
+
+
+def _update(data: dict[str, Any], sec: str, values: Mapping[str, Any]) -> None:
+    """Change section ``sec`` of a config mapping.
+
+    Naming another component than the section names starts the section
+    afresh, as :meth:`iloci.config.Config.replace` does: the parameters
+    belong to the component they were written for.
+    """
+    old = data.get(sec)
+    if ("name" in values and isinstance(old, dict) and "name" in old
+            and old["name"] != values["name"]):
+        data[sec] = dict(values)
+    else:
+        data.setdefault(sec, {}).update(values)
 
 
 def run_key(config: Mapping[str, Any], fold: int, seed: int) -> str:
