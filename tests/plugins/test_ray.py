@@ -145,19 +145,19 @@ def test_evaluate_on_ray_gives_the_local_results(ray_local):
     m_ray, r_ray = evaluate(cfg, jobs=2, executor="ray", baseline=False, progress=seen.append)
     m_loc, r_loc = evaluate(cfg, jobs=1, baseline=False)
     assert m_ray["ccr_folds"] == m_loc["ccr_folds"]
-    assert [r["predicted"] for r in r_ray] == [r["predicted"] for r in r_loc]
-    assert [r["feedbacks"] for r in r_ray] == [r["feedbacks"] for r in r_loc]
+    assert [r.predicted for r in r_ray] == [r.predicted for r in r_loc]
+    assert [r.feedbacks for r in r_ray] == [r.feedbacks for r in r_loc]
     kinds = {m["kind"] for m in seen}
     assert {"fold_queued", "fold_start", "interaction", "fold_done"} <= kinds
 
 
 def test_an_iloci_error_in_a_ray_task_reaches_the_caller_as_itself(ray_local):
     from iloci.config import load_config
-    from iloci.evaluation.evaluate import _run_fold_in_worker
+    from iloci.evaluation.parallel import FoldTask, _run_fold_in_worker
     from iloci_ray.executor import RayExecutor
 
     # a fold whose data the worker cannot load: the worker raises the error
-    call = (load_config(TINY).to_dict(), 0, [0], [1], ["NoSuchShape"], False, None)
+    call = (load_config(TINY).to_dict(), FoldTask(0, [0], [1]), ["NoSuchShape"], False, None)
     with pytest.raises(InvalidInputError, match="unknown LASA shape 'NoSuchShape'"):
         list(RayExecutor(1).run(_run_fold_in_worker, [call], lambda m: None))
 
