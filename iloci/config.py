@@ -53,9 +53,11 @@ COMPONENT_SECTIONS = {
 OPTIONAL_SECTIONS = {"simulator"}
 
 DEFAULT_NAMES = {
-    # JAX: at the memory sizes of a learning phase its compiled training
-    # step is about twice as fast as torch's (benchmarks/results/rnnpb.json)
-    "perceptual_model": "jax-rnnpb",
+    # torch-rnnpb: its native training kernel (AVX-512, AVX2 + FMA or
+    # portable C, chosen at run time) is the fastest training step on every
+    # CPU measured, and torch's recognition is faster than jax's
+    # (benchmarks/results/rnnpb.json, step_ms_by_kernel)
+    "perceptual_model": "torch-rnnpb",
     "clusterer": "scipy",
     "teacher": "oracle",
     "ik": "pinocchio",
@@ -169,16 +171,17 @@ class EvaluationConfig:
     #: Seed of everything: fold split, presentation order, network
     #: initialisation, noisy teacher.
     seed: int = 0
-    #: Folds run in parallel processes.
-    jobs: int = 1
+    #: Folds run in parallel processes; 0 (the default): one per CPU core
+    #: this process may use (:func:`iloci.evaluation.evaluate.default_jobs`).
+    jobs: int = 0
 
     def validate(self) -> None:
         if self.folds < 1:
             raise ValueError(f"folds must be >= 1, got {self.folds}")
         if not 0 < self.train_fraction < 1:
             raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
-        if self.jobs < 1:
-            raise ValueError(f"jobs must be >= 1, got {self.jobs}")
+        if self.jobs < 0:
+            raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {

@@ -366,7 +366,8 @@ def read_state(state: Mapping[str, Any], params: RNNPBParams
     The sizes (``input_size``, ``hidden``, ``context``, ``pb``) of the state
     replace those of ``params``; so do the other stored hyper-parameters,
     so a loaded model trains and recognizes as the saved one did. ``dtype``
-    stays the loading model's (a float64 state runs in float32 and back).
+    and ``kernel`` stay the loading model's (a float64 state runs in float32
+    and back; a torch state loads into jax-rnnpb).
 
     Returns
     -------
@@ -400,7 +401,7 @@ def read_state(state: Mapping[str, Any], params: RNNPBParams
         values["recognition_method"] = "adam"
     for f in fields(RNNPBParams):
         key = f"param.{f.name}"
-        if key in state and f.name != "dtype":
+        if key in state and f.name not in ("dtype", "kernel"):
             v = np.asarray(state[key])
             values[f.name] = type(values[f.name])(v.item() if v.ndim == 0 else v)
     try:

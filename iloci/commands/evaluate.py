@@ -14,12 +14,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", "-o", default="runs/lasa", help="output directory "
                    "(default: runs/lasa)")
     p.add_argument("--jobs", "-j", type=int, default=None,
-                   help="folds in parallel processes (default: evaluation.jobs)")
+                   help="folds in parallel processes (default: evaluation.jobs; "
+                   "when that is 0, one per CPU core)")
     p.add_argument("--folds", type=int, nargs="+", metavar="K",
                    help="run only these folds (0-based)")
     p.add_argument("--no-baseline", action="store_true", help="skip the DTW 1-NN baseline")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=run)
+
+
+def _jobs(args: argparse.Namespace, config) -> str:
+    """The folds run at once, as evaluate() will resolve them, for the banner."""
+    from iloci.evaluation.evaluate import default_jobs
+    if args.jobs is not None:
+        return str(args.jobs)
+    if config.evaluation.jobs:
+        return str(config.evaluation.jobs)
+    folds = len(args.folds) if args.folds else config.evaluation.folds
+    return f"{min(default_jobs(), folds)} (one per CPU core)"
 
 
 def _fmt_s(s: float) -> str:
@@ -98,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
           f"{config.clusterer.name}, teacher {config.teacher.name}, "
-          f"jobs {args.jobs or config.evaluation.jobs}", file=sys.stderr)
+          f"jobs {_jobs(args, config)}", file=sys.stderr)
     try:
         metrics, results = evaluate(config, jobs=args.jobs, progress=progress,
                                     folds=args.folds, baseline=not args.no_baseline)

@@ -35,7 +35,7 @@ from iloci.evaluation.metrics import (confidence_matrix, confusion_matrix,
                                       correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["FoldResult", "run_fold", "evaluate", "fold_plan", "summarize"]
+__all__ = ["FoldResult", "run_fold", "evaluate", "fold_plan", "summarize", "default_jobs"]
 
 
 @dataclass
@@ -257,6 +257,22 @@ class _ResolvedComponents:
         self._add(registry)
 
 
+def default_jobs() -> int:
+    """Folds to run at once when neither ``--jobs`` nor ``evaluation.jobs`` says.
+
+    One per CPU core this process may run on (its affinity mask where the
+    system has one, e.g. under ``taskset`` or a container's CPU set; else
+    :func:`os.cpu_count`); at least 1. A fold is single-threaded (the RNNPB
+    back ends train on one thread), so more processes than cores only
+    share them.
+    """
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        n = os.cpu_count() or 1
+    return max(1, n)
+
+
 def _resolved_specs(config: Config, pm: Any) -> list[Any]:
     """The specs ``pm`` resolves the config's components to, checked to pickle.
 
@@ -379,7 +395,8 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     ----------
     config : Config, path, mapping or None
     jobs : int, optional
-        Parallel processes (default ``config.evaluation.jobs``).
+        Parallel processes (default ``config.evaluation.jobs``; 0 there
+        means :func:`default_jobs`, one per CPU core, at most one per fold).
     progress : callable, optional
         Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
         "rehearsal"|"fold_done", "fold": k, ...}``.
@@ -420,18 +437,30 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
 
     pm = plugin_manager or get_plugin_manager()
     config = load_config(config, registry=get_registry(pm))
-    jobs = int(jobs or config.evaluation.jobs)
-    if jobs < 1:
-        raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
-    # resolved (and checked to pickle) before any data is loaded or fold run
-    specs = _resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
+    asked = int(jobs if jobs is not None else config.evaluation.jobs)
+    if asked < 0 or (jobs is not None and asked == 0):
+        raise InvalidInputError(f"jobs must be >= 1, got {asked}.")
+    n_folds = config.evaluation.folds
+    wanted = list(range(n_folds)) if folds is None else list(folds)
+    for k in wanted:
+        if not 0 <= k < n_folds:
+            raise InvalidInputError(f"fold {k} does not exist; folds are 0..{n_folds - 1}.")
+    # 0: one process per core, never more than folds, and serial where the
+    # given plugin manager's components could not be sent to a worker
+    # (parallelism the caller did not ask for must not fail the run)
+    jobs = asked or min(default_jobs(), len(wanted))
+    specs = None
+    if jobs > 1 and plugin_manager is not None:
+        # resolved (and checked to pickle) before any data is loaded or fold run
+        try:
+            specs = _resolved_specs(config, pm)
+        except InvalidInputError:
+            if asked:
+                raise
+            jobs = 1
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
-    plan = fold_plan(demos, config)
-    wanted = list(range(len(plan))) if folds is None else list(folds)
-    for k in wanted:
-        if not 0 <= k < len(plan):
-            raise InvalidInputError(f"fold {k} does not exist; folds are 0..{len(plan) - 1}.")
+    plan = fold_plan(demos, config)  # one (learn, test) pair per fold
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
     results: list[dict] = []

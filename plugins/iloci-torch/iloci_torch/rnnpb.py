@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 import ctypes
 from functools import lru_cache
+import os
 
 import numpy as np
 import torch
@@ -41,37 +42,121 @@ from iloci.errors import IlociError
 from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
                                  WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
 
-__all__ = ["TorchRNNPB", "native_kernel_available"]
+__all__ = ["TorchRNNPB", "native_kernel_available", "native_isas", "kernel_info", "ISAS",
+           "ISA_ENV"]
 
 _B1, _B2, _EPS = 0.9, 0.999, 1e-8
 
 
-@lru_cache(maxsize=1)
-def _native_train() -> Callable[..., int] | None:
-    """The native float32 training kernel (``_native.c``), or None.
+#: Instruction sets of the native kernel, fastest first, by their names in
+#: ``ILOCI_RNNPB_ISA`` and :func:`kernel_info`; values as in ``_native.c``.
+ISAS = {"avx512": 3, "avx2": 2, "portable": 1}
+#: Environment variable forcing the native kernel's instruction set (for
+#: tests and benchmarks): ``avx512``, ``avx2``, ``portable``, or ``auto``
+#: (unset: the fastest this CPU has).
+ISA_ENV = "ILOCI_RNNPB_ISA"
 
-    None when the optional extension was not compiled at install time or
-    the CPU lacks AVX-512; training then uses torch operations.
-    """
+
+#: What a non-zero return of ``iloci_rnnpb_train`` means.
+_NATIVE_CODES = {1: "out of memory", 2: "more than 256 hidden or state units",
+                 3: "instruction set not supported here", 4: "malformed arguments"}
+
+
+class _TrainArgs(ctypes.Structure):
+    """``iloci_rnnpb_train_args`` of ``_native.c``: the arguments of one training, by name."""
+
+    _fields_ = [
+        ("size", ctypes.c_int32), ("isa", ctypes.c_int32),
+        ("epochs", ctypes.c_int32), ("T", ctypes.c_int32), ("R", ctypes.c_int32),
+        ("D", ctypes.c_int32), ("C", ctypes.c_int32), ("H", ctypes.c_int32),
+        ("P", ctypes.c_int32), ("warmup", ctypes.c_int32),
+        ("alpha", ctypes.c_float), ("bound", ctypes.c_float),
+        ("lr", ctypes.c_double), ("pb_lr", ctypes.c_double),
+        ("decay", ctypes.c_double), ("clip", ctypes.c_double),
+        ("X", ctypes.c_void_p), ("mw", ctypes.c_void_p),
+        ("w_in", ctypes.c_void_p), ("b_hidden", ctypes.c_void_p),
+        ("w_out", ctypes.c_void_p), ("b_out", ctypes.c_void_p), ("u", ctypes.c_void_p),
+        ("loss_history", ctypes.c_void_p),
+        ("loss", ctypes.c_float), ("epochs_run", ctypes.c_int32),
+        ("isa_used", ctypes.c_int32),
+    ]
+
+
+@lru_cache(maxsize=1)
+def _native_lib() -> ctypes.CDLL | None:
+    """The native training kernel (``_native.c``), or None where it was not built."""
     try:
         from iloci_torch import _native
     except ImportError:
         return None
     lib = ctypes.CDLL(_native.__file__)
-    if not lib.iloci_rnnpb_native_supported():
+    if lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(_TrainArgs):
+        # a stale build of another layout: never pass it a struct it misreads
         return None
-    f32 = np.ctypeslib.ndpointer(np.float32, flags="C_CONTIGUOUS")
-    i, f, d = ctypes.c_int, ctypes.c_float, ctypes.c_double
-    fn = lib.iloci_rnnpb_train_f32
-    fn.restype = i
-    fn.argtypes = [i, i, i, i, i, i, i, f32, f32, f, f32, f32, f32, f32, f32,
-                   d, d, d, i, d, f, f32]
-    return fn
+    lib.iloci_rnnpb_train.argtypes = [ctypes.POINTER(_TrainArgs)]
+    lib.iloci_rnnpb_train.restype = ctypes.c_int
+    lib.iloci_rnnpb_isa_supported.argtypes = [ctypes.c_int]
+    return lib
+
+
+def native_isas() -> tuple[str, ...]:
+    """Instruction sets the native kernel can run here, fastest first (empty: not built)."""
+    lib = _native_lib()
+    if lib is None:
+        return ()
+    return tuple(name for name, code in ISAS.items() if lib.iloci_rnnpb_isa_supported(code))
 
 
 def native_kernel_available() -> bool:
-    """Whether float32 training runs in the native kernel on this machine."""
-    return _native_train() is not None
+    """Whether the native kernel was built (it then runs on every CPU, portable at worst)."""
+    return _native_lib() is not None
+
+
+def _requested_isa() -> str:
+    """The instruction set ``ILOCI_RNNPB_ISA`` asks for, checked; ``"auto"`` when unset.
+
+    Raises
+    ------
+    IlociError
+        An unknown name, or one this CPU or build cannot run.
+    """
+    name = os.environ.get(ISA_ENV, "").strip().lower() or "auto"
+    if name == "auto":
+        return name
+    if name not in ISAS:
+        raise IlociError(f"{ISA_ENV}={name!r} is no instruction set of the native kernel; "
+                         f"use one of auto, {', '.join(ISAS)}.")
+    if name not in native_isas():
+        have = ", ".join(native_isas()) or "none: the native kernel was not built"
+        raise IlociError(f"{ISA_ENV}={name} asks for an instruction set this machine cannot "
+                         f"run (available: {have}); unset it to use the fastest available.")
+    return name
+
+
+def kernel_info(kernel: str = "auto", dtype: str = "float32") -> str:
+    """Which training kernel a model with these settings runs here, in words.
+
+    E.g. ``"native (avx512)"``, ``"native (portable; forced by ILOCI_RNNPB_ISA)"``,
+    ``"torch operations (the native kernel was not built)"``. What ``iloci
+    plugins`` prints. Sizes beyond the native kernel (more than 256 hidden
+    or state units) also train with torch operations.
+
+    Raises
+    ------
+    IlociError
+        ``ILOCI_RNNPB_ISA`` names an instruction set that cannot run here.
+    """
+    if kernel == "torch":
+        return "torch operations (kernel = \"torch\")"
+    if dtype != "float32":
+        return f"torch operations ({dtype}: the native kernel is float32 only)"
+    if not native_kernel_available():
+        return ("torch operations (the native kernel was not built: reinstall iloci-torch "
+                "where a C compiler is available)")
+    isa = _requested_isa()
+    if isa != "auto":
+        return f"native ({isa}; forced by {ISA_ENV})"
+    return f"native ({native_isas()[0]})"
 
 
 @contextmanager
@@ -309,12 +394,21 @@ class TorchRNNPB(RNNPBBase):
     caller's ``torch.set_num_threads`` is restored after each call).
 
     Training in float32 (the default ``dtype``) runs in a native kernel
-    (``_native.c``: AVX-512, register-blocked, all epochs in one call) when
-    the package was installed with a C compiler and the CPU has AVX-512
-    (:func:`native_kernel_available`); otherwise, and in float64, with torch
-    operations. Both follow the same algorithm and update order; their
-    float32 results differ in rounding only. Set :attr:`use_native` to
-    False to train with torch operations anyway.
+    (``_native.c``: register-blocked vector loops, all epochs in one call)
+    when the package was installed with a C compiler; it picks at run time
+    the widest instruction set the CPU has (AVX-512, AVX2 + FMA, or portable
+    C; ``ILOCI_RNNPB_ISA`` forces one) and :func:`kernel_info` says which.
+    Float64 training, ``kernel = "torch"``, and sizes beyond the kernel
+    (more than 256 hidden or state units) use torch operations. Both follow
+    the same algorithm and update order as the numpy reference
+    (:mod:`iloci.rnnpb.reference`); their float32 results differ in
+    rounding only.
+
+    Attributes
+    ----------
+    kernel_ : str
+        The kernel the last :meth:`train` ran: ``"native (avx512)"``,
+        ``"native (avx2)"``, ``"native (portable)"`` or ``"torch operations"``.
 
     Parameters
     ----------
@@ -332,8 +426,6 @@ class TorchRNNPB(RNNPBBase):
     """
 
     backend = "torch"
-    #: Train float32 models with the native kernel where it is available.
-    use_native = True
 
     def _setup(self) -> None:
         self._dtype = torch.float64 if self.params.dtype == "float64" else torch.float32
@@ -356,7 +448,7 @@ class TorchRNNPB(RNNPBBase):
         return torch.from_numpy(np.ascontiguousarray(a)).to(dtype or self._dtype)
 
     def _train_kernel(self, X, mask, weight, u, epochs):
-        if self.use_native and self._dtype == torch.float32:
+        if self.params.kernel != "torch" and self._dtype == torch.float32:
             done = self._train_native(X, mask, weight, u, epochs)
             if done is not None:
                 return done
@@ -383,13 +475,22 @@ class TorchRNNPB(RNNPBBase):
             net.flat.copy_(backup)
             raise diverged_error()
         self._net64 = net if self._dtype == torch.float64 else None
+        self.kernel_ = "torch operations"
         return ut.numpy().astype(np.float64), float(loss)
 
     def _train_native(self, X, mask, weight, u, epochs):
-        """``_train_kernel`` in the native kernel; None where it cannot run."""
-        fn = _native_train()
-        if fn is None:
+        """``_train_kernel`` in the native kernel; None where it cannot run.
+
+        It cannot where the extension was not built or the sizes exceed its
+        widths; with ``kernel = "native"`` that is an error instead.
+        """
+        lib = _native_lib()
+        if lib is None:
+            if self.params.kernel == "native":
+                raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
+                                 'install a C compiler and reinstall, or set kernel = "auto".')
             return None
+        isa = _requested_isa()
         p, net = self.params, self._net
         d, h, c, pb = self._sizes
         # copies: the model changes only once the kernel has finished and succeeded
@@ -397,23 +498,35 @@ class TorchRNNPB(RNNPBBase):
              for k in WEIGHT_NAMES}
         f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
         Xf, mw, uf = f32(X), f32(mask * weight[None, :]), np.array(u, np.float32, order="C")
-        loss = np.zeros(1, np.float32)
-        code = fn(int(epochs), X.shape[0], X.shape[1], d, c, h, pb, Xf, mw,
-                  float(p.closed_loop), w["w_in"], w["b_hidden"], w["w_out"], w["b_out"], uf,
-                  float(p.learning_rate), float(p.pb_learning_rate),
-                  float(p.learning_rate_decay), int(p.warmup_epochs), float(p.grad_clip),
-                  float(p.pb_bound), loss)
+        history = np.zeros(max(int(epochs), 1), np.float32)
+        args = _TrainArgs(
+            size=ctypes.sizeof(_TrainArgs), isa=ISAS.get(isa, 0), epochs=int(epochs),
+            T=X.shape[0], R=X.shape[1], D=d, C=c, H=h, P=pb, warmup=int(p.warmup_epochs),
+            alpha=float(p.closed_loop), bound=float(p.pb_bound),
+            lr=float(p.learning_rate), pb_lr=float(p.pb_learning_rate),
+            decay=float(p.learning_rate_decay), clip=float(p.grad_clip),
+            X=Xf.ctypes.data, mw=mw.ctypes.data, w_in=w["w_in"].ctypes.data,
+            b_hidden=w["b_hidden"].ctypes.data, w_out=w["w_out"].ctypes.data,
+            b_out=w["b_out"].ctypes.data, u=uf.ctypes.data,
+            loss_history=history.ctypes.data)
+        code = lib.iloci_rnnpb_train(ctypes.byref(args))
         if code == 1:
             raise IlociError("not enough memory to train this batch; train fewer or shorter "
                              "sequences at once. The model was left unchanged.")
-        if code != 0:  # sizes beyond the kernel's registers, or no AVX-512
+        if code == 2 and p.kernel != "native":  # wider than the kernel's tiles
             return None
+        if code != 0:
+            raise IlociError(f"the native kernel refused to train (code {code}: "
+                             f"{_NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
+                             "to train with torch operations.")
         if not all(np.isfinite(a).all() for a in w.values()):
             raise diverged_error()
         for k in WEIGHT_NAMES:
             net.views[k].copy_(torch.from_numpy(w[k]))
         self._net64 = None
-        return uf.astype(np.float64), float(loss[0])
+        self._loss_history = history[:args.epochs_run].astype(np.float64)
+        self.kernel_ = "native (" + {v: k for k, v in ISAS.items()}[args.isa_used] + ")"
+        return uf.astype(np.float64), float(args.loss)
 
     def _recognize_kernel(self, X, mask, weight, u):
         if self.params.recognition_method == "adam":
