@@ -11,7 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from iloci.errors import InvalidInputError  # noqa: E402
-from iloci.rnnpb_common import init_weights, make_params, pad_sequences  # noqa: E402
+from iloci.rnnpb import init_weights, make_params, pad_sequences  # noqa: E402
 from iloci.testing import parametrize_with_checks, registry_factory  # noqa: E402
 from iloci.testing.checks import synthetic_sequences  # noqa: E402
 from iloci_torch.rnnpb import TorchRNNPB, _Net  # noqa: E402

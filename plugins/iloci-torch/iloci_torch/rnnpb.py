@@ -1,6 +1,6 @@
 """The RNNPB in PyTorch: hand-written batched BPTT, no autograd.
 
-The model is defined in :mod:`iloci.rnnpb_common`. A training step runs
+The model is defined in :mod:`iloci.rnnpb`. A training step runs
 every sequence at once over padded, time-major tensors: per time step the
 forward pass is two ``addmm`` + ``tanh_`` and the backward pass two
 matrix products and two element-wise products, all written into buffers
@@ -39,8 +39,8 @@ import numpy as np
 import torch
 
 from iloci.errors import IlociError
-from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
-                                 WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
+from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
+                          WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
 
 __all__ = ["TorchRNNPB", "native_kernel_available", "native_isas", "kernel_info", "ISAS",
            "ISA_ENV"]
@@ -389,8 +389,8 @@ class TorchRNNPB(RNNPBBase):
 
     Implements :class:`iloci.interfaces.PerceptualModel`; the public
     methods and their contract are documented in
-    :class:`iloci.rnnpb_common.RNNPBBase`, the network in
-    :mod:`iloci.rnnpb_common`. Runs on the CPU, single-threaded (the
+    :class:`iloci.rnnpb.RNNPBBase`, the network in
+    :mod:`iloci.rnnpb`. Runs on the CPU, single-threaded (the
     caller's ``torch.set_num_threads`` is restored after each call).
 
     Training in float32 (the default ``dtype``) runs in a native kernel
