@@ -107,8 +107,9 @@ def _full(reg):
 
     Only component *names* are needed to validate a config; nothing is built.
     """
-    for kind, name in [("perceptual_model", "jax-rnnpb"), ("clusterer", "scipy"),
-                       ("ik_solver", "pinocchio")]:
+    from iloci.config import COMPONENT_SECTIONS, DEFAULT_NAMES
+    for section in ("perceptual_model", "clusterer", "ik"):
+        kind, name = COMPONENT_SECTIONS[section], DEFAULT_NAMES[section]
         if (kind, name) not in reg:
             reg.add(kind, name, "iloci_missing_for_test:X", plugin="test")
     return reg

@@ -30,7 +30,7 @@ RECIPES = {
 def _kernels():
     out = []
     try:
-        from iloci_torch.rnnpb import ISAS, native_isas
+        from iloci_torch.native import ISAS, native_isas
     except ImportError:
         native = []
     else:
@@ -51,7 +51,7 @@ def _kernels():
 
 def _model(backend, dtype, kernel, monkeypatch, **params):
     if kernel.startswith("native-"):
-        from iloci_torch.rnnpb import ISA_ENV
+        from iloci_torch.native import ISA_ENV
         monkeypatch.setenv(ISA_ENV, kernel.split("-", 1)[1])
         kernel = "native"
     if backend == "torch":

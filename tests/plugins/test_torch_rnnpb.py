@@ -89,8 +89,8 @@ def test_float32_and_float64_train_alike():
 
 # -- the native float32 training kernel (_native.c) ----------------------------------
 
-from iloci_torch.rnnpb import (ISA_ENV, ISAS, kernel_info, native_isas,  # noqa: E402
-                               native_kernel_available)
+from iloci_torch.native import (ISA_ENV, ISAS, kernel_info, native_isas,  # noqa: E402
+                                native_kernel_available)
 
 needs_native = pytest.mark.skipif(not native_kernel_available(),
                                   reason="native kernel not built")
@@ -123,7 +123,7 @@ def test_native_kernel_trains_like_the_torch_operations(params, isa, monkeypatch
     # lengths differ (masking), the row count is no multiple of the kernel's row block
     seqs = synthetic_sequences(7, 6, lengths=(12, 17, 9))
     native, pbs_native, ops, pbs_ops = _train_both(seqs, 5, **params)
-    assert native.kernel_ == f"native ({isa})" and ops.kernel_ == "torch operations"
+    assert native.kernel_ == f"native kernel ({isa})" and ops.kernel_ == "torch operations"
     # float32, different rounding: 5 epochs stay within a few float32 ulps of the weights
     assert _max_weight_difference(native, ops) < 1e-5
     np.testing.assert_allclose(pbs_native, pbs_ops, atol=1e-5)
@@ -177,7 +177,7 @@ def test_kernel_torch_trains_with_torch_operations():
 def test_forcing_an_instruction_set(monkeypatch):
     from iloci.errors import IlociError
     monkeypatch.setenv(ISA_ENV, "portable")             # runs everywhere it was built
-    assert kernel_info() == f"native (portable; forced by {ISA_ENV})"
+    assert kernel_info() == f"native kernel (portable; forced by {ISA_ENV})"
     monkeypatch.setenv(ISA_ENV, "sse9")
     with pytest.raises(IlociError, match="no instruction set"):
         TorchRNNPB(seed=0).train(synthetic_sequences(2, 6), epochs=1)
@@ -187,7 +187,7 @@ def test_forcing_an_instruction_set(monkeypatch):
         with pytest.raises(IlociError, match="cannot run"):
             kernel_info()
     monkeypatch.setenv(ISA_ENV, "auto")
-    assert kernel_info() == f"native ({native_isas()[0]})"
+    assert kernel_info() == f"native kernel ({native_isas()[0]})"
 
 
 @needs_native
@@ -223,4 +223,4 @@ def test_native_kernel_is_built_and_used_where_it_can_be():
     assert native_isas() == expected
     m = TorchRNNPB(seed=0)
     m.train(synthetic_sequences(2, 6), epochs=1)
-    assert m.kernel_ == f"native ({expected[0]})" == kernel_info()
+    assert m.kernel_ == f"native kernel ({expected[0]})" == kernel_info()

@@ -29,134 +29,22 @@ folds x 3 seeds): 89.8 % with the rewrite, 90.9 % without; step 1.61 ->
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 import ctypes
-from functools import lru_cache
-import os
 
 import numpy as np
 import torch
 
 from iloci.errors import IlociError
 from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
-                          WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
+                         WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
+from iloci_torch.native import (ISAS, NATIVE_CODES, TrainArgs, kernel_info, native_lib,
+                                requested_isa)
 
-__all__ = ["TorchRNNPB", "native_kernel_available", "native_isas", "kernel_info", "ISAS",
-           "ISA_ENV"]
+__all__ = ["TorchRNNPB"]
 
 _B1, _B2, _EPS = 0.9, 0.999, 1e-8
-
-
-#: Instruction sets of the native kernel, fastest first, by their names in
-#: ``ILOCI_RNNPB_ISA`` and :func:`kernel_info`; values as in ``_native.c``.
-ISAS = {"avx512": 3, "avx2": 2, "portable": 1}
-#: Environment variable forcing the native kernel's instruction set (for
-#: tests and benchmarks): ``avx512``, ``avx2``, ``portable``, or ``auto``
-#: (unset: the fastest this CPU has).
-ISA_ENV = "ILOCI_RNNPB_ISA"
-
-
-#: What a non-zero return of ``iloci_rnnpb_train`` means.
-_NATIVE_CODES = {1: "out of memory", 2: "more than 256 hidden or state units",
-                 3: "instruction set not supported here", 4: "malformed arguments"}
-
-
-class _TrainArgs(ctypes.Structure):
-    """``iloci_rnnpb_train_args`` of ``_native.c``: the arguments of one training, by name."""
-
-    _fields_ = [
-        ("size", ctypes.c_int32), ("isa", ctypes.c_int32),
-        ("epochs", ctypes.c_int32), ("T", ctypes.c_int32), ("R", ctypes.c_int32),
-        ("D", ctypes.c_int32), ("C", ctypes.c_int32), ("H", ctypes.c_int32),
-        ("P", ctypes.c_int32), ("warmup", ctypes.c_int32),
-        ("alpha", ctypes.c_float), ("bound", ctypes.c_float),
-        ("lr", ctypes.c_double), ("pb_lr", ctypes.c_double),
-        ("decay", ctypes.c_double), ("clip", ctypes.c_double),
-        ("X", ctypes.c_void_p), ("mw", ctypes.c_void_p),
-        ("w_in", ctypes.c_void_p), ("b_hidden", ctypes.c_void_p),
-        ("w_out", ctypes.c_void_p), ("b_out", ctypes.c_void_p), ("u", ctypes.c_void_p),
-        ("loss_history", ctypes.c_void_p),
-        ("loss", ctypes.c_float), ("epochs_run", ctypes.c_int32),
-        ("isa_used", ctypes.c_int32),
-    ]
-
-
-@lru_cache(maxsize=1)
-def _native_lib() -> ctypes.CDLL | None:
-    """The native training kernel (``_native.c``), or None where it was not built."""
-    try:
-        from iloci_torch import _native
-    except ImportError:
-        return None
-    lib = ctypes.CDLL(_native.__file__)
-    if lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(_TrainArgs):
-        # a stale build of another layout: never pass it a struct it misreads
-        return None
-    lib.iloci_rnnpb_train.argtypes = [ctypes.POINTER(_TrainArgs)]
-    lib.iloci_rnnpb_train.restype = ctypes.c_int
-    lib.iloci_rnnpb_isa_supported.argtypes = [ctypes.c_int]
-    return lib
-
-
-def native_isas() -> tuple[str, ...]:
-    """Instruction sets the native kernel can run here, fastest first (empty: not built)."""
-    lib = _native_lib()
-    if lib is None:
-        return ()
-    return tuple(name for name, code in ISAS.items() if lib.iloci_rnnpb_isa_supported(code))
-
-
-def native_kernel_available() -> bool:
-    """Whether the native kernel was built (it then runs on every CPU, portable at worst)."""
-    return _native_lib() is not None
-
-
-def _requested_isa() -> str:
-    """The instruction set ``ILOCI_RNNPB_ISA`` asks for, checked; ``"auto"`` when unset.
-
-    Raises
-    ------
-    IlociError
-        An unknown name, or one this CPU or build cannot run.
-    """
-    name = os.environ.get(ISA_ENV, "").strip().lower() or "auto"
-    if name == "auto":
-        return name
-    if name not in ISAS:
-        raise IlociError(f"{ISA_ENV}={name!r} is no instruction set of the native kernel; "
-                         f"use one of auto, {', '.join(ISAS)}.")
-    if name not in native_isas():
-        have = ", ".join(native_isas()) or "none: the native kernel was not built"
-        raise IlociError(f"{ISA_ENV}={name} asks for an instruction set this machine cannot "
-                         f"run (available: {have}); unset it to use the fastest available.")
-    return name
-
-
-def kernel_info(kernel: str = "auto", dtype: str = "float32") -> str:
-    """Which training kernel a model with these settings runs here, in words.
-
-    E.g. ``"native (avx512)"``, ``"native (portable; forced by ILOCI_RNNPB_ISA)"``,
-    ``"torch operations (the native kernel was not built)"``. What ``iloci
-    plugins`` prints. Sizes beyond the native kernel (more than 256 hidden
-    or state units) also train with torch operations.
-
-    Raises
-    ------
-    IlociError
-        ``ILOCI_RNNPB_ISA`` names an instruction set that cannot run here.
-    """
-    if kernel == "torch":
-        return "torch operations (kernel = \"torch\")"
-    if dtype != "float32":
-        return f"torch operations ({dtype}: the native kernel is float32 only)"
-    if not native_kernel_available():
-        return ("torch operations (the native kernel was not built: reinstall iloci-torch "
-                "where a C compiler is available)")
-    isa = _requested_isa()
-    if isa != "auto":
-        return f"native ({isa}; forced by {ISA_ENV})"
-    return f"native ({native_isas()[0]})"
 
 
 @contextmanager
@@ -407,8 +295,8 @@ class TorchRNNPB(RNNPBBase):
     Attributes
     ----------
     kernel_ : str
-        The kernel the last :meth:`train` ran: ``"native (avx512)"``,
-        ``"native (avx2)"``, ``"native (portable)"`` or ``"torch operations"``.
+        The kernel the last :meth:`train` ran: ``"native kernel (avx512)"``,
+        ``"native kernel (avx2)"``, ``"native kernel (portable)"`` or ``"torch operations"``.
 
     Parameters
     ----------
@@ -484,13 +372,13 @@ class TorchRNNPB(RNNPBBase):
         It cannot where the extension was not built or the sizes exceed its
         widths; with ``kernel = "native"`` that is an error instead.
         """
-        lib = _native_lib()
+        lib = native_lib()
         if lib is None:
             if self.params.kernel == "native":
                 raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
                                  'install a C compiler and reinstall, or set kernel = "auto".')
             return None
-        isa = _requested_isa()
+        isa = requested_isa()
         p, net = self.params, self._net
         d, h, c, pb = self._sizes
         # copies: the model changes only once the kernel has finished and succeeded
@@ -499,8 +387,8 @@ class TorchRNNPB(RNNPBBase):
         f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
         Xf, mw, uf = f32(X), f32(mask * weight[None, :]), np.array(u, np.float32, order="C")
         history = np.zeros(max(int(epochs), 1), np.float32)
-        args = _TrainArgs(
-            size=ctypes.sizeof(_TrainArgs), isa=ISAS.get(isa, 0), epochs=int(epochs),
+        args = TrainArgs(
+            size=ctypes.sizeof(TrainArgs), isa=ISAS.get(isa, 0), epochs=int(epochs),
             T=X.shape[0], R=X.shape[1], D=d, C=c, H=h, P=pb, warmup=int(p.warmup_epochs),
             alpha=float(p.closed_loop), bound=float(p.pb_bound),
             lr=float(p.learning_rate), pb_lr=float(p.pb_learning_rate),
@@ -517,7 +405,7 @@ class TorchRNNPB(RNNPBBase):
             return None
         if code != 0:
             raise IlociError(f"the native kernel refused to train (code {code}: "
-                             f"{_NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
+                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
                              "to train with torch operations.")
         if not all(np.isfinite(a).all() for a in w.values()):
             raise diverged_error()
@@ -525,7 +413,7 @@ class TorchRNNPB(RNNPBBase):
             net.views[k].copy_(torch.from_numpy(w[k]))
         self._net64 = None
         self._loss_history = history[:args.epochs_run].astype(np.float64)
-        self.kernel_ = "native (" + {v: k for k, v in ISAS.items()}[args.isa_used] + ")"
+        self.kernel_ = "native kernel (" + {v: k for k, v in ISAS.items()}[args.isa_used] + ")"
         return uf.astype(np.float64), float(args.loss)
 
     def _recognize_kernel(self, X, mask, weight, u):
