@@ -74,8 +74,11 @@ class RNNPBParams:
     #: Which code trains: ``"auto"`` (torch-rnnpb: its native C kernel where
     #: it was built and the sizes fit, else torch operations), ``"native"``
     #: (the native kernel or an error; float32 only) or ``"torch"`` (torch
-    #: operations). jax-rnnpb has one kernel, XLA's, and accepts ``"auto"``
-    #: only. Like ``dtype``, a setting of the loading model, not of a state.
+    #: operations). The native kernel runs the widest instruction set the
+    #: CPU has (AVX-512, AVX2 + FMA, portable C; the environment variable
+    #: ``ILOCI_RNNPB_ISA`` forces one); ``iloci plugins`` says which.
+    #: jax-rnnpb has one kernel, XLA's, and accepts ``"auto"`` only. Like
+    #: ``dtype``, a setting of the loading model, not of a state.
     kernel: str = "auto"
 
     def validate(self) -> None:

@@ -194,20 +194,33 @@ class _Net:
         th = torch.tanh(u)
         ws = self.workspace(L, R)
         O = self.forward(th * bound, X, 1.0, ws)
-        Hs, Os = ws["H_t"], ws["O_t"]
         w_s, w_p, w_o = v["w_in"][:S], v["w_in"][S:], v["w_out"]
         swd = sw.unsqueeze(2)                                                 # (L, R, 1)
         r = (O[:, :, :d] - X[1:]).mul_(swd)
-        # d pre / d u_k = bound (1 - tanh(u_k)^2) w_p[k]: (P, R, H), the same every step
-        dpre = (bound * (1.0 - th * th)).T.unsqueeze(2) * w_p.unsqueeze(1)
+        # d tanh / d z = 1 - tanh^2, for all steps at once (one operation each)
+        torch.mul(ws["H"], ws["H"], out=ws["dtH"]).neg_().add_(1.0)
+        torch.mul(O, O, out=ws["dtO"]).neg_().add_(1.0)
+        dtH, dtO = ws["dtH_t"], ws["dtO_t"]
+        # d pre / d u_k = bound (1 - tanh(u_k)^2) w_p[k]: (P R, H), the same every step
+        dpre = ((bound * (1.0 - th * th)).T.unsqueeze(2) * w_p.unsqueeze(1)).reshape(P * R, -1)
         J = X.new_empty(L, P, R, d)
-        ds = None                                   # d s_0 / du = 0: s_0 is the data
+        Jf = J.view(L, P * R, d)
+        swp = swd.repeat(1, P, 1)                                             # (L, P R, 1)
+        # the P derivative copies of the batch stacked as P R rows: one matrix
+        # product per layer and step for all of them
+        dz = dpre.clone()                          # d s_0 / du = 0: s_0 is the data
+        dh = torch.empty_like(dpre)
+        do = dpre.new_empty(P * R, S)
+        # views made once: in the loop they cost as much as the arithmetic
+        dz3, dh3, do3, do_d = dz.view(P, R, -1), dh.view(P, R, -1), do.view(P, R, S), do[:, :d]
+        Jt, swt = Jf.unbind(0), swp.unbind(0)
         for t in range(L):
-            dz = dpre if ds is None else torch.matmul(ds, w_s).add_(dpre)
-            dh = dz * (1.0 - Hs[t] * Hs[t])
-            do = torch.matmul(dh, w_o).mul_(1.0 - Os[t] * Os[t])
-            torch.mul(do[:, :, :d], swd[t], out=J[t])
-            ds = do                                 # closed loop: s_{t+1} = o_t
+            if t:
+                torch.addmm(dpre, do, w_s, out=dz)  # closed loop: s_t = o_{t-1}
+            torch.mul(dz3, dtH[t], out=dh3)
+            torch.mm(dh, w_o, out=do)
+            do3.mul_(dtO[t])
+            torch.mul(do_d, swt[t], out=Jt[t])
         return r, J
 
     def loss_and_grads(self, pb: torch.Tensor, X: torch.Tensor, mask_w: torch.Tensor,
@@ -426,10 +439,12 @@ class TorchRNNPB(RNNPBBase):
         bound = p.pb_bound
         eye = torch.eye(p.pb, dtype=net.dtype)
         with torch.no_grad(), _one_thread():
-            e = net.sse(ut, bound, Xt, sw)
+            # each trial's residuals come with their Jacobian (one pass through
+            # the steps): an accepted trial's are the next step's
+            r, J = net.residuals_and_jacobian(ut, bound, Xt, sw)
+            e = r.square().sum(dim=(0, 2))
             lam = torch.full((len(ut),), p.recognition_damping, dtype=net.dtype)
             for _ in range(p.recognition_steps):
-                r, J = net.residuals_and_jacobian(ut, bound, Xt, sw)
                 A = torch.einsum("lprd,lqrd->rpq", J, J)                 # (R, P, P)
                 g = torch.einsum("lprd,lrd->rp", J, r)                   # (R, P)
                 damp = lam.unsqueeze(1) * (torch.diagonal(A, dim1=1, dim2=2) + LM_TINY)
@@ -437,9 +452,12 @@ class TorchRNNPB(RNNPBBase):
                 delta = torch.linalg.solve_ex(A + damp.unsqueeze(2) * eye,
                                               g.unsqueeze(2))[0].squeeze(2)
                 trial = (ut - delta).clamp_(-LM_U_MAX, LM_U_MAX)
-                e_new = net.sse(trial, bound, Xt, sw)
+                r_new, J_new = net.residuals_and_jacobian(trial, bound, Xt, sw)
+                e_new = r_new.square().sum(dim=(0, 2))
                 ok = e_new < e                 # False for NaN: a bad step is never kept
                 ut = torch.where(ok.unsqueeze(1), trial, ut)
+                r = torch.where(ok.view(1, -1, 1), r_new, r)
+                J = torch.where(ok.view(1, 1, -1, 1), J_new, J)
                 lam = torch.where(ok, lam * LM_DOWN, lam * LM_UP).clamp_(LM_MIN, LM_MAX)
                 e = torch.where(ok, e_new, e)
         return ut.numpy().astype(np.float64)
