@@ -13,9 +13,9 @@ gradient clipping are a handful of vector operations.
 Even so, at paper size (36 sequences x 50 steps) a step issues ~450 torch
 operations of a microsecond or two each, more than their arithmetic. Float32
 training therefore runs, where it can, in ``_native.c``: the same algorithm
-in C with register-blocked AVX-512 loops, every epoch in one call (measured
-on 2026-11-23 by benchmarks/rnnpb.py: 0.42 ms per step against 1.48 ms with
-torch operations).
+in C with register-blocked vector loops for AVX-512, AVX2 + FMA or portable
+C, chosen at run time (:mod:`iloci_torch.native`), every epoch in one call.
+Figures: ``benchmarks/results/rnnpb_speed.json`` (``step_ms_by_kernel``).
 Recognition, scoring, generation and float64 training use torch operations.
 
 Until 2026-11 the layers computed ``tanh(z)`` as ``2 sigmoid(2z) - 1``,
