@@ -112,16 +112,7 @@ enum { EPI_NONE = 0, EPI_TANH = 1, EPI_DTANH = 2 };
 #define VMIN vminq_f32
 #define VMAX vmaxq_f32
 #endif
-#include "_native_kernel.h"
-#undef VW
-#undef SUFFIX
-#undef TARGET
-#undef RECIP
-#undef WIDE
-#undef VMIN
-#undef VMAX
-#undef GEMM_NB_ROWS
-#undef TN_NB_ROWS
+#include "_native_kernel.h"  /* undefines the parameters above */
 
 #if ILOCI_X86
 /* -- AVX2 + FMA: 8 floats, 16 registers ------------------------------------ */
@@ -138,16 +129,7 @@ TARGET static inline __attribute__((always_inline)) __m256 recip_avx2(__m256 q) 
 #define WIDE 0
 #define VMIN _mm256_min_ps
 #define VMAX _mm256_max_ps
-#include "_native_kernel.h"
-#undef VW
-#undef SUFFIX
-#undef TARGET
-#undef RECIP
-#undef WIDE
-#undef VMIN
-#undef VMAX
-#undef GEMM_NB_ROWS
-#undef TN_NB_ROWS
+#include "_native_kernel.h"  /* undefines the parameters above */
 
 /* -- AVX-512: 16 floats, 32 registers -------------------------------------- */
 #define VW 16
@@ -163,16 +145,7 @@ TARGET static inline __attribute__((always_inline)) __m512 recip_avx512(__m512 q
 #define WIDE 1
 #define VMIN _mm512_min_ps
 #define VMAX _mm512_max_ps
-#include "_native_kernel.h"
-#undef VW
-#undef SUFFIX
-#undef TARGET
-#undef RECIP
-#undef WIDE
-#undef VMIN
-#undef VMAX
-#undef GEMM_NB_ROWS
-#undef TN_NB_ROWS
+#include "_native_kernel.h"  /* undefines the parameters above */
 #endif
 
 /* Whether this build and this CPU can run `isa` (ISA_AUTO: always). */

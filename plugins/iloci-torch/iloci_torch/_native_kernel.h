@@ -366,3 +366,13 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
 #undef GEMM_ROWS
 #undef TN_NB
 #undef TN_ROWS
+/* the parameters, so the next inclusion sets its own */
+#undef VW
+#undef SUFFIX
+#undef TARGET
+#undef RECIP
+#undef WIDE
+#undef VMIN
+#undef VMAX
+#undef GEMM_NB_ROWS
+#undef TN_NB_ROWS
