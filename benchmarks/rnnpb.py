@@ -43,9 +43,12 @@ Writes ``benchmarks/results/rnnpb.json``::
                          entries (PBs of a network trained on 25 learning
                          sequences): ``pipeline`` (trajectory -> preprocessing ->
                          IK -> encoded sequence), ``recognize`` (PB_obs by the
-                         model), ``total``; medians over the 146 test
-                         demonstrations, torch-rnnpb
+                         model), ``total``; wall and (``_cpu``) thread CPU time;
+                         medians over the 145 or 146 test demonstrations,
+                         torch-rnnpb
     targets              the issues' targets and whether this run met them
+                         (wall-time medians); ``targets_cpu_time``: issue 16's speed
+                         targets against thread CPU time
 
 The naive reference is how a user would first write the model: ``nn.Linear``
 layers, a Python loop over the steps, autograd and ``torch.optim.Adam``; it
@@ -278,24 +281,30 @@ def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:
     m = TorchRNNPB(seed=0)
     pbs = m.train([seqs[i] for i in learn[:entries]])
     ik, cfg = PinocchioIK(), SensorimotorConfig(steps=50)
-    pipe, rec, total = [], [], []
+    out: dict[str, list[float]] = {k: [] for k in ("pipeline", "recognize", "total",
+                                                   "pipeline_cpu", "recognize_cpu",
+                                                   "total_cpu")}
     for i in test:
-        t0 = time.perf_counter()
+        w0, c0 = time.perf_counter(), time.thread_time()
         seq = enc.encode_all(to_motions([demos[i]], cfg, ik))[0][0]
-        t1 = time.perf_counter()
+        w1, c1 = time.perf_counter(), time.thread_time()
         m.recognize([seq], candidate_pbs=pbs)
-        t2 = time.perf_counter()
-        pipe.append((t1 - t0) * 1e3)
-        rec.append((t2 - t1) * 1e3)
-        total.append((t2 - t0) * 1e3)
+        w2, c2 = time.perf_counter(), time.thread_time()
+        for key, a, b in (("pipeline", w0, w1), ("recognize", w1, w2), ("total", w0, w2),
+                          ("pipeline_cpu", c0, c1), ("recognize_cpu", c1, c2),
+                          ("total_cpu", c0, c2)):
+            out[key].append((b - a) * 1e3)
     return {"entries": entries, "demonstrations": len(test),
-            "pipeline": statistics.median(pipe), "recognize": statistics.median(rec),
-            "total": statistics.median(total)}
+            **{k: statistics.median(v) for k, v in out.items()}}
 
 
-def speed_targets(by_kernel: dict, rec_one: dict) -> dict:
-    """Issue 16's speed targets against one run's figures (wall-time medians)."""
-    wall = {k: v["wall"] for k, v in by_kernel.items()}
+def speed_targets(by_kernel: dict, rec_one: dict, clock: str = "wall") -> dict:
+    """Issue 16's speed targets against one run's figures (medians).
+
+    ``clock="cpu"``: the same against thread CPU time, what the targets
+    mean on a machine whose cores other processes share.
+    """
+    wall = {k: v[clock] for k, v in by_kernel.items()}
     out = {}
     if "avx2" in wall:
         out["avx2_le_0.8ms"] = wall["avx2"] <= 0.8
@@ -303,7 +312,7 @@ def speed_targets(by_kernel: dict, rec_one: dict) -> dict:
         out["portable_within_2.5x_avx2"] = wall["portable"] / wall["avx2"] <= 2.5
     if "avx512" in wall:
         out["avx512_le_0.42ms"] = wall["avx512"] <= 0.42
-    out["recognize_one_le_20ms"] = rec_one["total"] <= 20.0
+    out["recognize_one_le_20ms"] = rec_one["total" if clock == "wall" else "total_cpu"] <= 20.0
     return out
 
 
@@ -418,11 +427,13 @@ def main(argv=None) -> dict:
             "speedup_vs_naive": {k: wall["naive"] / v for k, v in wall.items() if k != "naive"},
             "recognize_one_ms": rec_one,
             "targets": speed_targets(by_kernel, rec_one),
+            "targets_cpu_time": speed_targets(by_kernel, rec_one, "cpu"),
             "seconds": time.perf_counter() - t_start,
         }
         from iloci.evaluation.report import write_json_atomic
         write_json_atomic(SPEED_RESULTS, result)
-        print(json.dumps({k: result[k] for k in ("speedup_vs_naive", "targets")}, indent=2))
+        print(json.dumps({k: result[k] for k in ("speedup_vs_naive", "targets",
+                                                 "targets_cpu_time")}, indent=2))
         return result
 
     print("step time at 36 x 50 ...", flush=True)
@@ -504,6 +515,7 @@ def main(argv=None) -> dict:
             "offline_ccr_mean_ge_90pct": {b: ccr[b]["mean"] >= 0.9 for b in backends},
             **speed_targets(by_kernel, rec_one),
         },
+        "targets_cpu_time": speed_targets(by_kernel, rec_one, "cpu"),
         "seconds": time.perf_counter() - t_start,
     }
     write(result)
