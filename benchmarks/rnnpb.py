@@ -35,7 +35,8 @@ Writes ``benchmarks/results/rnnpb.json``::
     step_ms_by_kernel    torch-rnnpb's paper-size step in each kernel this CPU runs:
                          the native kernel per instruction set (``avx512``,
                          ``avx2``, ``portable``; forced with ILOCI_RNNPB_ISA),
-                         ``torch_ops``, and ``naive``, interleaved round by round
+                         ``torch_ops``, jax-rnnpb (``jax``) and ``naive``,
+                         interleaved round by round
                          so load on the machine hits them alike; ``wall`` and
                          ``cpu`` (the thread's CPU time: what the step costs when
                          other processes share the cores)
@@ -213,7 +214,7 @@ def time_train(backend: str, seqs, reps: int, epochs: int, native: bool = True) 
 
 
 def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
-    """torch-rnnpb's step in every kernel this CPU runs, and the naive reference.
+    """torch-rnnpb's step in every kernel this CPU runs, jax-rnnpb's, and the naive reference.
 
     Each round times every kernel once, one after the other, so a change of
     load on the machine hits them alike; medians over rounds, of wall time
@@ -221,13 +222,15 @@ def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
     """
     import torch
 
-    from iloci_torch.native import ISA_ENV, native_isas
+    from iloci_torch.native import ISA_ENV, ISAS, native_isas
     from iloci_torch.rnnpb import TorchRNNPB
 
-    kernels = [*native_isas(), "torch_ops"]
-    models = {}
-    for k in kernels:
-        models[k] = TorchRNNPB(seed=0, kernel="torch" if k == "torch_ops" else "native")
+    from iloci_jax.rnnpb import JaxRNNPB
+
+    kernels = [*native_isas(), "torch_ops", "jax"]
+    models = {k: TorchRNNPB(seed=0, kernel="torch" if k == "torch_ops" else "native")
+              for k in kernels if k != "jax"}
+    models["jax"] = JaxRNNPB(seed=0)
     naive = None
     out: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": []}
                                               for k in (*kernels, "naive")}
@@ -236,7 +239,7 @@ def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
     try:
         for r in range(rounds + 1):                # round 0 warms up, not counted
             for k in kernels:
-                if k != "torch_ops":
+                if k in ISAS:
                     os.environ[ISA_ENV] = k
                 n = 2 if r == 0 else epochs
                 w0, c0 = time.perf_counter(), time.thread_time()
