@@ -38,18 +38,18 @@ Writes ``benchmarks/results/rnnpb.json``::
                          ``torch_ops``, jax-rnnpb (``jax``) and ``naive``,
                          interleaved round by round
                          so load on the machine hits them alike; ``wall`` and
-                         ``cpu`` (the thread's CPU time: what the step costs when
+                         ``cpu`` (the process's CPU time, all threads: what the step costs when
                          other processes share the cores)
     recognize_one_ms     recognizing one demonstration against a memory of 25
                          entries (PBs of a network trained on 25 learning
                          sequences): ``pipeline`` (trajectory -> preprocessing ->
                          IK -> encoded sequence), ``recognize`` (PB_obs by the
-                         model), ``total``; wall and (``_cpu``) thread CPU time;
+                         model), ``total``; wall and (``_cpu``) process CPU time;
                          medians over the 145 or 146 test demonstrations,
                          torch-rnnpb
     targets              the issues' targets and whether this run met them
                          (wall-time medians); ``targets_cpu_time``: issue 16's speed
-                         targets against thread CPU time
+                         targets against process CPU time
 
 The naive reference is how a user would first write the model: ``nn.Linear``
 layers, a Python loop over the steps, autograd and ``torch.optim.Adam``; it
@@ -218,7 +218,7 @@ def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
 
     Each round times every kernel once, one after the other, so a change of
     load on the machine hits them alike; medians over rounds, of wall time
-    and of the thread's CPU time.
+    and of the process's CPU time (all its threads: JAX computes on its own).
     """
     import torch
 
@@ -242,21 +242,21 @@ def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
                 if k in ISAS:
                     os.environ[ISA_ENV] = k
                 n = 2 if r == 0 else epochs
-                w0, c0 = time.perf_counter(), time.thread_time()
+                w0, c0 = time.perf_counter(), time.process_time()
                 models[k].train(seqs, epochs=n)
                 if r:
                     out[k]["wall"].append((time.perf_counter() - w0) / n * 1e3)
-                    out[k]["cpu"].append((time.thread_time() - c0) / n * 1e3)
+                    out[k]["cpu"].append((time.process_time() - c0) / n * 1e3)
             torch.set_num_threads(1)               # the naive step's faster setting here
             if naive is None:
                 naive = naive_step_fn(seqs)
             calls = 1 if r == 0 else naive_calls
-            w0, c0 = time.perf_counter(), time.thread_time()
+            w0, c0 = time.perf_counter(), time.process_time()
             for _ in range(calls):
                 naive()
             if r:
                 out["naive"]["wall"].append((time.perf_counter() - w0) / calls * 1e3)
-                out["naive"]["cpu"].append((time.thread_time() - c0) / calls * 1e3)
+                out["naive"]["cpu"].append((time.process_time() - c0) / calls * 1e3)
             torch.set_num_threads(threads)
     finally:
         if before is None:
@@ -288,11 +288,11 @@ def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:
                                                    "pipeline_cpu", "recognize_cpu",
                                                    "total_cpu")}
     for i in test:
-        w0, c0 = time.perf_counter(), time.thread_time()
+        w0, c0 = time.perf_counter(), time.process_time()
         seq = enc.encode_all(to_motions([demos[i]], cfg, ik))[0][0]
-        w1, c1 = time.perf_counter(), time.thread_time()
+        w1, c1 = time.perf_counter(), time.process_time()
         m.recognize([seq], candidate_pbs=pbs)
-        w2, c2 = time.perf_counter(), time.thread_time()
+        w2, c2 = time.perf_counter(), time.process_time()
         for key, a, b in (("pipeline", w0, w1), ("recognize", w1, w2), ("total", w0, w2),
                           ("pipeline_cpu", c0, c1), ("recognize_cpu", c1, c2),
                           ("total_cpu", c0, c2)):
@@ -304,7 +304,7 @@ def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:
 def speed_targets(by_kernel: dict, rec_one: dict, clock: str = "wall") -> dict:
     """Issue 16's speed targets against one run's figures (medians).
 
-    ``clock="cpu"``: the same against thread CPU time, what the targets
+    ``clock="cpu"``: the same against process CPU time, what the targets
     mean on a machine whose cores other processes share.
     """
     wall = {k: v[clock] for k, v in by_kernel.items()}
