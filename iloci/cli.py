@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "iloci.commands.recognize",
     "iloci.commands.evaluate",
     "iloci.commands.draw",
+    "iloci.commands.serve",
 )
 
 

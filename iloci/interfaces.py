@@ -185,6 +185,17 @@ class Response:
         What the simulator executed, when one is configured.
     attempt : int
         1 for the first guess on this demonstration, 2 for the second, ...
+    extra : mapping
+        Back-end details (the learner's: ``entry``, ``generation_error``,
+        ``clipped``).
+    dt : float, optional
+        Time between two rows of ``joint_path`` (s).
+    teacher_drawing : ndarray, shape (T, 2), optional
+        :attr:`drawing` in the frame of the demonstration answered: its
+        units and orientation, scaled and centred as that demonstration
+        was fitted into the drawing plane, so the two can be shown side by
+        side on equal axes. ``None`` when the response answers no
+        demonstration (e.g. ``Agent.respond``).
     """
 
     concept: str
@@ -195,6 +206,8 @@ class Response:
     execution: Execution | None = None
     attempt: int = 1
     extra: Mapping[str, Any] = field(default_factory=dict)
+    dt: float | None = None
+    teacher_drawing: np.ndarray | None = None
 
     @property
     def drawing(self) -> np.ndarray:

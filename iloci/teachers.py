@@ -33,9 +33,16 @@ __all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher", "check_feedback"]
 
 
 def check_feedback(value: object, teacher: object) -> int:
-    """Return ``value`` as int if it is +1 or -1, else raise :class:`FeedbackError`."""
+    """Return ``value`` as int if it is +1 or -1, else raise :class:`FeedbackError`.
+
+    ``teacher`` is the teacher object that gave it, or a string naming
+    where it came from (e.g. ``"Turn.feedback()"``).
+    """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
             or int(value) not in (1, -1):
+        if isinstance(teacher, str):
+            raise FeedbackError(f"{teacher} got {value!r}; feedback must be +1 (reward) or "
+                                "-1 (punishment).")
         raise FeedbackError(
             f"teacher {type(teacher).__name__} returned {value!r}; feedback must be "
             "+1 (reward) or -1 (punishment). Fix the teacher plugin's feedback().")
@@ -113,7 +120,8 @@ class ConsoleTeacher:
     picture_dir : str
         Directory for a PNG of each answer (demonstration beside the robot's
         drawing: :attr:`Response.drawing <iloci.interfaces.Response.drawing>`,
-        the executed pen path when a simulator is configured) when
+        the executed pen path when a simulator is configured, in the
+        demonstration's frame on the same equal axes) when
         matplotlib is installed; ``""`` disables pictures. The pictures are
         numbered ``answer-0001.png``, ... on from the highest number already
         in the directory, so a later session (or another teacher writing
@@ -140,19 +148,32 @@ class ConsoleTeacher:
         except ImportError:
             return None
         fig = Figure(figsize=(7, 3.5))
-        axes = fig.subplots(1, 2)
+        axes = fig.subplots(1, 2, sharex=True, sharey=True)
         axes[0].plot(demo.positions[:, 0], demo.positions[:, 1], "k-")
         axes[0].plot(*demo.positions[0], "go")
         axes[0].set_title(f"shown: {demo.key}")
-        # with a simulator, the teacher judges what the arm drew, not what
-        # the network meant to draw
-        drawing = response.drawing
+        # with a simulator, the teacher judges what the arm drew, not what the
+        # network meant to draw; shown in the demonstration's frame (its units,
+        # orientation, size and place) when the learner gave it
+        in_frame = response.teacher_drawing is not None
+        drawing = np.asarray(response.teacher_drawing if in_frame else response.drawing)
         axes[1].plot(drawing[:, 0], drawing[:, 1], "b-")
         axes[1].plot(*drawing[0], "go")
         drawn = "drew" if response.execution is not None else "generated"
         axes[1].set_title(f"robot {drawn}: concept {response.concept}")
-        for ax in axes:
-            ax.set_aspect("equal", adjustable="datalim")
+        if not in_frame:  # metres in the drawing plane, not the demonstration's units
+            axes[1].set_xlabel("y (m, drawing plane)")
+            axes[1].set_ylabel("z (m)")
+            for ax in axes:
+                ax.set_aspect("equal", adjustable="datalim")
+        else:
+            both = np.vstack([demo.positions, drawing])
+            lo, hi = both.min(axis=0), both.max(axis=0)
+            pad = 0.05 * float(np.max(hi - lo))
+            for ax in axes:
+                ax.set_xlim(lo[0] - pad, hi[0] + pad)
+                ax.set_ylim(lo[1] - pad, hi[1] + pad)
+                ax.set_aspect("equal", adjustable="box")
         fig.tight_layout()
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=80)
