@@ -119,7 +119,7 @@ function animateAnswer(answer) {
   const total = Math.min(6, Math.max(0.8, answer.dt * (pts.length - 1)));   // seconds
   const start = performance.now();
   const frame = (now) => {
-    const k = Math.min(pts.length, 1 + Math.floor((now - start) / 1000 / total * (pts.length - 1)));
+    const k = Math.max(1, Math.min(pts.length, 1 + Math.floor((now - start) / 1000 / total * (pts.length - 1))));
     ansCtx.clearRect(0, 0, answerCanvas.width, answerCanvas.height);
     showStrokeFaint(ansCtx);
     ansCtx.strokeStyle = "#1f5fbf"; ansCtx.lineWidth = 3; ansCtx.lineCap = "round";
