@@ -29,24 +29,7 @@ from iloci.errors import FeedbackError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration, Response
 
-__all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher", "check_feedback"]
-
-
-def check_feedback(value: object, teacher: object) -> int:
-    """Return ``value`` as int if it is +1 or -1, else raise :class:`FeedbackError`.
-
-    ``teacher`` is the teacher object that gave it, or a string naming
-    where it came from (e.g. ``"Turn.feedback()"``).
-    """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
-            or int(value) not in (1, -1):
-        if isinstance(teacher, str):
-            raise FeedbackError(f"{teacher} got {value!r}; feedback must be +1 (reward) or "
-                                "-1 (punishment).")
-        raise FeedbackError(
-            f"teacher {type(teacher).__name__} returned {value!r}; feedback must be "
-            "+1 (reward) or -1 (punishment). Fix the teacher plugin's feedback().")
-    return int(value)
+__all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher"]
 
 
 class OracleTeacher:
@@ -148,14 +131,14 @@ class ConsoleTeacher:
         except ImportError:
             return None
         fig = Figure(figsize=(7, 3.5))
-        axes = fig.subplots(1, 2, sharex=True, sharey=True)
+        in_frame = response.teacher_drawing is not None
+        axes = fig.subplots(1, 2, sharex=in_frame, sharey=in_frame)
         axes[0].plot(demo.positions[:, 0], demo.positions[:, 1], "k-")
         axes[0].plot(*demo.positions[0], "go")
         axes[0].set_title(f"shown: {demo.key}")
         # with a simulator, the teacher judges what the arm drew, not what the
         # network meant to draw; shown in the demonstration's frame (its units,
         # orientation, size and place) when the learner gave it
-        in_frame = response.teacher_drawing is not None
         drawing = np.asarray(response.teacher_drawing if in_frame else response.drawing)
         axes[1].plot(drawing[:, 0], drawing[:, 1], "b-")
         axes[1].plot(*drawing[0], "go")

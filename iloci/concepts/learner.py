@@ -43,9 +43,8 @@ from iloci.config import LearnerConfig
 from iloci.errors import InvalidInputError, NotFittedError
 from iloci.events import InteractionEvent, RehearsalEvent
 from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Response, Simulator,
-                              Teacher)
+                              Teacher, check_feedback)
 from iloci.sensorimotor.frames import TeacherFrame
-from iloci.teachers import check_feedback
 
 __all__ = ["Answer", "Learner", "LearnOutcome", "Recognition", "Turn", "confidence",
            "ik_joint_limits"]
