@@ -29,7 +29,7 @@ from iloci.errors import FeedbackError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration, Response
 
-__all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher"]
+__all__ = ["OracleTeacher", "NoisyTeacher", "DrawingTeacher", "ConsoleTeacher"]
 
 
 class OracleTeacher:
@@ -93,6 +93,81 @@ class NoisyTeacher(OracleTeacher):
     def feedback(self, demo: Demonstration, response: Response) -> int:
         value = super().feedback(demo, response)
         return -value if self._rng.random() < self.p else value
+
+
+class DrawingTeacher(OracleTeacher):
+    """Judges only what the robot drew, as a person looking at it would.
+
+    It knows the concept of the demonstration it showed (as the person who
+    drew it does) and what each concept looks like (reference
+    demonstrations), and never looks at which memory entry answered: +1
+    when the robot's drawing is nearest, by dynamic time warping, to a
+    reference demonstration of the shown demonstration's concept, else -1.
+    The oracle judges by labels; this teacher measures whether the answers
+    can be judged by eye (issue "Teach the robot in a browser", item 3).
+
+    Both paths are resampled to ``points`` equal time steps, centred on
+    their bounding box and scaled by its larger side (translation and
+    scale do not matter, orientation does), then compared with
+    ``dtaidistance``'s multi-dimensional DTW.
+
+    Parameters
+    ----------
+    references : sequence of Demonstration
+        Each with ``concept`` set (e.g. every LASA demonstration of the
+        shapes taught: ``iloci.data.load_lasa(shapes)``).
+    points : int
+        Resampling length (50, the robot's sequence length).
+    concepts : mapping of str to str, optional
+        Shape -> concept, for shown demonstrations outside LASA.
+
+    Raises
+    ------
+    MissingBackendError
+        ``dtaidistance`` is not installed (the ``report`` extra).
+    """
+
+    def __init__(self, references, points: int = 50,
+                 concepts: Mapping[str, str] | None = None) -> None:
+        super().__init__(concepts)
+        try:
+            from dtaidistance import dtw_ndim
+        except ImportError as exc:
+            from iloci.errors import MissingBackendError
+            raise MissingBackendError("teacher", "drawing", ["dtaidistance"],
+                                      "pip install 'iloci[report]'") from exc
+        self._dtw = dtw_ndim.distance_fast
+        refs = list(references)
+        if not refs or any(r.concept is None for r in refs):
+            raise FeedbackError("the drawing teacher needs reference demonstrations, each "
+                                "with its concept set.")
+        self.points = int(points)
+        self.reference_concepts = [str(r.concept) for r in refs]
+        self._refs = [_normalized(_at_times(r.positions, r.times, self.points)) for r in refs]
+
+    def nearest_concept(self, drawing: np.ndarray) -> str:
+        """The concept of the reference DTW-nearest to ``drawing`` (T, 2), any frame."""
+        d = np.asarray(drawing, dtype=np.float64)
+        path = _normalized(_at_times(d, np.arange(len(d), dtype=np.float64), self.points))
+        dist = [self._dtw(path, r) for r in self._refs]
+        return self.reference_concepts[int(np.argmin(dist))]
+
+    def feedback(self, demo: Demonstration, response: Response) -> int:
+        truth = self.true_concept(demo)
+        drawing = (response.teacher_drawing if response.teacher_drawing is not None
+                   else response.drawing)
+        return 1 if self.nearest_concept(drawing) == truth else -1
+
+
+def _at_times(positions: np.ndarray, times: np.ndarray, points: int) -> np.ndarray:
+    grid = np.linspace(times[0], times[-1], points)
+    return np.column_stack([np.interp(grid, times, positions[:, k]) for k in range(2)])
+
+
+def _normalized(path: np.ndarray) -> np.ndarray:
+    lo, hi = path.min(axis=0), path.max(axis=0)
+    size = float(np.max(hi - lo)) or 1.0
+    return np.ascontiguousarray((path - (lo + hi) / 2) / size, dtype=np.double)
 
 
 class ConsoleTeacher:

@@ -65,6 +65,9 @@ class _Channel:
 
 def _serve(conn: Any) -> None:  # pragma: no cover - runs in the worker process
     """The worker's loop: receive the model, call its methods until told to stop."""
+    # never train at a real-time priority inherited from a control loop
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     try:
         model = conn.recv()
     except (EOFError, OSError):

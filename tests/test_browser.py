@@ -3,8 +3,11 @@
 A LASA shape is drawn on the page's canvas with the mouse (Pointer Events),
 at a pace unlike LASA's; the robot answers; the person answers through a new
 concept and a correct guess, renames a concept, reloads the page and finds
-the memory. A screenshot is saved (``ILOCI_SCREENSHOT`` names where; by
-default the test's temporary directory).
+the memory. Screenshots are saved: ``answer.png`` (a guess on screen) and
+``serve.png`` (the end), in ``ILOCI_SCREENSHOT_DIR`` or else the test's
+temporary directory. ``ILOCI_SERVE_TEST_CONFIG`` names a TOML config to
+serve instead of the small one here (the guide's screenshot uses
+``docs/examples/tiny.toml``, whose drawings are recognizable).
 """
 
 from __future__ import annotations
@@ -30,9 +33,9 @@ from iloci.data import load_lasa  # noqa: E402
 from iloci.web.app import create_app  # noqa: E402
 
 EPOCHS = 30
-CONFIG = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
-                               "recognition_steps": EPOCHS},
-          "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
+CONFIG = os.environ.get("ILOCI_SERVE_TEST_CONFIG") or {
+    "perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS, "recognition_steps": EPOCHS},
+    "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 #: Debian's chromium; a browser is never downloaded.
 CHROMIUM = os.environ.get("ILOCI_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -99,6 +102,7 @@ def draw(page, demo, pace: str) -> None:
 
 def test_teach_in_the_browser(server, browser, tmp_path):
     url, memory = server
+    shots = Path(os.environ.get("ILOCI_SCREENSHOT_DIR") or tmp_path)
     lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
     page = browser.new_page(viewport={"width": 1000, "height": 900})
     errors = []
@@ -121,8 +125,8 @@ def test_teach_in_the_browser(server, browser, tmp_path):
 
     draw(page, lasa["GShape/1"], "slow")                       # guessed c1: yes
     expect(page.locator("#guess")).to_contain_text('Is it "c1"?', timeout=WAIT)
-    page.wait_for_timeout(2500)                                # let the answer's animation run
-    page.screenshot(path=str(tmp_path / "answer.png"))
+    page.wait_for_timeout(6500)                                # let the answer's animation run
+    page.screenshot(path=str(shots / "answer.png"))
     page.locator("#yes").click()
     expect(page.locator("#message")).to_contain_text("Learned", timeout=WAIT)
     expect(page.locator(".concept")).to_have_count(2)
@@ -146,7 +150,7 @@ def test_teach_in_the_browser(server, browser, tmp_path):
         time.sleep(0.01)
     page.mouse.up()
     expect(page.locator("#error")).to_be_visible()
-    shot = Path(os.environ.get("ILOCI_SCREENSHOT") or tmp_path / "serve.png")
+    shot = shots / "serve.png"
     page.screenshot(path=str(shot), full_page=True)
     assert shot.stat().st_size > 10_000
     assert not errors, errors

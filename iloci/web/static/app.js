@@ -100,13 +100,29 @@ pad.addEventListener("pointerup", penUp);
 pad.addEventListener("pointercancel", () => { drawing = false; });
 
 // -- the robot's answer ---------------------------------------------------------
-function showStrokeFaint(ctx) {
+// the answer canvas shows the pad's frame (pixels, y up); when the robot's
+// drawing leaves it, the view zooms out around both, axes kept equal
+function viewOf(points) {
+  const all = stroke.map((p) => [p[0], p[1]]).concat(points);
+  const xs = all.map((p) => p[0]), ys = all.map((p) => p[1]);
+  const lo = [Math.min(...xs), Math.min(...ys)], hi = [Math.max(...xs), Math.max(...ys)];
+  const W = answerCanvas.width, H = answerCanvas.height, m = 12;
+  if (lo[0] >= m && lo[1] >= m && hi[0] <= W - m && hi[1] <= H - m) {
+    return (p) => [p[0], H - p[1]];
+  }
+  const s = Math.min((W - 2 * m) / Math.max(hi[0] - lo[0], 1), (H - 2 * m) / Math.max(hi[1] - lo[1], 1));
+  const cx = (lo[0] + hi[0]) / 2, cy = (lo[1] + hi[1]) / 2;
+  return (p) => [W / 2 + (p[0] - cx) * s, H / 2 - (p[1] - cy) * s];
+}
+
+function showStrokeFaint(ctx, view) {
   if (stroke.length < 2) return;
   ctx.save();
-  ctx.strokeStyle = "#ccc"; ctx.lineWidth = 2; ctx.setLineDash([4, 4]);
+  ctx.strokeStyle = "#bbb"; ctx.lineWidth = 2; ctx.setLineDash([4, 4]);
   ctx.beginPath();
   stroke.forEach((p, i) => {
-    if (i === 0) ctx.moveTo(p[0], pad.height - p[1]); else ctx.lineTo(p[0], pad.height - p[1]);
+    const [x, y] = view(p);
+    if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
   });
   ctx.stroke();
   ctx.restore();
@@ -116,22 +132,23 @@ function animateAnswer(answer) {
   // the drawing is in the frame of what was drawn: pad pixels, y up
   clearAnswer();
   const pts = answer.drawing;
+  const view = viewOf(pts);
   const total = Math.min(6, Math.max(0.8, answer.dt * (pts.length - 1)));   // seconds
   const start = performance.now();
   const frame = (now) => {
     const k = Math.max(1, Math.min(pts.length, 1 + Math.floor((now - start) / 1000 / total * (pts.length - 1))));
     ansCtx.clearRect(0, 0, answerCanvas.width, answerCanvas.height);
-    showStrokeFaint(ansCtx);
+    showStrokeFaint(ansCtx, view);
     ansCtx.strokeStyle = "#1f5fbf"; ansCtx.lineWidth = 3; ansCtx.lineCap = "round";
     ansCtx.beginPath();
     for (let i = 0; i < k; i++) {
-      const x = pts[i][0], y = answerCanvas.height - pts[i][1];
+      const [x, y] = view(pts[i]);
       if (i === 0) ansCtx.moveTo(x, y); else ansCtx.lineTo(x, y);
     }
     ansCtx.stroke();
-    const head = pts[k - 1];
+    const [hx, hy] = view(pts[k - 1]);
     ansCtx.fillStyle = "#1f5fbf";
-    ansCtx.beginPath(); ansCtx.arc(head[0], answerCanvas.height - head[1], 5, 0, 2 * Math.PI); ansCtx.fill();
+    ansCtx.beginPath(); ansCtx.arc(hx, hy, 5, 0, 2 * Math.PI); ansCtx.fill();
     animation = k < pts.length ? requestAnimationFrame(frame) : null;
   };
   animation = requestAnimationFrame(frame);
