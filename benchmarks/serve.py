@@ -72,12 +72,21 @@ def stats(values_ms: list[float]) -> dict:
             "p99": round(float(np.percentile(a, 99)), 2), "max": round(float(a.max()), 2)}
 
 
-def teach_memory(path: Path, entries: int) -> dict:
-    """A memory of ``entries`` entries: LASA demonstrations taught with the oracle."""
+#: The served config: the defaults, but every rewarded answer a new exemplar, no clustering.
+SERVED = {"learner": {"similarity_threshold": 0.0, "num_threshold": 1000}}
+
+
+def teach_memory(path: Path, entries: int, epochs: int) -> dict:
+    """A memory of ``entries`` entries: LASA demonstrations taught with the oracle.
+
+    Rehearsals while building it train ``epochs`` epochs (the network's size,
+    not its training, sets the answer's cost); the server then runs the
+    served config's (the default 1500).
+    """
     import iloci
     from iloci.data import load_lasa
 
-    agent = iloci.build({"learner": {"similarity_threshold": 0.0, "num_threshold": 1000}})
+    agent = iloci.build({"learner": {**SERVED["learner"], "rehearsal_epochs": epochs}})
     demos = []
     for i in range(entries):
         shape = SHAPES[i % len(SHAPES)]
@@ -87,7 +96,7 @@ def teach_memory(path: Path, entries: int) -> dict:
     agent.save(path)
     return {"entries": len(agent.memory), "concepts": len(agent.memory.concepts()),
             "teach_seconds": round(time.perf_counter() - t0, 1),
-            "rehearsals": len(report.rehearsals)}
+            "rehearsals": len(report.rehearsals), "teach_rehearsal_epochs": epochs}
 
 
 def free_port() -> int:
@@ -96,17 +105,19 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def http_benchmark(entries: int, strokes: int) -> dict:
+def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
     import httpx
 
     from iloci.data import load_lasa
 
     with tempfile.TemporaryDirectory() as tmp:
         memory = Path(tmp) / "memory.npz"
-        built = teach_memory(memory, entries)
+        built = teach_memory(memory, entries, teach_epochs)
+        served = Path(tmp) / "served.toml"
+        served.write_text("[learner]\nsimilarity_threshold = 0.0\nnum_threshold = 1000\n")
         port = free_port()
         server = subprocess.Popen([sys.executable, "-m", "iloci", "serve", "--memory",
-                                   str(memory), "--port", str(port)],
+                                   str(memory), "--config", str(served), "--port", str(port)],
                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         url = f"http://127.0.0.1:{port}"
         try:
@@ -228,6 +239,8 @@ def main(argv=None) -> int:
     ap.add_argument("--entries", type=int, default=30)
     ap.add_argument("--strokes", type=int, default=20)
     ap.add_argument("--loop-epochs", type=int, default=0)
+    ap.add_argument("--teach-epochs", type=int, default=100,
+                    help="rehearsal epochs while building the 30-entry memory (100)")
     ap.add_argument("--skip-http", action="store_true")
     ap.add_argument("--skip-loop", action="store_true")
     ap.add_argument("--realtime", action="store_true",
@@ -243,7 +256,7 @@ def main(argv=None) -> int:
         result.update({k: previous[k] for k in ("http", "loop", "loop_realtime")
                        if k in previous})
     if not args.skip_http:
-        result["http"] = http_benchmark(args.entries, args.strokes)
+        result["http"] = http_benchmark(args.entries, args.strokes, args.teach_epochs)
         print(json.dumps(result["http"]["answer_ms"]), result["http"]["feedback"], flush=True)
     if not args.skip_loop:
         key = "loop_realtime" if args.realtime else "loop"

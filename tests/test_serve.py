@@ -216,3 +216,15 @@ def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
     finally:
         classroom.agent.close()
     assert iloci.Agent.load(tmp_path / "w.npz").memory.concepts() == ["c1", "c2"]
+
+
+def test_the_command_refuses_a_bad_port_and_a_corrupt_memory(tmp_path, capsys):
+    from iloci.cli import main
+
+    assert main(["serve", "--port", "70000"]) == 2
+    assert "--port must be 1..65535" in capsys.readouterr().err
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a memory")
+    assert main(["serve", "--memory", str(bad), "--port", "8765"]) == 2
+    assert "cannot read memory file" in capsys.readouterr().err
+    assert bad.read_bytes() == b"not a memory"

@@ -10,12 +10,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from iloci.commands.teach import DEFAULT_MEMORY
 from iloci.errors import InvalidInputError, MissingBackendError
 
 __all__ = ["register", "run", "build_classroom"]
-
-#: Memory file used when ``--memory`` is not given.
-DEFAULT_MEMORY = "iloci-memory.npz"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
