@@ -198,7 +198,6 @@ class Agent:
             The demonstration cannot be preprocessed or reached; the memory
             is untouched.
         """
-        from iloci.concepts.learner import Turn
         from iloci.sensorimotor.frames import TeacherFrame
         if motion is None:
             motion = self.motion(demo)

@@ -30,9 +30,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
-
 import threading
+from typing import Any
 
 import numpy as np
 
