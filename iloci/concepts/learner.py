@@ -214,6 +214,8 @@ class Learner:
         self.joint_limits = joint_limits
         self.on_progress = on_progress
         self.lock = lock if lock is not None else threading.RLock()
+        # observer events of the turn under way, sent once it is committed
+        self._pending: list[tuple[str, Any]] = []
 
     # -- helpers ---------------------------------------------------------------
     @property
@@ -231,8 +233,39 @@ class Learner:
         return self.config.rehearsal_epochs or None
 
     def _emit_interaction(self, event: InteractionEvent) -> None:
-        if self.hook is not None:
-            self.hook.iloci_on_interaction(event=event)
+        self._pending.append(("iloci_on_interaction", event))
+
+    def _deliver(self, outcome: LearnOutcome) -> None:
+        """Send the events of one committed learning step to every observer.
+
+        Each observer (hook implementation) gets every event, even when
+        another one raised; then one :class:`~iloci.errors.ObserverError`
+        names the first failing hook and plugin. Learning is committed
+        before any observer runs, so a fault never leaves it half done.
+        """
+        pending, self._pending = self._pending, []
+        if self.hook is None:
+            return
+        faults: list[tuple[str, str, BaseException]] = []
+        for hook_name, event in pending:
+            caller = getattr(self.hook, hook_name)
+            impls = caller.get_hookimpls() if hasattr(caller, "get_hookimpls") else None
+            if impls is None or any(getattr(i, "hookwrapper", False) or
+                                    getattr(i, "wrapper", False) for i in impls):
+                try:
+                    caller(event=event)
+                except Exception as exc:
+                    faults.append((hook_name, "?", exc))
+                continue
+            for impl in reversed(impls):  # pluggy's calling order
+                try:
+                    impl.function(event=event)
+                except Exception as exc:
+                    faults.append((hook_name, impl.plugin_name, exc))
+        if faults:
+            from iloci.errors import ObserverError
+            hook_name, plugin, exc = faults[0]
+            raise ObserverError(hook_name, plugin, exc, outcome, len(faults)) from exc
 
     def _rehearse(self, reason: str, entries: list[Entry],
                   new_entry: Entry | None = None,
@@ -255,8 +288,7 @@ class Learner:
         event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0,
                                loss=result.loss, seconds=result.seconds, reason=reason,
                                extra={"concepts": len(self.memory.concepts())})
-        if self.hook is not None:
-            self.hook.iloci_on_rehearsal(event=event)
+        self._pending.append(("iloci_on_rehearsal", event))
         return event
 
     def recognize_pbs(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
@@ -368,6 +400,12 @@ class Learner:
         FeedbackError
             The teacher returned something other than +1 or -1; the memory
             is left as it was.
+        ObserverError
+            An observer hook (``iloci_on_interaction``,
+            ``iloci_on_rehearsal``) raised. Observers are called after the
+            memory has been updated: the demonstration *is* learned (the
+            error's ``outcome`` says how) and must not be taught again.
+            Every other observer received every event.
         """
         turn = self.observe(demo, sequence, start, dt, frame)
         while turn.answer is not None:
@@ -543,17 +581,18 @@ class Turn:
         self.answer: Answer | None = None
         self.outcome: LearnOutcome | None = None
         self._revision = mem.revision
+        learner._pending = []
+        self.labels: list[str] = []
         if not mem.entries:
             # the very first demonstration: nothing to guess, a new concept
             self.pb_obs = np.zeros(learner.model.pb_size)
             self.distances = np.zeros(0)
-            self.labels: list[str] = []
-            self._new_concept()
+            self._step(self._new_concept)
             return
         self.pb_obs = learner.recognize_pbs([seq])[0]
         self.distances = np.linalg.norm(mem.pbs_rec - self.pb_obs, axis=1)
         self.labels = mem.concept_labels
-        self._next()
+        self._step(self._next)
 
     @property
     def key(self) -> str:
@@ -600,9 +639,27 @@ class Turn:
                                     "(another demonstration was learned, or a concept "
                                     "renamed); observe it again.")
         fb = check_feedback(value, "Turn.feedback()")
-        if fb == 1:
-            return self._reward()
-        return self._punish()
+        return self._step(self._reward if fb == 1 else self._punish)
+
+    def _step(self, action: Callable[[], Answer | LearnOutcome]) -> Answer | LearnOutcome:
+        """Run one step; observers hear of the turn's events once it is committed.
+
+        The events of a step that fails are dropped (it changed nothing);
+        those of earlier steps wait for the end of the turn, when they are
+        delivered with its own (see ``Learner._deliver``; an observer's
+        fault then raises :class:`~iloci.errors.ObserverError`, the
+        demonstration learned).
+        """
+        pending = self.learner._pending
+        mark = len(pending)
+        try:
+            result = action()
+        except BaseException:
+            del pending[mark:]
+            raise
+        if self.outcome is not None:
+            self.learner._deliver(self.outcome)
+        return result
 
     async def afeedback(self, value: int) -> Answer | LearnOutcome:
         """:meth:`feedback` from asyncio code: runs in a thread, the event loop stays free."""
