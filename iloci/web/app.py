@@ -286,8 +286,13 @@ class Classroom:
         execution = turn.answer.response.execution
 
         def render() -> bytes:
-            from iloci.commands.draw import png_bytes
-            return png_bytes(sim.render(execution, 360, 270))
+            import io
+
+            from PIL import Image
+            buf = io.BytesIO()
+            image = np.ascontiguousarray(sim.render(execution, 360, 270), dtype=np.uint8)
+            Image.fromarray(image).save(buf, format="PNG")
+            return buf.getvalue()
         return await asyncio.to_thread(render)
 
 
