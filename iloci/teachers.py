@@ -114,7 +114,7 @@ class DrawingTeacher(OracleTeacher):
     Parameters
     ----------
     references : sequence of Demonstration
-        Each with ``concept`` set (e.g. every LASA demonstration of the
+        Each with ``true_concept`` set (e.g. every LASA demonstration of the
         shapes taught: ``iloci.data.load_lasa(shapes)``).
     points : int
         Resampling length (50, the robot's sequence length).
@@ -138,11 +138,11 @@ class DrawingTeacher(OracleTeacher):
                                       "pip install 'iloci[report]'") from exc
         self._dtw = dtw_ndim.distance_fast
         refs = list(references)
-        if not refs or any(r.concept is None for r in refs):
+        if not refs or any(r.true_concept is None for r in refs):
             raise FeedbackError("the drawing teacher needs reference demonstrations, each "
-                                "with its concept set.")
+                                "with its true concept set.")
         self.points = int(points)
-        self.reference_concepts = [str(r.concept) for r in refs]
+        self.reference_concepts = [str(r.true_concept) for r in refs]
         self._refs = [_normalized(_at_times(r.positions, r.times, self.points)) for r in refs]
 
     def nearest_concept(self, drawing: np.ndarray) -> str:
