@@ -337,8 +337,8 @@ class Learner:
                     faults.append((hook_name, impl.plugin_name, exc))
         if faults:
             from iloci.errors import ObserverError
-            hook_name, plugin, exc = faults[0]
-            raise ObserverError(hook_name, plugin, exc, outcome, len(faults)) from exc
+            hook_name, plugin, first = faults[0]
+            raise ObserverError(hook_name, plugin, first, outcome, len(faults)) from first
 
     def _rehearse(self, reason: str, entries: list[Entry],
                   new_entry: Entry | None = None,
