@@ -1,4 +1,4 @@
-"""Can the robot's answers be judged by eye? A teacher that sees only the drawing, beside the oracle.
+"""Can the robot's answers be judged by eye? A teacher seeing only the drawing, beside the oracle.
 
 The oracle judges an answer by labels (the concept of the demonstration the
 answering entry stands for) and never looks at it. The drawing teacher

@@ -129,8 +129,8 @@ def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
                         break
                     except httpx.TransportError:
                         if time.monotonic() > deadline or server.poll() is not None:
-                            raise RuntimeError("iloci serve did not start: "
-                                               + (server.stdout.read() if server.stdout else ""))
+                            raise RuntimeError("iloci serve did not start: " + (
+                                server.stdout.read() if server.stdout else "")) from None
                         time.sleep(0.2)
                 tests = [load_lasa([SHAPES[i % len(SHAPES)]])[6 - (i // len(SHAPES)) % 2]
                          for i in range(strokes + 2)]
