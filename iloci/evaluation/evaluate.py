@@ -33,8 +33,8 @@ from iloci.errors import InvalidInputError
 from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan", "memory_counts", "run_fold",
-           "summarize", "versions"]
+__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan", "memory_counts",
+           "run_fold", "summarize", "versions"]
 
 
 @dataclass
