@@ -258,7 +258,8 @@ def _true_concept(key: str, fallback: dict[str, str]) -> str:
 def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Sequence[Any], *,
              send: Callable[[dict], None] | None = None, baseline: bool = True,
              details: bool = True, plugin_manager: Any = None,
-             memory_dir: str | None = None) -> FoldResult:
+             memory_dir: str | None = None,
+             overrides: dict[str, Any] | None = None) -> FoldResult:
     """Teach a fresh agent ``learn`` (in order), recognize ``test``; one fold.
 
     Parameters
@@ -280,6 +281,9 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         Save the fold's learned agent there as ``fold-K.npz``
         (:meth:`~iloci.agent.Agent.save`), e.g. to study recognition later
         without learning again.
+    overrides : dict, optional
+        Component objects by section (``{"teacher": DrawingTeacher(...)}``),
+        as for :func:`iloci.build`.
     """
     from iloci.agent import learn_and_recognize
     from iloci.plugins import get_plugin_manager, get_registry
@@ -291,7 +295,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     if observer is not None:
         pm.register(observer)
     try:
-        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm)
+        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm,
+                                                  **(overrides or {}))
     finally:
         if observer is not None:
             pm.unregister(observer)
