@@ -18,6 +18,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--folds", type=int, nargs="+", metavar="K",
                    help="run only these folds (0-based)")
     p.add_argument("--no-baseline", action="store_true", help="skip the DTW 1-NN baseline")
+    p.add_argument("--robustness", action="store_true",
+                   help="also recognize every test set under the perturbations of "
+                   "iloci.evaluation.perturb (pace, sampling, rests, jitter, rotation, "
+                   "stretch, scale) beside DTW 1-NN (evaluation.robustness)")
+    p.add_argument("--order", choices=("shuffled", "blocked"), default=None,
+                   help="order of each learning set: seeded shuffle, or concept by "
+                   "concept (default: evaluation.order)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
@@ -94,6 +101,13 @@ def run(args: argparse.Namespace) -> int:
     from iloci.evaluation.report import headline, write_outputs
 
     config = load_config(args.config)
+    changes = {}
+    if args.robustness:
+        changes["robustness"] = True
+    if args.order:
+        changes["order"] = args.order
+    if changes:
+        config = config.replace(evaluation=changes)
     progress = None if args.quiet else Progress()
     print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
@@ -107,5 +121,8 @@ def run(args: argparse.Namespace) -> int:
         return 130
     report = write_outputs(args.out, metrics, results)
     print(headline(metrics))
+    if metrics.get("robustness"):
+        from iloci.evaluation.report import robustness_table
+        print("\n" + "\n".join(robustness_table(metrics["robustness"])))
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
     return 0
