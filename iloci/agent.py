@@ -362,18 +362,18 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         A configured back end, of a component not given as an object, is
         not installed (names the pip command).
     """
-    from iloci.config import COMPONENT_SECTIONS
-    unknown = set(overrides) - set(COMPONENT_SECTIONS)
+    from iloci.interfaces import COMPONENT_KINDS
+    unknown = set(overrides) - set(COMPONENT_KINDS)
     if unknown:
         from iloci.errors import ConfigError
         raise ConfigError(f"build() got unknown component override(s) {sorted(unknown)}; "
-                          f"valid: {', '.join(COMPONENT_SECTIONS)}.")
+                          f"valid: {', '.join(COMPONENT_KINDS)}.")
     _check_overrides(overrides)
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config, registry=registry, supplied=overrides)
     components: dict[str, Any] = {}
-    for sec, kind in COMPONENT_SECTIONS.items():
+    for sec in COMPONENT_KINDS:
         if sec in overrides:
             components[sec] = overrides[sec]
             continue
@@ -381,24 +381,22 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         if cc.name == "none":
             components[sec] = None
             continue
-        components[sec] = registry.build(kind, cc.name, cc.params, seed=cfg.seed)
+        components[sec] = registry.build(sec, cc.name, cc.params, seed=cfg.seed)
     return Agent(cfg, components, pm, registry)
 
 
 def _check_overrides(overrides: dict[str, Any]) -> None:
     """Raise one InvalidInputError for every override that is not a component."""
-    from iloci.config import COMPONENT_SECTIONS, OPTIONAL_SECTIONS
-    from iloci.interfaces import PROTOCOLS, unmet_members
-    from iloci.registry import LABELS
+    from iloci.interfaces import COMPONENT_KINDS, unmet_members
     problems = []
     for sec, obj in overrides.items():
-        kind = COMPONENT_SECTIONS[sec]
-        protocol = PROTOCOLS[kind]
+        kind = COMPONENT_KINDS[sec]
+        protocol = kind.protocol
         where = f"iloci.interfaces.{protocol.__name__}"
-        label = LABELS[kind]
+        label = kind.label
         a_label = ("an " if label[0].lower() in "aeiou" else "a ") + label
         if obj is None:
-            if sec not in OPTIONAL_SECTIONS:
+            if not kind.optional:
                 problems.append(f"{sec}=None: {a_label} is required (only simulator=None "
                                 "is allowed)")
         elif isinstance(obj, type):

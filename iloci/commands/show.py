@@ -58,9 +58,9 @@ def _components(config_file: str | None):
 
     registry = get_registry()
     if config_file is None:
-        return registry.build("ik_solver", "pinocchio"), SensorimotorConfig()
+        return registry.build("ik", "pinocchio"), SensorimotorConfig()
     cfg = load_config(config_file, registry=registry)
-    return (registry.build("ik_solver", cfg.ik.name, cfg.ik.params, seed=cfg.seed),
+    return (registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed),
             cfg.sensorimotor)
 
 
