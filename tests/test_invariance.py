@@ -1,4 +1,4 @@
-"""The default preprocessing reads a drawing the same however a person draws it.
+"""The path reading (``resample = "arc_length"``) is the same however a person draws.
 
 Each invariance on real LASA demonstrations (one of each of the 26 shapes):
 the network's sensory input -- the plane displacements ``(dy, dz)`` per
@@ -28,6 +28,7 @@ from iloci.interfaces import Demonstration
 from iloci.sensorimotor.pipeline import preprocessed
 
 PAPER = SensorimotorConfig(resample="time", rest_tolerance=0.0)
+PATH = SensorimotorConfig(resample="arc_length", rest_tolerance=0.01)
 
 
 @pytest.fixture(scope="module")
@@ -35,11 +36,11 @@ def demos():
     return [d for d in load_lasa() if d.index == 0]
 
 
-def _input(demo, cfg=None):
+def _input(demo, cfg=PATH):
     return np.diff(preprocessed(demo, cfg), axis=0)
 
 
-def _worst_rms(demos, change, cfg=None):
+def _worst_rms(demos, change, cfg=PATH):
     worst = 0.0
     for d in demos:
         ref = _input(d, cfg)
@@ -74,7 +75,7 @@ def test_jitter_is_smoothed_along_the_path(demos):
     smoothed = _worst_rms(demos, lambda d: P.jitter(d, 0.02, rng))
     rng = np.random.default_rng(0)
     raw = _worst_rms(demos, lambda d: P.jitter(d, 0.02, rng),
-                     SensorimotorConfig(smoothing=0.0))
+                     SensorimotorConfig(resample="arc_length", smoothing=0.0))
     assert smoothed <= 0.15 and smoothed < raw / 3
 
 
@@ -84,12 +85,13 @@ def test_uniform_scale_and_translation(demos):
 
 
 def test_screen_coordinates_with_y_down(demos):
-    down = SensorimotorConfig(y_axis="down")
-    for d in demos[:5]:
-        flipped = Demonstration(d.positions * [1.0, -1.0] + [0.0, 900.0], d.times,
-                                shape=d.shape)
-        assert np.allclose(preprocessed(flipped, down), preprocessed(d), atol=1e-12)
-        assert not np.allclose(preprocessed(flipped), preprocessed(d), atol=1e-3)
+    for cfg in (PATH, PAPER):
+        down = SensorimotorConfig(resample=cfg.resample, y_axis="down")
+        for d in demos[:5]:
+            flipped = Demonstration(d.positions * [1.0, -1.0] + [0.0, 900.0], d.times,
+                                    shape=d.shape)
+            assert np.allclose(preprocessed(flipped, down), preprocessed(d, cfg), atol=1e-12)
+            assert not np.allclose(preprocessed(flipped, cfg), preprocessed(d, cfg), atol=1e-3)
 
 
 def test_millisecond_time_stamps_warn_with_the_likely_unit(demos):
@@ -107,15 +109,15 @@ def test_a_too_short_stroke_is_a_clear_error(demos):
     d = demos[0]
     tap = Demonstration(d.positions[::300], d.times[::300])          # 4 samples
     with pytest.raises(InvalidDemonstrationError, match=r"4 samples.*at least 5"):
-        preprocessed(tap)
+        preprocessed(tap, PATH)
     rested = P.pen_rests(tap, 0.5)                                     # 4 + 2 x 2 samples
     with pytest.raises(InvalidDemonstrationError, match="4 samples once the pen's rests are "
                        r"trimmed \(from 8\); at least 5"):
-        preprocessed(rested)
-    assert preprocessed(Demonstration(d.positions[::200], d.times[::200])).shape == (50, 2)
+        preprocessed(rested, PATH)
+    assert preprocessed(Demonstration(d.positions[::200], d.times[::200]), PATH).shape == (50, 2)
     with pytest.raises(InvalidDemonstrationError, match="at least 12"):
         preprocessed(Demonstration(d.positions[::100], d.times[::100]),
-                     SensorimotorConfig(min_points=12))
+                     SensorimotorConfig(resample="arc_length", min_points=12))
 
 
 def test_new_settings_are_validated():

@@ -3,13 +3,14 @@
 The paper (section "sensorimotor") smooths each demonstration, scales it and
 fits it into a y-z rectangle of the robot's workspace; its filter and
 resolution are not given. A person at a tablet or a mouse draws at their own
-pace, at their device's sampling rate, pauses, and jitters; iloci's default
-reads the drawn *path* and nothing else (:func:`preprocess`):
+pace, at their device's sampling rate, pauses, and jitters; the path reading
+(``resample="arc_length"``) reads the drawn *path* and nothing else
+(:func:`preprocess`):
 
 * **Screen coordinates**: ``y_axis="down"`` flips y first.
 * **Rests** at the start and the end (the pen down before it moves, held
   after it stops) are trimmed (:func:`trim_rests`).
-* **Resampling along the path** (``resample="arc_length"``, the default):
+* **Resampling along the path** (``resample="arc_length"``):
   ``steps`` points (default 50, the network's sequence length) evenly spaced
   along the path's length, so the teacher's pace and pauses do not change
   them (:func:`resample_path`). The length is measured on a lightly
@@ -23,7 +24,8 @@ reads the drawn *path* and nothing else (:func:`preprocess`):
   at 10 000 (:func:`local_linear`). Each sample is weighted by the stretch
   of path it stands for, so samples crowded where the pen was slow do not
   outvote the rest.
-* **The paper's time-based reading** (``resample="time"``): Savitzky-Golay
+* **The paper's time-based reading** (``resample="time"``, the default):
+  Savitzky-Golay
   smoothing, cubic, ``smoothing_window`` samples (default 31 of LASA's
   1000), then ``steps`` points evenly in *time* (:func:`smooth`,
   :func:`resample`); with ``rest_tolerance = 0`` nothing is trimmed.
@@ -33,8 +35,8 @@ reads the drawn *path* and nothing else (:func:`preprocess`):
   plane's y and the teacher's y to z, so a teacher facing the robot sees
   the shape drawn as they drew it.
 
-Why the default, with the numbers: see the guide's section "How a drawing
-is read" and ``benchmarks/results/robustness.json``.
+The figures behind the choice: the guide's section "How a drawing is read"
+and ``benchmarks/results/robustness.json``.
 """
 
 from __future__ import annotations
@@ -389,9 +391,9 @@ def fit_to_plane(points: np.ndarray, plane: DrawingPlane) -> np.ndarray:
     return plane.center + (p - (lo + hi) / 2) * scale
 
 
-def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_length",
+def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "time",
                smoothing: float = 0.02, smoothing_window: int = 31,
-               rest_tolerance: float = 0.01, y_axis: str = "up", min_points: int = 5,
+               rest_tolerance: float = 0.0, y_axis: str = "up", min_points: int = 5,
                plane: DrawingPlane) -> np.ndarray:
     """Read one demonstration as the robot's drawing: plane points.
 
