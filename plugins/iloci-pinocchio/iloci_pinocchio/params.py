@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 __all__ = ["PinocchioIKParams"]
 
@@ -10,6 +11,9 @@ __all__ = ["PinocchioIKParams"]
 @dataclass(frozen=True)
 class PinocchioIKParams:
     """Settings of :class:`iloci_pinocchio.ik.PinocchioIK`."""
+
+    #: A saved memory's motor channels are this robot's joint angles.
+    MEMORY_KEYS: ClassVar[tuple[str, ...]] = ("robot",)
 
     #: Robot (a name of :mod:`iloci.sensorimotor.robots`).
     robot: str = "nao-v32-right-arm"
