@@ -249,7 +249,12 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     where the samples are sparse to the distance from ``u_k`` to its second
     nearest sample, so a coarsely sampled path is interpolated (a straight
     line through its two nearest samples) rather than averaged away. Unlike
-    a moving average the fit does not shift a curve's ends inward.
+    a moving average the fit does not shift a curve's ends inward. Each
+    sample's weight is also multiplied by the stretch of ``s`` it stands
+    for (half the gaps to its neighbours), so samples crowded where the pen
+    was slow or resting count once together (a Priestley-Chao weighting);
+    samples further than 6 bandwidths are left out (their weight is below
+    1.6e-8 of the peak).
 
     Parameters
     ----------
@@ -270,10 +275,9 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     u = np.asarray(u, dtype=np.float64)
     if width <= 0:
         return np.column_stack([np.interp(u, s, p[:, k]) for k in range(2)])
-    d = s[None, :] - u[:, None]                                   # (K, N)
-    ad = np.abs(d)
-    second = np.partition(ad, 1, axis=1)[:, 1] if len(s) > 1 else ad[:, 0]
-    h = np.maximum(width, second)[:, None]
+    if np.any(np.diff(s) < 0):
+        order = np.argsort(s, kind="stable")
+        s, p = s[order], p[order]
     # each sample stands for the stretch of path around it (half the gaps to
     # its neighbours): samples crowded where the pen is slow or resting
     # share one stretch instead of outvoting the rest of the path
@@ -281,13 +285,30 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     share = np.concatenate([[0.0], gaps]) + np.concatenate([gaps, [0.0]])
     if not np.any(share > 0):
         share = np.ones_like(s)
-    w = np.exp(-0.5 * (d / h) ** 2) * share[None, :]
+    n = len(s)
+    # bandwidth per point: widened to the second nearest sample where sparse
+    at = np.searchsorted(s, u)
+    cand = np.clip(at[:, None] + np.arange(-2, 2)[None, :], 0, n - 1)
+    near = np.sort(np.abs(s[cand] - u[:, None]), axis=1)
+    h = np.maximum(width, near[:, min(1, n - 1)])
+    # samples beyond 6 bandwidths weigh under 1.6e-8 of the peak: left out
+    lo = np.maximum(np.searchsorted(s, u - 6 * h, side="left") - 1, 0)
+    hi = np.minimum(np.searchsorted(s, u + 6 * h, side="right") + 1, n)
+    idx = lo[:, None] + np.arange(int((hi - lo).max()))[None, :]       # (K, M)
+    inside = idx < hi[:, None]
+    idx = np.minimum(idx, n - 1)
+    d = s[idx] - u[:, None]
+    w = np.where(inside, np.exp(-0.5 * (d / h[:, None]) ** 2) * share[idx], 0.0)
     s0, s1, s2 = w.sum(1), (w * d).sum(1), (w * d * d).sum(1)
-    t0, t1 = w @ p, (w * d) @ p
+    t0 = np.einsum("km,kmc->kc", w, p[idx])
+    t1 = np.einsum("km,kmc->kc", w * d, p[idx])
     den = s0 * s2 - s1 * s1
-    ok = den > 1e-12 * np.maximum(s0 * s2, 1e-300)
-    out = np.where(ok[:, None], (s2[:, None] * t0 - s1[:, None] * t1)
-                   / np.where(ok, den, 1.0)[:, None], t0 / s0[:, None])
+    ok = (s0 > 0) & (den > 1e-12 * np.maximum(s0 * s2, 1e-300))
+    safe_den = np.where(ok, den, 1.0)[:, None]
+    safe_s0 = np.where(s0 > 0, s0, 1.0)[:, None]
+    nearest = p[np.clip(at, 0, n - 1)]
+    out = np.where(ok[:, None], (s2[:, None] * t0 - s1[:, None] * t1) / safe_den,
+                   np.where((s0 > 0)[:, None], t0 / safe_s0, nearest))
     return out
 
 
