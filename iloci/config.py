@@ -114,12 +114,12 @@ class SensorimotorConfig:
 
     #: Points each demonstration is resampled to before IK (sequence length).
     steps: int = 50
-    #: Resampling parameter: ``"time"`` (evenly in the demonstration's time
-    #: stamps, the paper's reading) or ``"arc_length"`` (evenly along the
-    #: drawn path, smoothed along it: independent of the teacher's pace, the
-    #: sampling rate and pauses of the pen; see the guide, "How a drawing is
-    #: read").
-    resample: str = "time"
+    #: Resampling parameter: ``"arc_length"`` (evenly along the drawn path,
+    #: smoothed along it: independent of the teacher's pace, the sampling
+    #: rate and pauses of the pen) or ``"time"`` (evenly in the
+    #: demonstration's time stamps, the paper's reading). See the guide,
+    #: "How a drawing is read", for the figures behind the default.
+    resample: str = "arc_length"
     #: Smoothing bandwidth as a fraction of the path's length (``resample =
     #: "arc_length"``: Gaussian local linear regression along the path);
     #: 0 interpolates the samples without smoothing.
@@ -130,7 +130,7 @@ class SensorimotorConfig:
     #: The pen rests at the start (end) while it stays within this fraction
     #: of the drawing's size of its first (last) point; those samples are
     #: dropped before resampling. 0 keeps every sample (the paper's reading).
-    rest_tolerance: float = 0.0
+    rest_tolerance: float = 0.01
     #: Direction of the teacher's y axis: ``"up"`` (a plot, LASA) or
     #: ``"down"`` (screen and image coordinates: a browser, a tablet).
     y_axis: str = "up"

@@ -231,6 +231,6 @@ class TimeUnitWarning(UserWarning):
     """A demonstration's time stamps look like another unit than seconds (e.g. ms).
 
     iloci reads time stamps in seconds; only the robot's drawing speed
-    depends on them (the path reading, ``resample = "arc_length"``, does not
-    read them at all), so this is a warning, not an error.
+    depends on them (the default path reading, ``resample = "arc_length"``,
+    does not read them at all), so this is a warning, not an error.
     """

@@ -15,6 +15,7 @@ tap) has one test each.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -86,7 +87,7 @@ def test_uniform_scale_and_translation(demos):
 
 def test_screen_coordinates_with_y_down(demos):
     for cfg in (PATH, PAPER):
-        down = SensorimotorConfig(resample=cfg.resample, y_axis="down")
+        down = dataclasses.replace(cfg, y_axis="down")
         for d in demos[:5]:
             flipped = Demonstration(d.positions * [1.0, -1.0] + [0.0, 900.0], d.times,
                                     shape=d.shape)

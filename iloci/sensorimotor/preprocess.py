@@ -3,14 +3,14 @@
 The paper (section "sensorimotor") smooths each demonstration, scales it and
 fits it into a y-z rectangle of the robot's workspace; its filter and
 resolution are not given. A person at a tablet or a mouse draws at their own
-pace, at their device's sampling rate, pauses, and jitters; the path reading
-(``resample="arc_length"``) reads the drawn *path* and nothing else
-(:func:`preprocess`):
+pace, at their device's sampling rate, pauses, and jitters; the default, the
+path reading (``resample="arc_length"``), reads the drawn *path* and nothing
+else (:func:`preprocess`):
 
 * **Screen coordinates**: ``y_axis="down"`` flips y first.
 * **Rests** at the start and the end (the pen down before it moves, held
   after it stops) are trimmed (:func:`trim_rests`).
-* **Resampling along the path** (``resample="arc_length"``):
+* **Resampling along the path** (``resample="arc_length"``, the default):
   ``steps`` points (default 50, the network's sequence length) evenly spaced
   along the path's length, so the teacher's pace and pauses do not change
   them (:func:`resample_path`). The length is measured on a lightly
@@ -24,7 +24,7 @@ pace, at their device's sampling rate, pauses, and jitters; the path reading
   at 10 000 (:func:`local_linear`). Each sample is weighted by the stretch
   of path it stands for, so samples crowded where the pen was slow do not
   outvote the rest.
-* **The paper's time-based reading** (``resample="time"``, the default):
+* **The paper's time-based reading** (``resample="time"``):
   Savitzky-Golay
   smoothing, cubic, ``smoothing_window`` samples (default 31 of LASA's
   1000), then ``steps`` points evenly in *time* (:func:`smooth`,
@@ -412,9 +412,9 @@ def fit_to_plane(points: np.ndarray, plane: DrawingPlane) -> np.ndarray:
     return plane.center + (p - (lo + hi) / 2) * scale
 
 
-def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "time",
+def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_length",
                smoothing: float = 0.02, smoothing_window: int = 31,
-               rest_tolerance: float = 0.0, y_axis: str = "up", min_points: int = 5,
+               rest_tolerance: float = 0.01, y_axis: str = "up", min_points: int = 5,
                plane: DrawingPlane) -> np.ndarray:
     """Read one demonstration as the robot's drawing: plane points.
 
