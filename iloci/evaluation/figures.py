@@ -212,6 +212,6 @@ def plot_robustness(rob: Mapping[str, Mapping], path: str | Path) -> Path:
     ax.set_xlim(0, 100)
     ax.set_xlabel("CCR (%)")
     ax.set_title("recognition of perturbed test demonstrations")
-    ax.legend(loc="lower left", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
     ax.grid(axis="x", alpha=0.3)
     return _save(fig, path)
