@@ -95,7 +95,8 @@ def test_robustness_section(run_dir):
         for f, ccr in zip(folds, row["ccr_folds"]):
             predicted = f["robustness"][name]["predicted"]
             assert len(predicted) == len(f["test"])
-            assert ccr == sum(p == t for p, t in zip(predicted, f["true"])) / len(f["true"])
+            true = f["true_concepts"]
+            assert ccr == sum(p == t for p, t in zip(predicted, true)) / len(true)
     # the unperturbed suite entry is the fold's own recognition
     assert rob["clean"]["ccr_folds"] == metrics["ccr_folds"]
     assert rob["clean"]["baseline"]["ccr_folds"] == metrics["baseline"]["ccr_folds"]
