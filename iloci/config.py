@@ -485,7 +485,8 @@ def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
         params = getattr(config, sec).params
         keys[sec] = tuple(getattr(params, "MEMORY_KEYS", ())) if params is not None else ()
     for sec, names in keys.items():
-        old_sec = saved.get(sec) if isinstance(saved.get(sec), Mapping) else {}
+        section = saved.get(sec)
+        old_sec: Mapping[str, Any] = section if isinstance(section, Mapping) else {}
         defaults = params_to_dict(type(getattr(config, sec))()) if sec in MEMORY_SECTIONS \
             else None
         for key in names:

@@ -7,7 +7,8 @@ when the demonstration its nearest memory entry stands for has the same
 true concept (what an oracle teacher would reward). The DTW 1-NN baseline
 runs on the same folds.
 
-Folds run in parallel processes (``jobs``, :mod:`iloci.evaluation.parallel`);
+Folds run in parallel (``jobs``, :mod:`iloci.evaluation.parallel`) on an
+executor (:mod:`iloci.evaluation.executors`: worker processes here, or Ray);
 progress (per fold and per interaction, with ETA) is reported through a
 callback fed by the ``iloci_on_interaction`` observer hook. Each fold gives
 a :class:`FoldResult`; :func:`summarize` turns them into ``metrics.json``.
@@ -234,6 +235,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     predicted = [_true_concept(r.source, known) for r in recs]
     mem = agent.memory
     entries = mem.entries
+    counts = memory_counts(mem)
     res = FoldResult(
         fold=fold,
         learn=[d.key for d in learn],
@@ -245,7 +247,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         feedbacks=[int(f) for f in report.feedbacks],
         first_guess=[bool(g) for g in report.first_guess_correct],
         interactions_per_demo=len(report.feedbacks) / max(1, len(report.outcomes)),
-        **memory_counts(mem),
+        entries=counts["entries"], exemplars=counts["exemplars"],
+        prototypes=counts["prototypes"], concepts=counts["concepts"],
         generation_error=float(np.mean([e.generation_error for e in entries])),
         rehearsals=len(report.rehearsals),
         rehearsal_seconds=float(sum(r.seconds for r in report.rehearsals)),
@@ -456,14 +459,16 @@ def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
 def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
-             plugin_manager: Any = None) -> Evaluation:
+             plugin_manager: Any = None, executor: str = "local",
+             address: str | None = None) -> Evaluation:
     """Run the k-fold protocol; return the metrics and every fold's result.
 
     Parameters
     ----------
     config : Config, path, mapping or None
     jobs : int, optional
-        Parallel processes (default ``config.evaluation.jobs``).
+        Folds run at once (default ``config.evaluation.jobs``). With
+        ``executor="local"`` and ``jobs == 1`` they run in this process.
     progress : callable, optional
         Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
         "rehearsal"|"fold_done", "fold": k, ...}``.
@@ -476,6 +481,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         only on this manager can be evaluated) and receives
         ``iloci_on_fold_finished``; with ``jobs == 1`` also the learning
         events. Defaults to :func:`~iloci.plugins.get_plugin_manager`.
+    executor : str
+        Where the folds run (:func:`~iloci.evaluation.executors.make_executor`):
+        ``"local"`` (worker processes of joblib's loky pool) or ``"ray"``
+        (the ``iloci-ray`` plugin).
+    address : str, optional
+        The executor's engine (e.g. a running Ray cluster, ``HOST:PORT``).
 
     Returns
     -------
@@ -485,8 +496,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
 
     Notes
     -----
-    With ``jobs > 1`` the folds run in spawned worker processes
-    (:mod:`iloci.evaluation.parallel`), which cannot receive a plugin
+    Results do not depend on the executor or ``jobs``: each fold's seeds
+    come from the config and the fold index.
+
+    In parallel (``jobs > 1`` or an executor other than ``local``) the folds
+    run in worker processes (:mod:`iloci.evaluation.parallel`), which cannot
+    receive a plugin
     manager (its plugin objects do not pickle). Without ``plugin_manager``,
     each worker builds the default one from the installed plugins, as the
     parent does. With one, the parent resolves the config's component names
@@ -510,6 +525,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         Re-raised after the workers are stopped.
     """
     from iloci.data import load_lasa
+    from iloci.evaluation.executors import LocalExecutor, make_executor
     from iloci.evaluation.parallel import FoldTask, resolved_specs, run_folds_in_processes
     from iloci.plugins import get_plugin_manager, get_registry
 
@@ -528,8 +544,11 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     jobs = int(jobs or config.evaluation.jobs)
     if jobs < 1:
         raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
+    runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
+    serial = jobs == 1 and isinstance(runner, LocalExecutor)
     # resolved (and checked to pickle) before any data is loaded or fold run
-    specs = resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
+    specs = (resolved_specs(config, pm) if not serial and plugin_manager is not None
+             else None)
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
     plan = fold_plan(demos, config)
@@ -547,7 +566,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         emit({"kind": "fold_done", "fold": res.fold, "ccr": res.ccr,
               "seconds": res.wall_seconds})
 
-    if jobs == 1:
+    if serial:  # in this process: the observers see every learning event
         for k in wanted:
             learn_idx, test_idx = plan[k]
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
@@ -556,7 +575,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
                               plugin_manager=pm))
     else:
         run_folds_in_processes(config.to_dict(), [FoldTask(k, *plan[k]) for k in wanted],
-                               shapes, jobs, baseline=baseline, specs=specs, emit=emit,
+                               shapes, runner, baseline=baseline, specs=specs, emit=emit,
                                on_result=finished)
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r.fold)
