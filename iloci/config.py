@@ -46,9 +46,12 @@ __all__ = [
 
 #: The component each section names when a config leaves its name out.
 DEFAULT_NAMES = {
-    # JAX: at the memory sizes of a learning phase its compiled training
-    # step is about twice as fast as torch's (benchmarks/results/rnnpb.json)
-    "perceptual_model": "jax-rnnpb",
+    # torch-rnnpb: with AVX2 or AVX-512 its native training kernel is the
+    # fastest training step measured (CPU per paper-size step: AVX-512 0.58 ms,
+    # AVX2 0.99 ms, jax-rnnpb 1.38 ms; its portable C path 1.75 ms is slower
+    # than jax), and its recognition is faster than jax's everywhere
+    # (benchmarks/results/rnnpb_speed.json, step_ms_by_kernel)
+    "perceptual_model": "torch-rnnpb",
     "clusterer": "scipy",
     "teacher": "oracle",
     "ik": "pinocchio",
@@ -204,8 +207,9 @@ class EvaluationConfig:
     #: Seed of everything: fold split, presentation order, network
     #: initialisation, noisy teacher.
     seed: int = 0
-    #: Folds run in parallel processes.
-    jobs: int = 1
+    #: Folds run in parallel processes; 0 (the default): one per CPU core
+    #: this process may use (:func:`iloci.evaluation.evaluate.default_jobs`).
+    jobs: int = 0
     #: Order of each fold's learning set: ``"shuffled"`` (seeded random) or
     #: ``"blocked"`` (concept by concept, as a person teaching "circle,
     #: circle, then square, square" would; concepts and demonstrations in
@@ -225,8 +229,8 @@ class EvaluationConfig:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         if not 0 < self.train_fraction < 1:
             raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
-        if self.jobs < 1:
-            raise ValueError(f"jobs must be >= 1, got {self.jobs}")
+        if self.jobs < 0:
+            raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
         if self.order not in ("shuffled", "blocked"):
             raise ValueError(f"order must be 'shuffled' or 'blocked', got {self.order!r}")
 

@@ -6,13 +6,25 @@ import argparse
 import sys
 
 
+def _jobs(args: argparse.Namespace, config) -> str:
+    """The folds run at once, as evaluate() will resolve them, for the banner."""
+    from iloci.evaluation.evaluate import default_jobs
+    if args.jobs is not None:
+        return str(args.jobs)
+    if config.evaluation.jobs:
+        return str(config.evaluation.jobs)
+    folds = len(args.folds) if args.folds else config.evaluation.folds
+    return f"{min(default_jobs(), folds)} (one per CPU core)"
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="run the k-fold LASA evaluation and write a report")
     p.add_argument("--config", "-c", help="TOML config (default: the paper's settings)")
     p.add_argument("--out", "-o", default="runs/lasa", help="output directory "
                    "(default: runs/lasa)")
     p.add_argument("--jobs", "-j", type=int, default=None,
-                   help="folds run at once (default: evaluation.jobs)")
+                   help="folds run at once (default: evaluation.jobs; when that is 0, "
+                   "one per CPU core)")
     p.add_argument("--executor", default="local", metavar="NAME",
                    help="where folds run: 'local' (worker processes, the default) or 'ray' "
                    "(needs the iloci-ray plugin)")
@@ -73,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
           f"{config.clusterer.name}, teacher {config.teacher.name}, "
-          f"jobs {args.jobs or config.evaluation.jobs}, executor {args.executor}",
+          f"jobs {_jobs(args, config)}, executor {args.executor}",
           file=sys.stderr)
     progress = None if args.quiet else FoldProgress()
     try:

@@ -33,8 +33,9 @@ from iloci.errors import InvalidInputError
 from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["Evaluation", "FoldResult", "evaluate", "fold_plan", "memory_counts",
-           "robustness_suite", "run_fold", "summarize", "summarize_robustness", "versions"]
+__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan",
+           "memory_counts", "robustness_suite", "run_fold", "summarize",
+           "summarize_robustness", "versions"]
 
 
 @dataclass
@@ -456,6 +457,22 @@ def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
     return out
 
 
+def default_jobs() -> int:
+    """Folds to run at once when neither ``--jobs`` nor ``evaluation.jobs`` says.
+
+    One per CPU core this process may run on (its affinity mask where the
+    system has one, e.g. under ``taskset`` or a container's CPU set; else
+    :func:`os.cpu_count`); at least 1. A fold is single-threaded (the RNNPB
+    back ends train on one thread), so more processes than cores only
+    share them.
+    """
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        n = os.cpu_count() or 1
+    return max(1, n)
+
+
 def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
@@ -467,7 +484,8 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     ----------
     config : Config, path, mapping or None
     jobs : int, optional
-        Folds run at once (default ``config.evaluation.jobs``). With
+        Folds run at once (default ``config.evaluation.jobs``; 0 there means
+        :func:`default_jobs`, one per CPU core, at most one per fold). With
         ``executor="local"`` and ``jobs == 1`` they run in this process.
     progress : callable, optional
         Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
@@ -541,9 +559,23 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         import importlib.util
         if any(importlib.util.find_spec(m) is None for m in BASELINE_MODULES):
             check_report_extras(baseline=True)
-    jobs = int(jobs or config.evaluation.jobs)
-    if jobs < 1:
-        raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
+    asked = int(jobs if jobs is not None else config.evaluation.jobs)
+    if asked < 0 or (jobs is not None and asked == 0):
+        raise InvalidInputError(f"jobs must be >= 1, got {asked}.")
+    n_folds = config.evaluation.folds
+    wanted = list(range(n_folds)) if folds is None else list(folds)
+    for k in wanted:
+        if not 0 <= k < n_folds:
+            raise InvalidInputError(f"fold {k} does not exist; folds are 0..{n_folds - 1}.")
+    # 0: one per core, never more than folds; serial where the given plugin
+    # manager's components could not be sent to a worker (parallelism the
+    # caller did not ask for must not fail the run)
+    jobs = asked or min(default_jobs(), len(wanted))
+    if asked == 0 and jobs > 1 and executor == "local" and plugin_manager is not None:
+        try:
+            resolved_specs(config, pm)
+        except InvalidInputError:
+            jobs = 1
     runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
     serial = jobs == 1 and isinstance(runner, LocalExecutor)
     # resolved (and checked to pickle) before any data is loaded or fold run
@@ -551,11 +583,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
              else None)
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
-    plan = fold_plan(demos, config)
-    wanted = list(range(len(plan))) if folds is None else list(folds)
-    for k in wanted:
-        if not 0 <= k < len(plan):
-            raise InvalidInputError(f"fold {k} does not exist; folds are 0..{len(plan) - 1}.")
+    plan = fold_plan(demos, config)  # one (learn, test) pair per fold
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
     results: list[FoldResult] = []

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from iloci.errors import InvalidInputError
-from iloci.rnnpb_common import (FORMAT_VERSION, WEIGHT_NAMES, init_weights, make_params,
-                                reference_generate, reference_prediction_error)
+from iloci.rnnpb import (FORMAT_VERSION, WEIGHT_NAMES, init_weights, make_params,
+                         reference_generate, reference_prediction_error)
 from iloci.testing.checks import synthetic_sequences
 
 
@@ -25,7 +25,7 @@ def _weights(model):
     return {k: st[k] for k in WEIGHT_NAMES}
 
 
-# -- the network is the one defined in iloci.rnnpb_common ------------------------
+# -- the network is the one defined in iloci.rnnpb ------------------------
 
 def test_generate_and_error_match_the_numpy_reference(make):
     m = make(seed=3)
