@@ -222,6 +222,17 @@ class Response:
         What the simulator executed, when one is configured.
     attempt : int
         1 for the first guess on this demonstration, 2 for the second, ...
+    extra : mapping
+        Back-end details (the learner's: ``entry``, ``generation_error``,
+        ``clipped``).
+    dt : float, optional
+        Time between two rows of ``joint_path`` (s).
+    teacher_drawing : ndarray, shape (T, 2), optional
+        :attr:`drawing` in the frame of the demonstration answered: its
+        units and orientation, scaled and centred as that demonstration
+        was fitted into the drawing plane, so the two can be shown side by
+        side on equal axes. ``None`` when the response answers no
+        demonstration (e.g. ``Agent.respond``).
     """
 
     concept: str
@@ -232,6 +243,8 @@ class Response:
     execution: Execution | None = None
     attempt: int = 1
     extra: Mapping[str, Any] = field(default_factory=dict)
+    dt: float | None = None
+    teacher_drawing: np.ndarray | None = None
 
     @property
     def drawing(self) -> np.ndarray:
@@ -489,10 +502,14 @@ def check_feedback(value: object, teacher: object) -> int:
     ------
     FeedbackError
         ``value`` is anything else (a bool, a float, 0, ...); the message
-        names the teacher's class.
+        names the teacher's class, or ``teacher`` itself when it is a string
+        naming where the feedback came from (e.g. ``"Turn.feedback()"``).
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
             or int(value) not in (1, -1):
+        if isinstance(teacher, str):
+            raise FeedbackError(f"{teacher} got {value!r}; feedback must be +1 (reward) or "
+                                "-1 (punishment).")
         raise FeedbackError(
             f"teacher {type(teacher).__name__} returned {value!r}; feedback must be "
             "+1 (reward) or -1 (punishment). Fix the teacher plugin's feedback().")

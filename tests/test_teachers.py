@@ -141,3 +141,24 @@ def test_pictures_follow_the_highest_number_and_never_replace_a_file(tmp_path, m
     assert (tmp_path / "answer-0002.png").read_bytes()[:4] == b"\x89PNG"
     assert (tmp_path / "answer-0007.png").read_bytes() == b"a person's picture"
     assert not list(tmp_path.glob(".*.tmp")), "no temporary file left behind"
+
+
+def test_drawing_teacher_judges_only_the_drawing():
+    pytest.importorskip("dtaidistance")
+    from iloci.data import load_lasa
+    from iloci.teachers import DrawingTeacher
+
+    demos = load_lasa(["GShape", "Angle"])
+    refs = [d for d in demos if d.index < 6]
+    teacher = DrawingTeacher(refs)
+    g, angle = demos[6], demos[13]
+    assert (g.key, angle.key) == ("GShape/6", "Angle/6")
+    t = np.linspace(g.times[0], g.times[-1], 50)
+    drawn = np.column_stack([np.interp(t, g.times, g.positions[:, k]) for k in (0, 1)])
+    # a G drawn in metres somewhere in the plane: scale and place do not matter
+    response = Response("c1", drawn * 0.003 + [0.05, 0.2], np.zeros((50, 4)),
+                        source="Angle/0")                    # the label would say "Angle"
+    assert teacher.feedback(g, response) == 1
+    assert teacher.feedback(angle, response) == -1
+    with pytest.raises(FeedbackError, match="reference"):
+        DrawingTeacher([])

@@ -193,6 +193,7 @@ def _true_concept(key: str, fallback: dict[str, str]) -> str:
 def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Sequence[Any], *,
              send: Callable[[dict], None] | None = None, baseline: bool = True,
              details: bool = True, plugin_manager: Any = None,
+             overrides: dict[str, Any] | None = None,
              robustness: bool | None = None) -> FoldResult:
     """Teach a fresh agent ``learn`` (in order), recognize ``test``; one fold.
 
@@ -211,6 +212,9 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         Resolves the config's component names; its observers see this
         fold's learning events. Defaults to
         :func:`~iloci.plugins.get_plugin_manager`.
+    overrides : dict, optional
+        Component objects by section (``{"teacher": DrawingTeacher(...)}``),
+        as for :func:`iloci.build`.
     robustness : bool, optional
         Recognize ``test`` again under each perturbation of
         :data:`iloci.evaluation.perturb.SUITE` (and run the baseline on it
@@ -226,7 +230,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     if observer is not None:
         pm.register(observer)
     try:
-        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm)
+        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm,
+                                                  **(overrides or {}))
     finally:
         if observer is not None:
             pm.unregister(observer)
