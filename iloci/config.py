@@ -147,12 +147,29 @@ class SensorimotorConfig:
 
     #: Points each demonstration is resampled to before IK (sequence length).
     steps: int = 50
-    #: Resampling parameter: ``"time"`` (the demonstration's time stamps)
-    #: or ``"arc_length"`` (uniform along the path).
-    resample: str = "time"
-    #: Smoothing window in points of the raw trajectory (Savitzky-Golay,
-    #: cubic); 0 or 1 disables smoothing.
+    #: Resampling parameter: ``"arc_length"`` (evenly along the drawn path,
+    #: smoothed along it: independent of the teacher's pace, the sampling
+    #: rate and pauses of the pen) or ``"time"`` (evenly in the
+    #: demonstration's time stamps, the paper's reading). See the guide,
+    #: "How a drawing is read", for the figures behind the default.
+    resample: str = "arc_length"
+    #: Smoothing bandwidth as a fraction of the path's length (``resample =
+    #: "arc_length"``: Gaussian local linear regression along the path);
+    #: 0 interpolates the samples without smoothing.
+    smoothing: float = 0.02
+    #: Smoothing window in points of the raw trajectory for ``resample =
+    #: "time"`` (Savitzky-Golay, cubic); 0 or 1 disables smoothing.
     smoothing_window: int = 31
+    #: The pen rests at the start (end) while it stays within this fraction
+    #: of the drawing's size of its first (last) point; those samples are
+    #: dropped before resampling. 0 keeps every sample (the paper's reading).
+    rest_tolerance: float = 0.01
+    #: Direction of the teacher's y axis: ``"up"`` (a plot, LASA) or
+    #: ``"down"`` (screen and image coordinates: a browser, a tablet).
+    y_axis: str = "up"
+    #: Fewest samples a stroke may have once the pen's rests are trimmed;
+    #: fewer is an error (a tap or a click, not a drawing).
+    min_points: int = 5
     #: Robot and drawing plane (a name of :mod:`iloci.sensorimotor.robots`).
     robot: str = "nao-v32-right-arm"
 
@@ -161,10 +178,20 @@ class SensorimotorConfig:
             raise ValueError(f"steps must be >= 3, got {self.steps}")
         if self.resample not in ("time", "arc_length"):
             raise ValueError(f"resample must be 'time' or 'arc_length', got {self.resample!r}")
+        if not 0 <= self.smoothing < 0.5:
+            raise ValueError(f"smoothing must be a fraction of the path in [0, 0.5), got "
+                             f"{self.smoothing}")
         if self.smoothing_window < 0 or (self.smoothing_window > 1
                                          and self.smoothing_window % 2 == 0):
             raise ValueError("smoothing_window must be 0, 1 or an odd number of points, "
                              f"got {self.smoothing_window}")
+        if not 0 <= self.rest_tolerance < 0.5:
+            raise ValueError(f"rest_tolerance must be a fraction of the drawing's size in "
+                             f"[0, 0.5), got {self.rest_tolerance}")
+        if self.y_axis not in ("up", "down"):
+            raise ValueError(f"y_axis must be 'up' or 'down', got {self.y_axis!r}")
+        if self.min_points < 3:
+            raise ValueError(f"min_points must be >= 3, got {self.min_points}")
         from iloci.sensorimotor.robots import ROBOTS
         if self.robot not in ROBOTS:
             from iloci.errors import did_you_mean
@@ -222,6 +249,15 @@ class EvaluationConfig:
     #: says "unknown" for what it was never taught; 0 leaves none out.
     #: Which ones rotates from fold to fold (seeded).
     untaught: int = 0
+    #: Order of each fold's learning set: ``"shuffled"`` (seeded random) or
+    #: ``"blocked"`` (concept by concept, as a person teaching "circle,
+    #: circle, then square, square" would; concepts and demonstrations in
+    #: seeded random order).
+    order: str = "shuffled"
+    #: Also recognize every fold's test set under the perturbations of
+    #: :mod:`iloci.evaluation.perturb` (pace, sampling, rests, jitter,
+    #: rotation, stretch, scale), iloci beside DTW 1-NN.
+    robustness: bool = False
 
     def validate(self) -> None:
         if self.protocol not in ("folds", "stream"):
@@ -238,6 +274,8 @@ class EvaluationConfig:
             raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
         if self.jobs < 0:
             raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
+        if self.order not in ("shuffled", "blocked"):
+            raise ValueError(f"order must be 'shuffled' or 'blocked', got {self.order!r}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {

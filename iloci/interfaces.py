@@ -40,6 +40,27 @@ __all__ = [
     "unmet_members",
 ]
 
+#: Longest plausible duration of one drawn stroke (s): a person draws a
+#: shape in a few seconds (LASA's take 0.6 to 6 s); longer time stamps
+#: with steps of 1 or more are read as milliseconds.
+LONGEST_STROKE_S = 120.0
+
+
+def _check_time_unit(t: np.ndarray, label: str) -> None:
+    """Warn (TimeUnitWarning) when time stamps look like milliseconds, not seconds."""
+    duration = float(t[-1] - t[0])
+    step = float(np.median(np.diff(t)))
+    if duration > LONGEST_STROKE_S and step >= 1.0:
+        import warnings
+
+        from iloci.errors import TimeUnitWarning
+        warnings.warn(
+            f"time stamps of {label} span {duration:.6g} s in steps of {step:.3g} s; "
+            f"iloci reads seconds, and these look like milliseconds (the stroke would "
+            f"last {duration / 1000:.3g} s). Divide them by 1000 (or pass times=None for "
+            "sample numbers).", TimeUnitWarning, stacklevel=4)
+
+
 @dataclass(frozen=True, eq=False, init=False)
 class Demonstration:
     """One pen trajectory shown by the teacher, validated on creation.
@@ -140,6 +161,7 @@ class Demonstration:
                 raise InvalidDemonstrationError(
                     f"times of {label} must be finite and strictly increasing."
                 )
+            _check_time_unit(t, label)
         pos = pos.copy()
         t = t.copy()
         pos.flags.writeable = False

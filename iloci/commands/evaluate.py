@@ -39,6 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", choices=("folds", "stream"), default=None,
                    help="folds: the paper's k-fold experiment; stream: test-then-learn over "
                    "every demonstration (default: evaluation.protocol)")
+    p.add_argument("--robustness", action="store_true",
+                   help="also recognize every test set under the perturbations of "
+                   "iloci.evaluation.perturb (pace, sampling, rests, jitter, rotation, "
+                   "stretch, scale) beside DTW 1-NN (evaluation.robustness)")
+    p.add_argument("--order", choices=("shuffled", "blocked"), default=None,
+                   help="order of each learning set: seeded shuffle, or concept by "
+                   "concept (default: evaluation.order)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
@@ -70,6 +77,13 @@ def run(args: argparse.Namespace) -> int:
     from iloci.display import FoldProgress
 
     config = load_config(args.config)
+    changes = {}
+    if args.robustness:
+        changes["robustness"] = True
+    if args.order:
+        changes["order"] = args.order
+    if changes:
+        config = config.replace(evaluation=changes)
     if args.protocol is not None and args.protocol != config.evaluation.protocol:
         config = config.replace(evaluation={"protocol": args.protocol})
     # fail now, not after the first fold: the report's libraries, a writable --out
@@ -101,6 +115,9 @@ def run(args: argparse.Namespace) -> int:
         return 130
     report = write_outputs(args.out, metrics, results)
     print(headline(metrics))
+    if metrics.get("robustness"):
+        from iloci.evaluation.report import robustness_table
+        print("\n" + "\n".join(robustness_table(metrics["robustness"])))
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
     return 0
 

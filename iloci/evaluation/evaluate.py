@@ -34,8 +34,9 @@ from iloci.evaluation.metrics import (auroc, correct_classification_rate, majori
                                       matched_names, mean_std, purity)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan", "memory_counts",
-           "run_fold", "summarize", "untaught_concepts", "versions"]
+__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan",
+           "memory_counts", "robustness_suite", "run_fold", "summarize",
+           "summarize_robustness", "untaught_concepts", "versions"]
 
 
 @dataclass
@@ -149,6 +150,9 @@ class FoldResult:
     pb_concepts: list[str] = field(default_factory=list)
     pb_kinds: list[str] = field(default_factory=list)
     shapes: dict[str, list[list[float]]] = field(default_factory=dict)
+    #: Robustness suite: perturbation name -> {"predicted", "ccr",
+    #: "baseline_predicted", "baseline_ccr", "seconds"} (empty unless asked).
+    robustness: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-able dict of every field."""
@@ -219,6 +223,11 @@ def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], lis
         # presentation order: seeded per fold, independent of the split's draws
         rng = np.random.default_rng([ev.seed, k, 1])
         order = [int(i) for i in rng.permutation(learn)]
+        if ev.order == "blocked":
+            # concept by concept, in the order each concept first appears in
+            # the shuffled stream (so concepts and their members stay seeded)
+            concepts = list(dict.fromkeys(_concept(demos[i]) for i in order))
+            order = [i for c in concepts for i in order if _concept(demos[i]) == c]
         test_idx = [int(i) for i in test]
         left_out = set(untaught_concepts(demos, config, k))
         if left_out:
@@ -228,6 +237,10 @@ def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], lis
             test_idx += sorted(out)
         plan.append((order, test_idx))
     return plan
+
+
+def _concept(demo: Any) -> str:
+    return demo.concept or demo.shape
 
 
 class _ProgressObserver:
@@ -259,7 +272,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
              send: Callable[[dict], None] | None = None, baseline: bool = True,
              details: bool = True, plugin_manager: Any = None,
              memory_dir: str | None = None,
-             overrides: dict[str, Any] | None = None) -> FoldResult:
+             overrides: dict[str, Any] | None = None,
+             robustness: bool | None = None) -> FoldResult:
     """Teach a fresh agent ``learn`` (in order), recognize ``test``; one fold.
 
     Parameters
@@ -284,6 +298,10 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     overrides : dict, optional
         Component objects by section (``{"teacher": DrawingTeacher(...)}``),
         as for :func:`iloci.build`.
+    robustness : bool, optional
+        Recognize ``test`` again under each perturbation of
+        :data:`iloci.evaluation.perturb.SUITE` (and run the baseline on it
+        when ``baseline``); default ``config.evaluation.robustness``.
     """
     from iloci.agent import learn_and_recognize
     from iloci.plugins import get_plugin_manager, get_registry
@@ -373,6 +391,10 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         res.baseline_predicted = dtw_1nn(list(learn), list(test))
         res.baseline_seconds = time.perf_counter() - tb
         res.baseline_ccr = correct_classification_rate(true, res.baseline_predicted)
+    if config.evaluation.robustness if robustness is None else robustness:
+        res.robustness = robustness_suite(agent, list(learn), list(test), true, known,
+                                          seed=config.evaluation.seed * 1000 + fold,
+                                          baseline=baseline)
     return res
 
 
@@ -385,6 +407,51 @@ def _other_concept_distances(mem: Any) -> list[float]:
     d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
     d = np.where(lab[:, None] != lab[None, :], d, np.inf)
     return [float(v) for v in d.min(axis=1)]
+
+
+def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[str],
+                     known: dict[str, str], *, seed: int = 0, baseline: bool = True,
+                     names: Sequence[str] | None = None) -> dict[str, dict[str, Any]]:
+    """Recognize ``test`` under each perturbation; iloci and DTW 1-NN.
+
+    Parameters
+    ----------
+    agent : Agent
+        Taught; its memory is not changed.
+    learn, test : lists of Demonstration
+        The fold's learning set (the baseline's references) and test set.
+    true : list of str
+        True concept of each test demonstration.
+    known : dict
+        Demonstration key -> concept, to name what the nearest entry stands for.
+    seed : int
+        Seeds the perturbations' random draws.
+    baseline : bool
+        Also the DTW 1-NN baseline.
+    names : sequence of str, optional
+        Perturbations to run (default: the whole suite).
+
+    Returns
+    -------
+    dict
+        Name -> ``{"predicted", "ccr", "baseline_predicted", "baseline_ccr",
+        "seconds"}``.
+    """
+    from iloci.evaluation.baseline import dtw_1nn
+    from iloci.evaluation.perturb import perturb, suite
+    out: dict[str, dict[str, Any]] = {}
+    for p in suite(names):
+        t0 = time.perf_counter()
+        shown = perturb(test, p, seed)
+        predicted = [_true_concept(r.source, known) for r in agent.recognize(shown)]
+        row: dict[str, Any] = {"predicted": predicted,
+                               "ccr": correct_classification_rate(true, predicted)}
+        if baseline:
+            row["baseline_predicted"] = dtw_1nn(learn, shown)
+            row["baseline_ccr"] = correct_classification_rate(true, row["baseline_predicted"])
+        row["seconds"] = time.perf_counter() - t0
+        out[p.name] = row
+    return out
 
 
 _NAME = re.compile(r"[A-Za-z0-9._-]+")
@@ -492,12 +559,45 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
             "taught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught) if t])),
             "taught_demos": int(sum(taught)), "untaught_demos": int(len(taught) - sum(taught)),
         }
+    if all(r.get("robustness") for r in results):
+        out["robustness"] = summarize_robustness(results)
     if all(r.get("baseline_predicted") for r in results):
         bm, bs = mean_std([r["baseline_ccr"] for r in results])
         out["baseline"] = {"method": "DTW 1-NN (dtaidistance), positions resampled to 50",
                            "ccr_mean": bm, "ccr_std": bs,
                            "ccr_folds": [r["baseline_ccr"] for r in results],
                            "seconds": [r["baseline_seconds"] for r in results]}
+    return out
+
+
+def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
+    """metrics.json's ``robustness``: per perturbation, CCR over folds, iloci and DTW.
+
+    Each perturbation maps to ``{"group", "label", "ccr_mean", "ccr_std",
+    "ccr_folds", "drop"}`` (``drop``: clean CCR minus this one, in CCR
+    units, mean over folds) and, when the baseline ran, the same under
+    ``"baseline"``.
+    """
+    from iloci.evaluation.perturb import suite
+    out: dict[str, Any] = {}
+    names = [p for p in suite() if all(p.name in r["robustness"] for r in results)]
+    for p in names:
+        rows = [r["robustness"][p.name] for r in results]
+        entry: dict[str, Any] = {"group": p.group, "label": p.label}
+        for key, into in (("ccr", entry), ("baseline_ccr", None)):
+            if not all(key in row for row in rows):
+                continue
+            vals = [row[key] for row in rows]
+            m, s = mean_std(vals)
+            part = {"ccr_mean": m, "ccr_std": s, "ccr_folds": vals}
+            if "clean" in results[0]["robustness"]:
+                clean = [r["robustness"]["clean"][key] for r in results]
+                part["drop"] = float(np.mean(np.subtract(clean, vals)))
+            if into is None:
+                entry["baseline"] = part
+            else:
+                entry.update(part)
+        out[p.name] = entry
     return out
 
 

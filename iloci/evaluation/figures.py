@@ -21,6 +21,7 @@ __all__ = [
     "plot_shapes",
     "plot_stream",
     "plot_noisy",
+    "plot_robustness",
 ]
 
 
@@ -256,4 +257,30 @@ def plot_noisy(ps: Sequence[float], ccr: Sequence[Sequence[float]],
     ax.set_title("accuracy (band: min-max)")
     bx.set_title("teacher effort")
     fig.tight_layout()
+
+
+def plot_robustness(rob: Mapping[str, Mapping], path: str | Path) -> Path:
+    """Horizontal bars: CCR per perturbation, iloci beside DTW 1-NN (mean ± std over folds).
+
+    ``rob`` is metrics.json's ``robustness`` (see
+    :func:`iloci.evaluation.evaluate.summarize_robustness`).
+    """
+    plt = _plt()
+    rows = list(rob.values())
+    n = len(rows)
+    y = np.arange(n)
+    fig, ax = plt.subplots(figsize=(7.5, 0.32 * n + 1.2))
+    ax.barh(y - 0.2, [100 * r["ccr_mean"] for r in rows], 0.38,
+            xerr=[100 * r["ccr_std"] for r in rows], label="iloci", color="tab:blue")
+    if all("baseline" in r for r in rows):
+        ax.barh(y + 0.2, [100 * r["baseline"]["ccr_mean"] for r in rows], 0.38,
+                xerr=[100 * r["baseline"]["ccr_std"] for r in rows], label="DTW 1-NN",
+                color="tab:gray")
+    ax.set_yticks(y, [r["label"] for r in rows], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlim(0, 100)
+    ax.set_xlabel("CCR (%)")
+    ax.set_title("recognition of perturbed test demonstrations")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
     return _save(fig, path)

@@ -15,7 +15,7 @@ from iloci.evaluation.evaluate import FoldResult
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
 __all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
-           "stream_headline"]
+           "robustness_table", "stream_headline"]
 
 
 #: Modules the report needs: figures (matplotlib), the PB-space figure
@@ -104,6 +104,18 @@ def headline(metrics: dict[str, Any]) -> str:
         f"{m['wall_seconds']:.1f} s ({m['jobs']} job(s))",
     ]
     return "\n".join(rows)
+
+
+def robustness_table(rob: dict[str, Any]) -> list[str]:
+    """Markdown rows: per perturbation, iloci and DTW 1-NN CCR (mean ± std, %)."""
+    rows = ["| the test demonstrations, drawn … | iloci CCR % | DTW 1-NN CCR % |",
+            "|---|---|---|"]
+    for row in rob.values():
+        b = row.get("baseline")
+        base = f"{_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])}" if b else "-"
+        rows.append(f"| {row['label']} | {_pct(row['ccr_mean'])} ± {_pct(row['ccr_std'])} | "
+                    f"{base} |")
+    return rows
 
 
 def _sparse_table(concepts: Sequence[str], conf: np.ndarray, cmat: np.ndarray) -> list[str]:
@@ -252,6 +264,14 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         lines += ["## Baseline", "", m["baseline"]["method"] + " on the same folds: "
                   f"{_pct(m['baseline']['ccr_mean'])} ± {_pct(m['baseline']['ccr_std'])} %."]
         lines += baseline_rows
+    if m.get("robustness"):
+        figures.plot_robustness(m["robustness"], fig_dir / "robustness.png")
+        lines += ["", "## Robustness", "",
+                  "Each fold's test set recognized again, transformed the way a person's "
+                  "drawing differs from LASA's recordings (`iloci.evaluation.perturb`); the "
+                  "learning phase is the one above. Mean ± std over the folds:", "",
+                  *robustness_table(m["robustness"]), "",
+                  "![robustness](figures/robustness.png)"]
     report = out / "report.md"
     write_text_atomic(report, "\n".join(lines) + "\n")
     return report

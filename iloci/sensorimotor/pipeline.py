@@ -20,7 +20,7 @@ from iloci.interfaces import Demonstration, IKSolver
 from iloci.sensorimotor.preprocess import preprocess
 from iloci.sensorimotor.robots import get_robot
 
-__all__ = ["Motion", "to_motion", "to_motions"]
+__all__ = ["Motion", "preprocessed", "to_motion", "to_motions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,6 +81,22 @@ def _sensorimotor(config: SensorimotorConfig | Config | None) -> SensorimotorCon
                             f"{type(config).__name__}.")
 
 
+def preprocessed(demo: Demonstration,
+                 config: SensorimotorConfig | Config | None = None) -> np.ndarray:
+    """:func:`~iloci.sensorimotor.preprocess.preprocess` with a config's settings.
+
+    Returns
+    -------
+    ndarray, shape (steps, 2)
+        Plane points ``(y, z)`` (m, torso frame) of the configured robot.
+    """
+    cfg = _sensorimotor(config)
+    return preprocess(demo, steps=cfg.steps, resample_by=cfg.resample,
+                      smoothing=cfg.smoothing, smoothing_window=cfg.smoothing_window,
+                      rest_tolerance=cfg.rest_tolerance, y_axis=cfg.y_axis,
+                      min_points=cfg.min_points, plane=get_robot(cfg.robot).plane)
+
+
 def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
               ik: IKSolver) -> Motion:
     """Preprocess a demonstration and solve IK along it.
@@ -103,8 +119,7 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     """
     cfg = _sensorimotor(config)
     robot = get_robot(cfg.robot)
-    plane_points = preprocess(demo, steps=cfg.steps, resample_by=cfg.resample,
-                              smoothing_window=cfg.smoothing_window, plane=robot.plane)
+    plane_points = preprocessed(demo, cfg)
     targets = robot.plane.to_3d(plane_points)
     joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
     times = demo.times
