@@ -279,9 +279,25 @@ def test_batched_recognition(lasa):
         assert a.pb_obs.shape == (4,)
     single = agent.recognize(lasa["Sine/5"])
     assert single.concept == answers[3].concept
-    # batch composition may change float32 rounding, not the answer
-    assert single.distance == pytest.approx(answers[3].distance, abs=1e-4)
+    # batch composition changes float32 rounding, which 30 LM steps amplify
+    # (measured: 7.1e-4 on this PB distance of 0.06), not the answer
+    assert single.distance == pytest.approx(answers[3].distance, abs=2e-3)
     assert entries_equal(agent.memory.entries, snapshot)    # inference changes nothing
+
+
+def test_batched_recognition_is_independent_of_the_batch_in_float64(lasa):
+    """In float64 a sequence's PB_obs does not depend on what else is in the batch."""
+    config = small_config()
+    config["perceptual_model"]["dtype"] = "float64"
+    try:
+        agent = iloci.build(config)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    batch = agent.recognize([lasa["GShape/4"], lasa["Sine/4"], lasa["Sine/5"]])
+    single = agent.recognize(lasa["Sine/5"])
+    np.testing.assert_allclose(single.pb_obs, batch[2].pb_obs, atol=1e-6)
+    assert single.distance == pytest.approx(batch[2].distance, abs=1e-6)
 
 
 # -- bad input ----------------------------------------------------------------------
