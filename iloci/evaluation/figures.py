@@ -257,6 +257,7 @@ def plot_noisy(ps: Sequence[float], ccr: Sequence[Sequence[float]],
     ax.set_title("accuracy (band: min-max)")
     bx.set_title("teacher effort")
     fig.tight_layout()
+    return _save(fig, path)
 
 
 def plot_robustness(rob: Mapping[str, Mapping], path: str | Path) -> Path:

@@ -27,6 +27,12 @@ __all__ = ["Perturbation", "SUITE", "suite", "perturb", "time_warp", "resample_c
            "pen_rests", "jitter", "rotate", "stretch", "scale"]
 
 
+def _times(demo: Demonstration) -> np.ndarray:
+    """A demonstration's times, s (a constructed Demonstration always has them)."""
+    assert demo.times is not None
+    return demo.times
+
+
 def _extent(demo: Demonstration) -> float:
     return float(np.ptp(demo.positions, axis=0).max())
 
@@ -38,7 +44,7 @@ def _with(demo: Demonstration, positions: np.ndarray, times: np.ndarray) -> Demo
 
 def _at_times(demo: Demonstration, t: np.ndarray) -> np.ndarray:
     """Positions of ``demo`` at times ``t`` (linear interpolation), shape (len(t), 2)."""
-    return np.column_stack([np.interp(t, demo.times, demo.positions[:, k]) for k in range(2)])
+    return np.column_stack([np.interp(t, _times(demo), demo.positions[:, k]) for k in range(2)])
 
 
 def time_warp(demo: Demonstration, kind: str = "slow_fast") -> Demonstration:
@@ -49,7 +55,7 @@ def time_warp(demo: Demonstration, kind: str = "slow_fast") -> Demonstration:
     ``"slow_fast"`` (slow at first, twice the mean speed at the end) and
     ``1 - (1 - u)**2`` for ``"fast_slow"``.
     """
-    t = demo.times
+    t = _times(demo)
     t0, T = float(t[0]), float(t[-1] - t[0])
     u = np.linspace(0.0, 1.0, len(t))
     if kind == "slow_fast":
@@ -63,7 +69,7 @@ def time_warp(demo: Demonstration, kind: str = "slow_fast") -> Demonstration:
 
 def resample_count(demo: Demonstration, points: int) -> Demonstration:
     """The same drawing sampled ``points`` times at a uniform rate (linear interpolation)."""
-    t = np.linspace(demo.times[0], demo.times[-1], int(points))
+    t = np.linspace(_times(demo)[0], _times(demo)[-1], int(points))
     return _with(demo, _at_times(demo, t), t)
 
 
@@ -74,7 +80,7 @@ def pen_rests(demo: Demonstration, fraction: float = 0.25, where: str = "ends") 
     ``"middle"``: once, half way through the samples. The rest is sampled
     at the demonstration's mean rate.
     """
-    t, p = demo.times, demo.positions
+    t, p = _times(demo), demo.positions
     n = len(t)
     k = max(1, int(round(fraction * n)))
     dt = float(t[-1] - t[0]) / (n - 1)
@@ -91,7 +97,7 @@ def pen_rests(demo: Demonstration, fraction: float = 0.25, where: str = "ends") 
 def jitter(demo: Demonstration, size: float, rng: np.random.Generator) -> Demonstration:
     """Independent Gaussian noise on every sample, standard deviation ``size * extent``."""
     noise = rng.normal(0.0, size * _extent(demo), demo.positions.shape)
-    return _with(demo, demo.positions + noise, demo.times)
+    return _with(demo, demo.positions + noise, _times(demo))
 
 
 def rotate(demo: Demonstration, degrees: float, rng: np.random.Generator) -> Demonstration:
@@ -100,17 +106,17 @@ def rotate(demo: Demonstration, degrees: float, rng: np.random.Generator) -> Dem
     c, s = np.cos(a), np.sin(a)
     p = demo.positions
     centre = (p.min(axis=0) + p.max(axis=0)) / 2
-    return _with(demo, (p - centre) @ np.array([[c, s], [-s, c]]) + centre, demo.times)
+    return _with(demo, (p - centre) @ np.array([[c, s], [-s, c]]) + centre, _times(demo))
 
 
 def stretch(demo: Demonstration, x: float = 1.0, y: float = 1.0) -> Demonstration:
     """Stretched by ``x`` horizontally and ``y`` vertically (non-uniform scale)."""
-    return _with(demo, demo.positions * np.array([x, y]), demo.times)
+    return _with(demo, demo.positions * np.array([x, y]), _times(demo))
 
 
 def scale(demo: Demonstration, factor: float) -> Demonstration:
     """Uniformly scaled by ``factor`` (e.g. another unit: mm, m, pixels)."""
-    return _with(demo, demo.positions * factor, demo.times)
+    return _with(demo, demo.positions * factor, _times(demo))
 
 
 @dataclass(frozen=True)
