@@ -122,8 +122,19 @@ class LearnerConfig:
     #: demonstration's first step, reproduces it with the lowest prediction
     #: error; the confidence margin is then taken on those errors).
     decision: str = "pb_distance"
+    #: What each rehearsal trains the network on for the entries it already
+    #: holds: ``"regenerated"`` (the paper: each entry's pattern generated
+    #: closed-loop from its PB; the robot keeps no demonstration) or
+    #: ``"demonstrations"`` (each entry keeps the encoded demonstration it
+    #: was learned from, a prototype its medoid's). Regenerated patterns
+    #: carry each training's residual error into the next rehearsal and
+    #: drift away from what was shown over a learning phase.
+    rehearse_from: str = "regenerated"
 
     def validate(self) -> None:
+        if self.rehearse_from not in ("regenerated", "demonstrations"):
+            raise ValueError("rehearse_from must be 'regenerated' or 'demonstrations', got "
+                             f"{self.rehearse_from!r}")
         if self.decision not in ("pb_distance", "reproduction"):
             raise ValueError("decision must be 'pb_distance' or 'reproduction', got "
                              f"{self.decision!r}")

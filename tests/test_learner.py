@@ -464,3 +464,30 @@ def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa)
         assert r.concept == agent.memory.entries[r.entry].concept
     with pytest.raises(iloci.errors.ConfigError, match="decision must be"):
         iloci.build(small_config(decision="nearest"))
+
+
+def test_rehearsal_from_kept_demonstrations(lasa, tmp_path):
+    """rehearse_from = "demonstrations": each entry keeps its encoded demonstration,
+    rehearsal trains on it (not on a regeneration), and it survives save/load."""
+    agent = make_agent(rehearse_from="demonstrations")
+    demos = [lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"], lasa["GShape/3"]]
+    agent.teach(demos)
+    by_key = {d.key: d for d in demos}
+    for e in agent.memory.entries:
+        seq = agent._encode(agent.motion(by_key[e.source]))[0]
+        np.testing.assert_array_equal(e.pattern, seq)
+    patterns = rehearsal.regenerate(agent.perceptual_model, agent.memory.entries)
+    for p, e in zip(patterns, agent.memory.entries):
+        np.testing.assert_array_equal(p, e.pattern)
+    # the paper's setting keeps nothing and regenerates
+    plain = make_agent()
+    plain.teach(demos[:2])
+    assert all(e.pattern is None for e in plain.memory.entries)
+    regen = rehearsal.regenerate(plain.perceptual_model, plain.memory.entries)
+    assert not np.array_equal(regen[0], plain._encode(plain.motion(demos[0]))[0])
+    path = agent.save(tmp_path / "kept.npz")
+    back = iloci.Agent.load(path)
+    assert entries_equal(back.memory.entries, agent.memory.entries)
+    assert all(e.pattern is not None for e in back.memory.entries)
+    with pytest.raises(iloci.errors.ConfigError, match="rehearse_from must be"):
+        iloci.build(small_config(rehearse_from="raw"))

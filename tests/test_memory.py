@@ -226,6 +226,21 @@ def test_memory_arrays_round_trip():
     assert not entries_equal(copy.entries, mem.entries)
 
 
+def test_kept_patterns_round_trip_and_are_checked():
+    """[learner] rehearse_from = "demonstrations": an entry's pattern is saved with it."""
+    mem = make_memory()
+    mem.entries[1].pattern = np.linspace(0.0, 1.0, 49 * 6).reshape(49, 6)
+    arrays, meta = mem.to_arrays()
+    back = Memory.from_arrays(arrays, meta)
+    assert back.entries[0].pattern is None and back.entries[2].pattern is None
+    np.testing.assert_array_equal(back.entries[1].pattern, mem.entries[1].pattern)
+    assert entries_equal(back.entries, mem.entries)
+    assert not entries_equal(make_memory().entries, mem.entries)
+    arrays["mem/pattern/1"] = arrays["mem/pattern/1"][:10]
+    with pytest.raises(MemoryFileError, match="pattern has shape"):
+        Memory.from_arrays(arrays, meta)
+
+
 def test_inconsistent_arrays_are_a_memory_file_error():
     arrays, meta = make_memory().to_arrays()
     arrays["mem/pb"] = arrays["mem/pb"][:2]

@@ -1011,4 +1011,6 @@ class Turn:
         return Entry(pb=pb.copy(), pb_rec=pb.copy(), num_samples=1, num_steps=len(seq),
                      initial_input=seq[0].copy(), start=self.start.copy(), dt=self.dt,
                      concept=label, generation_error=float("nan"), source=key,
-                     sources=(key,))
+                     sources=(key,),
+                     pattern=(seq.copy() if self.learner.config.rehearse_from == "demonstrations"
+                              else None))

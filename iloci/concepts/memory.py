@@ -99,6 +99,11 @@ class Entry:
         Keys of every demonstration the entry stands for.
     prototype : bool
         True for a medoid that replaced a cluster, False for an exemplar.
+    pattern : ndarray, shape (num_steps, D), optional
+        The encoded demonstration the entry was learned from, kept only with
+        ``[learner] rehearse_from = "demonstrations"``: rehearsal then trains
+        on it instead of regenerating it (see :mod:`iloci.concepts.rehearsal`).
+        ``None`` (the paper): the robot keeps no demonstration.
     """
 
     pb: np.ndarray
@@ -113,6 +118,7 @@ class Entry:
     source: str
     sources: tuple[str, ...] = ()
     prototype: bool = False
+    pattern: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def exemplar(self) -> bool:
@@ -122,7 +128,8 @@ class Entry:
     def copy(self) -> Entry:
         return Entry(self.pb.copy(), self.pb_rec.copy(), self.num_samples, self.num_steps,
                      self.initial_input.copy(), self.start.copy(), self.dt, self.concept,
-                     self.generation_error, self.source, tuple(self.sources), self.prototype)
+                     self.generation_error, self.source, tuple(self.sources), self.prototype,
+                     None if self.pattern is None else self.pattern.copy())
 
     def __repr__(self) -> str:
         kind = "prototype" if self.prototype else "exemplar"
@@ -349,6 +356,9 @@ class Memory:
                                              np.float64),
             "mem/prototype": np.array([e.prototype for e in self.entries], np.bool_),
         }
+        # [learner] rehearse_from = "demonstrations": each entry's kept pattern
+        arrays.update({f"mem/pattern/{i}": np.asarray(e.pattern, dtype=np.float64)
+                       for i, e in enumerate(self.entries) if e.pattern is not None})
         if self.encoder is not None and self.encoder.scale_ is not None:
             arrays.update({f"enc/{k}": np.asarray(v) for k, v in self.encoder.state().items()})
         meta = {
@@ -382,7 +392,9 @@ class Memory:
                       generation_error=float(cols["generation_error"][i]),
                       source=str(meta["source"][i]),
                       sources=tuple(str(s) for s in meta["sources"][i]),
-                      prototype=bool(cols["prototype"][i]))
+                      prototype=bool(cols["prototype"][i]),
+                      pattern=_pattern(arrays, i, int(cols["num_steps"][i]),
+                                       cols["initial_input"].shape[-1]))
                 for i in range(m)]
             enc_state = {k[4:]: v for k, v in arrays.items() if k.startswith("enc/")}
             encoder = SensorimotorEncoder.from_state(enc_state) if enc_state else None
@@ -395,6 +407,19 @@ class Memory:
 
 #: Longest concept name :meth:`Memory.rename` accepts (characters).
 MAX_NAME = 40
+
+
+def _pattern(arrays: Mapping[str, np.ndarray], i: int, steps: int,
+             width: int) -> np.ndarray | None:
+    """Entry ``i``'s kept pattern (``None`` when it has none), checked against its size."""
+    a = arrays.get(f"mem/pattern/{i}")
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape != (steps, width) or not np.all(np.isfinite(a)):
+        raise ValueError(f"entry {i}'s pattern has shape {a.shape}, expected "
+                         f"({steps}, {width}) finite values")
+    return a
 
 
 def _stack(rows: list[np.ndarray], width: int | None = None) -> np.ndarray:
@@ -526,4 +551,7 @@ def entries_equal(a: Iterable[Entry], b: Iterable[Entry]) -> bool:
                      "source", "sources", "prototype"):
             if getattr(x, name) != getattr(y, name):
                 return False
+        if (x.pattern is None) != (y.pattern is None) or (
+                x.pattern is not None and not np.array_equal(x.pattern, y.pattern)):
+            return False
     return True

@@ -103,6 +103,13 @@ class RehearsalResult:
 def regenerate(model: PerceptualModel, entries: Sequence[Entry]) -> list[np.ndarray]:
     """Each entry's pattern, generated closed-loop from its PB and initialInfo.
 
+    An entry that keeps its demonstration (:attr:`Entry.pattern`,
+    ``[learner] rehearse_from = "demonstrations"``) gives that pattern
+    instead: regenerated patterns carry each training's residual error into
+    the next rehearsal, so over a learning phase an early entry's pattern
+    drifts away from what was shown (on LASA, by as much as two different
+    shapes differ).
+
     Parameters
     ----------
     model : PerceptualModel
@@ -114,10 +121,16 @@ def regenerate(model: PerceptualModel, entries: Sequence[Entry]) -> list[np.ndar
     """
     if not entries:
         return []
-    pbs = np.array([e.pb for e in entries], dtype=np.float64)
-    first = np.array([e.initial_input for e in entries], dtype=np.float64)
-    return [np.asarray(s, dtype=np.float64)
-            for s in model.generate(pbs, first, [e.num_steps for e in entries])]
+    out: list[np.ndarray | None] = [None if e.pattern is None else
+                                    np.asarray(e.pattern, dtype=np.float64) for e in entries]
+    todo = [i for i, p in enumerate(out) if p is None]
+    if todo:
+        pbs = np.array([entries[i].pb for i in todo], dtype=np.float64)
+        first = np.array([entries[i].initial_input for i in todo], dtype=np.float64)
+        made = model.generate(pbs, first, [entries[i].num_steps for i in todo])
+        for i, s in zip(todo, made):
+            out[i] = np.asarray(s, dtype=np.float64)
+    return [p for p in out if p is not None]
 
 
 def rehearse(model: PerceptualModel, entries: Sequence[Entry],
