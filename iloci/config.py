@@ -128,7 +128,9 @@ class LearnerConfig:
     #: ``"demonstrations"`` (each entry keeps the encoded demonstration it
     #: was learned from, a prototype its medoid's). Regenerated patterns
     #: carry each training's residual error into the next rehearsal and
-    #: drift away from what was shown over a learning phase.
+    #: drift away from what was shown; on LASA (5 folds) keeping the
+    #: demonstrations gave CCR 98.77 / 99.31 / 98.63 % for seeds 0 / 1 / 2
+    #: against 97.38 / 97.95 / 99.04 % (docs/method.md, "Memory rehearsal").
     rehearse_from: str = "regenerated"
 
     def validate(self) -> None:

@@ -35,6 +35,7 @@ PAPER: dict[str, str] = {
     "learner.k_cutoff": "K_cutoff = 0.5",
     "learner.num_threshold": "Num_threshold = 3",
     "learner.similarity_threshold": "Similarity_threshold = 0.1",
+    "learner.rehearse_from": '"regenerated" (no demonstration is kept)',
     "sensorimotor.steps": "numSteps + 1 (no value given)",
     "sensorimotor.smoothing_window": "smoothing (no method given)",
     "sensorimotor.robot": "Nao V3.2 right arm, y-z plane",

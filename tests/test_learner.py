@@ -236,7 +236,7 @@ def test_clustering_replaces_a_valid_cluster_by_its_medoid(lasa):
 
 
 def test_rehearsal_regenerates_entries_and_retrains_from_current_weights(lasa):
-    agent = make_agent()
+    agent = make_agent(rehearse_from="regenerated")   # the paper's temporal memory
     agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
     entries = agent.memory.entries
     regenerated = rehearsal.regenerate(agent.perceptual_model, entries)
@@ -469,6 +469,7 @@ def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa)
 def test_rehearsal_from_kept_demonstrations(lasa, tmp_path):
     """rehearse_from = "demonstrations": each entry keeps its encoded demonstration,
     rehearsal trains on it (not on a regeneration), and it survives save/load."""
+    assert make_agent().config.learner.rehearse_from == "regenerated"   # the paper's default
     agent = make_agent(rehearse_from="demonstrations")
     demos = [lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"], lasa["GShape/3"]]
     agent.teach(demos)
@@ -480,7 +481,7 @@ def test_rehearsal_from_kept_demonstrations(lasa, tmp_path):
     for p, e in zip(patterns, agent.memory.entries):
         np.testing.assert_array_equal(p, e.pattern)
     # the paper's setting keeps nothing and regenerates
-    plain = make_agent()
+    plain = make_agent(rehearse_from="regenerated")
     plain.teach(demos[:2])
     assert all(e.pattern is None for e in plain.memory.entries)
     regen = rehearsal.regenerate(plain.perceptual_model, plain.memory.entries)

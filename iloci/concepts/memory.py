@@ -551,7 +551,8 @@ def entries_equal(a: Iterable[Entry], b: Iterable[Entry]) -> bool:
                      "source", "sources", "prototype"):
             if getattr(x, name) != getattr(y, name):
                 return False
-        if (x.pattern is None) != (y.pattern is None) or (
-                x.pattern is not None and not np.array_equal(x.pattern, y.pattern)):
+        px, py = x.pattern, y.pattern
+        if (px is None) != (py is None) or (
+                px is not None and py is not None and not np.array_equal(px, py)):
             return False
     return True
