@@ -21,7 +21,9 @@ class RNNPBParams:
     25 context units, 4 PB units, 60 hidden units.
     """
 
-    #: Features per step (paper: 6 = 2 sensory + 4 motor).
+    #: Features per step: 2 sensory + J motor, set from the robot by
+    #: :func:`iloci.build` (paper: 6, the Nao arm's 4 joints); a value that
+    #: fits neither the default nor the robot is an error.
     input_size: int = 6
     #: Hidden units (paper: 60).
     hidden: int = 60

@@ -163,13 +163,16 @@ class Performer:
         The memory's network, its state loaded.
     ik_solver : IKSolver
     config : PerformerConfig
+    robot : Robot
     """
 
-    def __init__(self, memory, perceptual_model, ik_solver, sensorimotor) -> None:
+    def __init__(self, memory, perceptual_model, ik_solver, sensorimotor, robot=None) -> None:
         self.memory = memory
         self.perceptual_model = perceptual_model
         self.ik_solver = ik_solver
         self.config = PerformerConfig(sensorimotor)
+        #: The memory's robot (its plane placed).
+        self.robot = robot if robot is not None else ik_solver.robot
 
     def respond(self, concept: str):
         """Perform ``concept``: its entry of lowest generation error (as :meth:`Agent.respond`)."""
@@ -195,8 +198,7 @@ def draw(agent, concept: str, simulator) -> DrawResult:
     ----------
     agent : Agent or Performer
         Built with no simulator of its own (the caller executes). Only its
-        ``memory``, ``respond``, ``ik_solver`` and ``config.sensorimotor``
-        are used.
+        ``memory``, ``respond``, ``ik_solver`` and ``robot`` are used.
     concept : str
         A robot concept label or true concept name (see :func:`resolve_concept`).
     simulator : Simulator
@@ -205,12 +207,10 @@ def draw(agent, concept: str, simulator) -> DrawResult:
     -------
     DrawResult
     """
-    from iloci.sensorimotor.robots import get_robot
-
     label = resolve_concept(agent.memory, concept)
     response = agent.respond(label)
     entry = agent.memory.entries[response.extra["entry"]]
-    robot = get_robot(agent.config.sensorimotor.robot)
+    robot = agent.robot
     q = np.asarray(response.joint_path, dtype=np.float64)
     # the network may generate a little past a joint limit; the arm stops there
     q_safe = np.clip(q, robot.lower, robot.upper)
@@ -358,11 +358,19 @@ def build_performer(memory_path: str | os.PathLike[str], *, registry=None,
     if registry is None:
         from iloci.plugins import get_registry
         registry = get_registry()
+    from iloci.agent import _upgrade_config
+    from iloci.config import RobotConfig
+    from iloci.sensorimotor.robots import place_robot, robot_from_config
+
     memory, net_state, header = loaded if loaded is not None else load_memory(memory_path)
     saved = header.get("config")
     if not isinstance(saved, dict):
         raise MemoryFileError(f"{source} holds no config: it names no perceptual model to "
                               "regenerate its concepts with.")
+    saved = _upgrade_config(saved)
+    robot_cfg = validate_dataclass(RobotConfig, dict(saved.get("robot") or {}),
+                                   section="robot", source=source)
+    robot, mode = robot_from_config(robot_cfg)
     specs = {}
     for section in _NEEDED:
         try:
@@ -377,9 +385,16 @@ def build_performer(memory_path: str | os.PathLike[str], *, registry=None,
     components = {}
     for section, (spec, params) in specs.items():
         try:
-            components[section] = registry.build(spec.kind, spec.name, params, seed=seed)
+            extra = {"robot": robot} if section == "ik" else {}
+            components[section] = registry.build(spec.kind, spec.name, params, seed=seed,
+                                                 **extra)
         except MissingBackendError as exc:  # registered, but its library is missing
             raise _why_needed(exc, section, spec.name, source)
+    placed = place_robot(robot, mode, components["ik"], robot_cfg)
+    if placed is not robot:
+        spec, params = specs["ik"]
+        components["ik"] = registry.build(spec.kind, spec.name, params, seed=seed,
+                                          robot=placed)
     model = components["perceptual_model"]
     if net_state:
         try:
@@ -387,7 +402,7 @@ def build_performer(memory_path: str | os.PathLike[str], *, registry=None,
         except (ValueError, KeyError, InvalidInputError) as exc:
             raise MemoryFileError(f"the network saved in {source} does not fit the "
                                   f"configured perceptual model: {exc}") from None
-    return Performer(memory, model, components["ik"], sensorimotor)
+    return Performer(memory, model, components["ik"], sensorimotor, placed)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -416,7 +431,11 @@ def run(args: argparse.Namespace) -> int:
     resolve_concept(loaded[0], args.concept)
     # only the memory's network and IK solver: not its clusterer and teacher
     performer = build_performer(args.memory, registry=registry, loaded=loaded)
-    simulator = registry.build("simulator", spec.name, sim_params)
+    simulator = registry.build("simulator", spec.name, sim_params, robot=performer.robot)
+    if not callable(getattr(simulator, "render", None)):
+        simulator.close()
+        raise InvalidInputError(f"simulator {spec.name!r} renders no images (an executor of a "
+                                "real arm); choose one that does with --simulator.")
     try:
         result = draw(performer, args.concept, simulator)
         ex = result.execution
