@@ -255,9 +255,10 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
             f"{h0 * 100:.1f} cm, facing {tuple(np.round(n, 3))} with up "
             f"{tuple(np.round(v, 3))}, is reachable with every joint "
             f"{math.degrees(joint_margin):.1f} deg inside its limits and the Jacobian's "
-            f"smallest singular value >= {min_singular} of its best. Give the plane "
+            f"smallest singular value >= {min_singular} of its best, its lowest edge "
+            f">= {min_up} m above the base origin. Give the plane "
             "([robot] plane = [x, y, z, width, height]), another plane_normal / plane_up, or "
-            "lower plane_joint_margin / plane_min_singular.")
+            "lower plane_joint_margin / plane_min_singular / plane_min_up.")
     # the largest first (stable: among equals, the one found first)
     candidates.sort(key=lambda c: -c[0])
     best = (0.0, 0.0, 0.0, 0.0)

@@ -203,7 +203,11 @@ class MuJoCoSimulator:
         spec.visual.headlight.ambient = [0.45, 0.45, 0.45]
         spec.visual.headlight.diffuse = [0.55, 0.55, 0.55]
         spec.visual.global_.fovy = simulation.VIEW["fov"]
-        return spec.compile()
+        try:
+            return spec.compile()
+        except ValueError as exc:  # MuJoCo's compiler (a mesh it cannot read, ...)
+            raise InvalidInputError(f"MuJoCo cannot compile the URDF of {self.robot.name!r} "
+                                    f"({self.robot.urdf_path}): {exc}") from None
 
     def __repr__(self) -> str:
         return (f"MuJoCoSimulator(robot={self.robot.name!r}, control_period="

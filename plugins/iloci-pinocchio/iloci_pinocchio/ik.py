@@ -235,12 +235,14 @@ class PinocchioIK:
         tol = self.tolerance
         tx, ty, tz = float(target[0]), float(target[1]), float(target[2])
         err = math.inf
-        for _ in range(self.max_iterations):
+        for it in range(self.max_iterations):
             pin.computeJointJacobians(m, d, q)
             p = pin.updateFramePlacement(m, d, f).translation
             e = np.array((tx - p[0], ty - p[1], tz - p[2]))
             err = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-            if err < tol:
+            # with a rest posture every point takes at least one step, so the
+            # null-space pull acts even where the task is already met
+            if err < tol and (rest is None or it > 0):
                 break
             J = pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED)[:3]
             if rest is None:
