@@ -529,13 +529,12 @@ def get_robot(name: str = "nao-v32-right-arm", plugin_manager: Any = None) -> Ro
     MissingBackendError
         The preset's files are not installed.
     """
-    if name in ROBOTS:
-        return ROBOTS[name].make()
+    presets = available_robots(plugin_manager) if plugin_manager is not None or \
+        name not in ROBOTS else ROBOTS
     try:
-        preset = available_robots(plugin_manager)[name]
+        preset = presets[name]
     except (KeyError, TypeError):
-        raise UnknownComponentError("robot", str(name),
-                                    list(available_robots(plugin_manager))) from None
+        raise UnknownComponentError("robot", str(name), list(presets)) from None
     return preset.make()
 
 
