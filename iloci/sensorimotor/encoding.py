@@ -103,9 +103,17 @@ class SensorimotorEncoder:
             raise InvalidInputError("fit needs motions of one robot: they have "
                                     f"{sorted({d.shape[1] - 2 for d in deltas})} joints.")
         peak = np.abs(np.vstack(deltas)).max(axis=0)
-        # a channel that never moves in the learning data keeps unit scale
-        # rather than dividing by zero
-        self.scale_ = np.where(peak > 0, peak / self.limit, 1.0)
+        # a channel that never moves in the learning data (a joint that cannot
+        # move the pen, such as a roll about the pen's own axis) takes the
+        # median scale of the moving channels of its kind, not 1: whatever the
+        # network outputs there is decoded at the size of the other joints'
+        # motion, not as up to ``limit`` rad per step
+        scale = peak / self.limit
+        for group in (slice(0, 2), slice(2, None)):
+            g = scale[group]
+            moving = g[g > 0]
+            g[g == 0] = float(np.median(moving)) if moving.size else 1.0
+        self.scale_ = scale
         return self
 
     def _check_fitted(self) -> np.ndarray:

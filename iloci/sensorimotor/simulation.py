@@ -34,11 +34,11 @@ from iloci.interfaces import Execution
 from iloci.sensorimotor.robots import DrawingPlane, Robot
 
 __all__ = [
-    "approach", "camera_for", "to_base", "to_world",
     "FRAME_RADIUS", "FRAME_RGBA", "MAX_IMAGE_SIZE", "PEN_RADIUS", "PEN_RGBA", "START_RADIUS",
     "START_RGBA", "VIEW", "SimulatorParams", "check_execution", "check_image_size",
     "check_joint_path", "check_postures", "check_settings", "path_dots", "plane_outline",
-    "setpoints", "track", "updates_per_step",
+    "setpoints", "track", "updates_per_step", "approach", "camera_for", "to_base",
+    "to_world",
 ]
 
 #: Camera of every simulator's ``render``: the teacher's view, in front of the
@@ -343,7 +343,7 @@ def camera_for(robot: Robot) -> dict[str, Any]:
     radius = max(float(np.linalg.norm(centre)), float(np.hypot(plane.width, plane.height)))
     direction = 0.75 * n - 0.45 * u + 0.5 * v
     direction /= np.linalg.norm(direction)
-    distance = 1.1 * radius / math.tan(math.radians(VIEW["fov"] / 2))
+    distance = 0.8 * radius / math.tan(math.radians(VIEW["fov"] / 2))
     eye = target + distance * direction
     return {"eye": tuple(to_world(robot, eye[None])[0].tolist()),
             "target": tuple(to_world(robot, target[None])[0].tolist()), "fov": VIEW["fov"]}

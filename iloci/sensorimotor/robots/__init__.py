@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import InvalidInputError, UnknownComponentError, did_you_mean
-from iloci.sensorimotor.robots.urdf import MOVABLE, UrdfTree, read_urdf, resolve_uri
+from iloci.sensorimotor.robots.urdf import MOVABLE, read_urdf, resolve_uri
 
 __all__ = ["ROBOTS", "DrawingPlane", "Robot", "RobotPreset", "available_robots",
            "describe_robot", "get_robot", "place_robot", "robot_from_config"]

@@ -224,8 +224,7 @@ def resolve_uri(uri: str, urdf_dir: Path, package_dirs: tuple[Path, ...] = ()) -
     InvalidInputError
         No such file (names the places searched).
     """
-    if uri.startswith("file://"):
-        uri = uri[len("file://"):]
+    uri = uri.removeprefix("file://")
     if not uri.startswith("package://"):
         f = Path(uri)
         f = f if f.is_absolute() else urdf_dir / f
