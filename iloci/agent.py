@@ -372,12 +372,12 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         A configured back end, of a component not given as an object, is
         not installed (names the pip command).
     """
-    from iloci.config import COMPONENT_SECTIONS
-    unknown = set(overrides) - set(COMPONENT_SECTIONS)
+    from iloci.interfaces import COMPONENT_KINDS
+    unknown = set(overrides) - set(COMPONENT_KINDS)
     if unknown:
         from iloci.errors import ConfigError
         raise ConfigError(f"build() got unknown component override(s) {sorted(unknown)}; "
-                          f"valid: {', '.join(COMPONENT_SECTIONS)}.")
+                          f"valid: {', '.join(COMPONENT_KINDS)}.")
     _check_overrides(overrides)
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
@@ -393,7 +393,7 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
             return None
         # the robot goes to the components that draw with it
         extra = {"robot": robot} if sec in ("ik", "simulator") else {}
-        return registry.build(COMPONENT_SECTIONS[sec], cc.name, cc.params, seed=cfg.seed,
+        return registry.build(sec, cc.name, cc.params, seed=cfg.seed,
                               **extra)
 
     ik = overrides["ik"] if "ik" in overrides else make("ik", robot)
@@ -401,7 +401,7 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
     if placed is not robot and "ik" not in overrides:
         ik = make("ik", placed)  # with its start posture at the placed plane
     robot = placed
-    for sec in COMPONENT_SECTIONS:
+    for sec in COMPONENT_KINDS:
         if sec in overrides:
             components[sec] = overrides[sec]
         elif sec == "ik":
@@ -478,18 +478,16 @@ def _check_same_robot(path: Any, saved: dict[str, Any], robot: Any, memory: Any)
 
 def _check_overrides(overrides: dict[str, Any]) -> None:
     """Raise one InvalidInputError for every override that is not a component."""
-    from iloci.config import COMPONENT_SECTIONS, OPTIONAL_SECTIONS
-    from iloci.interfaces import PROTOCOLS, unmet_members
-    from iloci.registry import LABELS
+    from iloci.interfaces import COMPONENT_KINDS, unmet_members
     problems = []
     for sec, obj in overrides.items():
-        kind = COMPONENT_SECTIONS[sec]
-        protocol = PROTOCOLS[kind]
+        kind = COMPONENT_KINDS[sec]
+        protocol = kind.protocol
         where = f"iloci.interfaces.{protocol.__name__}"
-        label = LABELS[kind]
+        label = kind.label
         a_label = ("an " if label[0].lower() in "aeiou" else "a ") + label
         if obj is None:
-            if sec not in OPTIONAL_SECTIONS:
+            if not kind.optional:
                 problems.append(f"{sec}=None: {a_label} is required (only simulator=None "
                                 "is allowed)")
         elif isinstance(obj, type):

@@ -27,7 +27,8 @@ import tomllib
 from typing import Any
 
 from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError
-from iloci.registry import LABELS, Registry, params_to_dict, validate_dataclass, validate_params
+from iloci.interfaces import COMPONENT_KINDS
+from iloci.registry import Registry, params_to_dict, validate_dataclass, validate_params
 
 __all__ = [
     "Config",
@@ -41,18 +42,7 @@ __all__ = [
     "to_toml",
 ]
 
-#: Section name -> component kind.
-COMPONENT_SECTIONS = {
-    "perceptual_model": "perceptual_model",
-    "clusterer": "clusterer",
-    "teacher": "teacher",
-    "ik": "ik_solver",
-    "simulator": "simulator",
-}
-
-#: Components a section may leave out by naming ``"none"``.
-OPTIONAL_SECTIONS = {"simulator"}
-
+#: The component each section names when a config leaves its name out.
 DEFAULT_NAMES = {
     # JAX: at the memory sizes of a learning phase its compiled training
     # step is about twice as fast as torch's (benchmarks/results/rnnpb.json)
@@ -307,7 +297,7 @@ class Config:
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict, every value resolved (TOML-serialisable)."""
         out: dict[str, Any] = {}
-        for sec in COMPONENT_SECTIONS:
+        for sec in COMPONENT_KINDS:
             out[sec] = getattr(self, sec).to_dict()
         for sec in _PLAIN_SECTIONS:
             out[sec] = params_to_dict(getattr(self, sec))
@@ -324,7 +314,7 @@ class Config:
         data = self.to_dict()
         for sec, value in changes.items():
             if isinstance(value, Mapping) and isinstance(data.get(sec), dict):
-                if sec in COMPONENT_SECTIONS and "name" in value and \
+                if sec in COMPONENT_KINDS and "name" in value and \
                         value["name"] != data[sec]["name"]:
                     data[sec] = dict(value)  # another component: its own defaults
                 else:
@@ -406,15 +396,15 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
         raise ConfigError(f"load_config takes a path, a mapping or None, got "
                           f"{type(source).__name__}.")
     supplied = set(supplied)
-    bad = supplied - set(COMPONENT_SECTIONS)
+    bad = supplied - set(COMPONENT_KINDS)
     if bad:
         raise ConfigError(f"supplied names no component section: {sorted(bad)}; component "
-                          f"sections are {', '.join(COMPONENT_SECTIONS)}.")
-    if registry is None and not supplied >= set(COMPONENT_SECTIONS):
+                          f"sections are {', '.join(COMPONENT_KINDS)}.")
+    if registry is None and not supplied >= set(COMPONENT_KINDS):
         from iloci.plugins import get_registry
         registry = get_registry()
 
-    known = set(COMPONENT_SECTIONS) | set(_PLAIN_SECTIONS)
+    known = set(COMPONENT_KINDS) | set(_PLAIN_SECTIONS)
     for key, value in data.items():
         if key not in known:
             from iloci.errors import did_you_mean
@@ -429,7 +419,7 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     kwargs: dict[str, Any] = {"source": origin}
     # A typo is reported before a missing back end: it is what the user can fix here.
     missing: MissingBackendError | None = None
-    for sec, kind in COMPONENT_SECTIONS.items():
+    for sec, kind in COMPONENT_KINDS.items():
         values = dict(data.get(sec, {}))
         name = values.pop("name", DEFAULT_NAMES[sec])
         if not isinstance(name, str):
@@ -440,9 +430,9 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
             continue
         assert registry is not None
         if name == "none":
-            if sec not in OPTIONAL_SECTIONS:
+            if not kind.optional:
                 raise ConfigError(f"[{sec}] is required; 'none' is not allowed. Known "
-                                  f"names: {', '.join(registry.names(kind))}.",
+                                  f"names: {', '.join(registry.names(sec))}.",
                                   source=origin, key=f"{sec}.name")
             if values:
                 raise ConfigError(f"[{sec}] name = 'none' takes no other keys, got "
@@ -450,7 +440,7 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
             kwargs[sec] = ComponentConfig("none", None)
             continue
         try:
-            spec = registry.get(kind, name)
+            spec = registry.get(sec, name)
         except UnknownComponentError as exc:
             exc.args = (f"{origin}: [{sec}] name: {exc.args[0]}",)
             raise
@@ -491,8 +481,4 @@ def to_toml(config: Config) -> str:
                 continue
             lines.append(f"{k} = {_toml_value(v)}")
     return "\n".join(lines) + "\n"
-
-
-def component_label(section: str) -> str:
-    return LABELS[COMPONENT_SECTIONS[section]]
 

@@ -17,9 +17,10 @@ import inspect
 import re
 import textwrap
 
-from iloci.config import _PLAIN_SECTIONS, COMPONENT_SECTIONS, DEFAULT_NAMES
+from iloci.config import _PLAIN_SECTIONS, DEFAULT_NAMES
+from iloci.interfaces import COMPONENT_KINDS
 from iloci.plugins import get_plugin_manager, get_registry
-from iloci.registry import FIRST_PARTY, LABELS, params_to_dict
+from iloci.registry import FIRST_PARTY, params_to_dict
 
 __all__ = ["PAPER", "config_reference", "field_docs", "first_party"]
 
@@ -139,12 +140,12 @@ def config_reference() -> str:
         "lists them) and the keys of that component's own schema.",
         "",
     ]
-    for section, kind in COMPONENT_SECTIONS.items():
+    for section, kind in COMPONENT_KINDS.items():
         default = DEFAULT_NAMES[section]
-        out += [f"### `[{section}]` — {LABELS[kind]}", "",
+        out += [f"### `[{section}]` — {kind.label}", "",
                 f"`{section}.name` — default `\"{default}\"`."
-                + (" `\"none\"` leaves it out." if section == "simulator" else ""), ""]
-        for spec in filter(first_party, registry.specs(kind)):
+                + (" `\"none\"` leaves it out." if kind.optional else ""), ""]
+        for spec in filter(first_party, registry.specs(section)):
             out.append(f"#### `name = \"{spec.name}\"` ({spec.distribution or '-'})")
             out.append("")
             if spec.summary:

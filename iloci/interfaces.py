@@ -15,11 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from iloci.errors import InvalidDemonstrationError
+from iloci.errors import FeedbackError, InvalidDemonstrationError
 
 __all__ = [
     "Demonstration",
@@ -30,14 +31,12 @@ __all__ = [
     "Teacher",
     "IKSolver",
     "Simulator",
+    "ComponentKind",
+    "COMPONENT_KINDS",
     "KINDS",
-    "PROTOCOLS",
+    "check_feedback",
     "unmet_members",
 ]
-
-#: Component kinds, as used in config sections and the registry.
-KINDS = ("perceptual_model", "clusterer", "teacher", "ik_solver", "simulator")
-
 
 def _check_finite_2d(name: str, arr: Any, width: int) -> np.ndarray:
     try:
@@ -331,7 +330,11 @@ class Teacher(Protocol):
     """Judges the robot's response to a demonstration."""
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
-        """Return +1 (reward) or -1 (punishment)."""
+        """Return +1 (reward) or -1 (punishment).
+
+        Anything else is a broken teacher: callers check the answer with
+        :func:`check_feedback`, which raises :class:`~iloci.errors.FeedbackError`.
+        """
         ...
 
 
@@ -445,14 +448,66 @@ class Simulator(Protocol):
 
 
 
-#: The protocol of each component kind.
-PROTOCOLS: dict[str, type] = {
-    "perceptual_model": PerceptualModel,
-    "clusterer": Clusterer,
-    "teacher": Teacher,
-    "ik_solver": IKSolver,
-    "simulator": Simulator,
-}
+def check_feedback(value: object, teacher: object) -> int:
+    """``value`` as an int if it is a valid :meth:`Teacher.feedback`, +1 or -1.
+
+    Part of the Teacher contract: whoever calls a teacher checks its answer
+    with this before acting on it.
+
+    Raises
+    ------
+    FeedbackError
+        ``value`` is anything else (a bool, a float, 0, ...); the message
+        names the teacher's class.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+            or int(value) not in (1, -1):
+        raise FeedbackError(
+            f"teacher {type(teacher).__name__} returned {value!r}; feedback must be "
+            "+1 (reward) or -1 (punishment). Fix the teacher plugin's feedback().")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class ComponentKind:
+    """One kind of component: its protocol, config section and registration hook.
+
+    Attributes
+    ----------
+    name : str
+        The kind, which is also its config section (``[ik]``) and the
+        section's keyword of :func:`iloci.build` (``ik=my_solver``).
+    protocol : type
+        The :class:`typing.Protocol` its components satisfy.
+    label : str
+        How messages name it (``"IK solver"``).
+    hook : str
+        The :mod:`iloci.hookspecs` hook through which plugins register it.
+    optional : bool
+        Whether a config may leave it out with ``name = "none"``.
+    """
+
+    name: str
+    protocol: type
+    label: str
+    hook: str
+    optional: bool = False
+
+
+#: Every component kind, in config order: the one table the registry, the
+#: config, the plugin manager and :func:`iloci.build` read.
+COMPONENT_KINDS: Mapping[str, ComponentKind] = MappingProxyType({k.name: k for k in (
+    ComponentKind("perceptual_model", PerceptualModel, "perceptual model",
+                  "iloci_register_perceptual_models"),
+    ComponentKind("clusterer", Clusterer, "clusterer", "iloci_register_clusterers"),
+    ComponentKind("teacher", Teacher, "teacher", "iloci_register_teachers"),
+    ComponentKind("ik", IKSolver, "IK solver", "iloci_register_ik_solvers"),
+    ComponentKind("simulator", Simulator, "simulator", "iloci_register_simulators",
+                  optional=True),
+)})
+
+#: The kinds' names (:data:`COMPONENT_KINDS` keys), in config order.
+KINDS: tuple[str, ...] = tuple(COMPONENT_KINDS)
 
 
 def unmet_members(obj: Any, protocol: type) -> list[str]:

@@ -26,7 +26,7 @@ import pluggy
 
 from iloci import hookspecs
 from iloci.errors import PluginError
-from iloci.interfaces import KINDS
+from iloci.interfaces import COMPONENT_KINDS
 from iloci.registry import Registry
 
 __all__ = [
@@ -44,15 +44,6 @@ DEFAULT_PLUGINS = ("iloci.teachers",)
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
-
-_REGISTRATION_HOOKS = {
-    "perceptual_model": "iloci_register_perceptual_models",
-    "clusterer": "iloci_register_clusterers",
-    "teacher": "iloci_register_teachers",
-    "ik_solver": "iloci_register_ik_solvers",
-    "simulator": "iloci_register_simulators",
-}
-
 
 class PluginLoadWarning(UserWarning):
     """An installed plugin failed to import; it was skipped."""
@@ -174,12 +165,12 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
         pm = get_plugin_manager()
     info = plugin_infos(pm)
     registry = Registry()
-    for kind in KINDS:
-        caller = getattr(pm.hook, _REGISTRATION_HOOKS[kind])
+    for kind in COMPONENT_KINDS.values():
+        caller = getattr(pm.hook, kind.hook)
         # Reverse pluggy's LIFO order so built-ins register first.
         for impl in reversed(caller.get_hookimpls()):
             pinfo = info.get(impl.plugin_name, PluginInfo(impl.plugin_name, None, None))
-            view = registry.view(kind, plugin=impl.plugin_name,
+            view = registry.view(kind.name, plugin=impl.plugin_name,
                                  distribution=pinfo.distribution, version=pinfo.version)
             try:
                 impl.function(**{arg: view for arg in impl.argnames})

@@ -20,28 +20,11 @@ import types
 import typing
 from typing import Any, Union
 
-from iloci.errors import ConfigError, MissingBackendError, PluginError, UnknownComponentError
-from iloci.interfaces import KINDS
+from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
+                          UnknownComponentError)
+from iloci.interfaces import COMPONENT_KINDS, KINDS
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
-
-#: Config section of each kind.
-SECTIONS = {
-    "perceptual_model": "perceptual_model",
-    "clusterer": "clusterer",
-    "teacher": "teacher",
-    "ik_solver": "ik",
-    "simulator": "simulator",
-}
-
-#: Human-readable kind names used in messages.
-LABELS = {
-    "perceptual_model": "perceptual model",
-    "clusterer": "clusterer",
-    "teacher": "teacher",
-    "ik_solver": "IK solver",
-    "simulator": "simulator",
-}
 
 #: First-party components and the plugin distribution that provides each, so
 #: a config naming one that is not installed gets the install command rather
@@ -52,10 +35,22 @@ FIRST_PARTY = {
     ("perceptual_model", "jax-rnnpb"): "iloci-jax",
     ("clusterer", "scipy"): "iloci-scipy",
     ("clusterer", "sklearn"): "iloci-sklearn",
-    ("ik_solver", "pinocchio"): "iloci-pinocchio",
+    ("ik", "pinocchio"): "iloci-pinocchio",
     ("simulator", "pybullet"): "iloci-pybullet",
     ("simulator", "mujoco"): "iloci-mujoco",
 }
+
+
+def _label(kind: str) -> str:
+    k = COMPONENT_KINDS.get(kind)
+    return k.label if k is not None else kind
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in COMPONENT_KINDS:
+        from iloci.errors import did_you_mean
+        raise InvalidInputError(f"unknown component kind {kind!r}; kinds are "
+                                f"{', '.join(KINDS)}.{did_you_mean(str(kind), KINDS)}")
 
 
 def install_command(distribution: str) -> str:
@@ -149,7 +144,7 @@ class Registry:
         old = self._specs[kind].get(name)
         if old is not None:
             raise PluginError(
-                f"{LABELS[kind]} {name!r} is registered twice: by plugin "
+                f"{_label(kind)} {name!r} is registered twice: by plugin "
                 f"{old.plugin!r} and by plugin {plugin!r}. Uninstall one, or block "
                 "one with ILOCI_BLOCK_PLUGINS."
             )
@@ -163,22 +158,27 @@ class Registry:
         return KindRegistry(self, kind, plugin, distribution, version)
 
     def names(self, kind: str) -> list[str]:
+        """Registered names of ``kind``, sorted."""
+        _check_kind(kind)
         return sorted(self._specs[kind])
 
     def specs(self, kind: str | None = None) -> list[ComponentSpec]:
+        if kind is not None:
+            _check_kind(kind)
         kinds = KINDS if kind is None else (kind,)
         return [self._specs[k][n] for k in kinds for n in sorted(self._specs[k])]
 
     def get(self, kind: str, name: str) -> ComponentSpec:
         """The spec of ``name``; :class:`UnknownComponentError` if none."""
+        _check_kind(kind)
         try:
             return self._specs[kind][name]
         except KeyError:
             dist = FIRST_PARTY.get((kind, name))
             if dist is not None:
-                raise MissingBackendError(LABELS[kind], name, [dist],
+                raise MissingBackendError(_label(kind), name, [dist],
                                           install_command(dist)) from None
-            raise UnknownComponentError(LABELS.get(kind, kind), name,
+            raise UnknownComponentError(_label(kind), name,
                                         list(self._specs.get(kind, {}))) from None
 
     def __contains__(self, item: tuple[str, str]) -> bool:
@@ -189,7 +189,7 @@ class Registry:
         """Import the factory of ``spec`` (the heavy import happens here)."""
         missing = spec.missing()
         if missing:
-            raise MissingBackendError(LABELS[spec.kind], spec.name, missing,
+            raise MissingBackendError(_label(spec.kind), spec.name, missing,
                                       spec.install or f"pip install {' '.join(missing)}")
         if callable(spec.factory):
             return spec.factory
@@ -199,14 +199,14 @@ class Registry:
         except ImportError as exc:
             missing_mod = getattr(exc, "name", None) or mod_name
             raise MissingBackendError(
-                LABELS[spec.kind], spec.name, [missing_mod],
+                _label(spec.kind), spec.name, [missing_mod],
                 spec.install or f"pip install {missing_mod}") from exc
         try:
             obj: Any = module
             for part in attr.split("."):
                 obj = getattr(obj, part)
         except AttributeError:
-            raise PluginError(f"{LABELS[spec.kind]} {spec.name!r}: {spec.factory!r} "
+            raise PluginError(f"{_label(spec.kind)} {spec.name!r}: {spec.factory!r} "
                               f"does not exist (registered by plugin {spec.plugin!r}).") from None
         return obj
 
@@ -368,12 +368,12 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
 def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,
                     source: str | None = None) -> Any:
     """Validate a component's config keys against its schema (no heavy import)."""
-    section = SECTIONS[spec.kind]
+    section = spec.kind
     if spec.params is None:
         if values:
             key = next(iter(values))
             raise ConfigError(
-                f"unknown key {section + '.' + key!r}: {LABELS[spec.kind]} "
+                f"unknown key {section + '.' + key!r}: {_label(spec.kind)} "
                 f"{spec.name!r} takes no parameters.", source=source, key=f"{section}.{key}")
         return None
     return validate_dataclass(spec.params, values, section=section, source=source)

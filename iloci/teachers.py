@@ -29,17 +29,7 @@ from iloci.errors import FeedbackError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration, Response
 
-__all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher", "check_feedback"]
-
-
-def check_feedback(value: object, teacher: object) -> int:
-    """Return ``value`` as int if it is +1 or -1, else raise :class:`FeedbackError`."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
-            or int(value) not in (1, -1):
-        raise FeedbackError(
-            f"teacher {type(teacher).__name__} returned {value!r}; feedback must be "
-            "+1 (reward) or -1 (punishment). Fix the teacher plugin's feedback().")
-    return int(value)
+__all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher"]
 
 
 class OracleTeacher:

@@ -32,7 +32,7 @@ def _available(kind: str) -> list[str]:
 
 def combinations() -> list[dict[str, str]]:
     """Component names per run: the i-th run takes the i-th installed back end of each kind."""
-    pms, cls, iks = (_available(k) for k in ("perceptual_model", "clusterer", "ik_solver"))
+    pms, cls, iks = (_available(k) for k in ("perceptual_model", "clusterer", "ik"))
     sims = _available("simulator")
     if not (pms and cls and iks):
         return []
@@ -134,9 +134,8 @@ NOT_FOR_DRAWING = ("perceptual_model", "clusterer", "teacher")
 def _block_all_but(combo: dict[str, str], *keep_sections: str) -> str:
     """ILOCI_BLOCK_PLUGINS value: every plugin of NOT_FOR_DRAWING but those of ``combo``'s
     ``keep_sections`` (and of its IK solver and simulator)."""
-    from iloci.config import COMPONENT_SECTIONS
     registry = get_registry()
-    keep = {registry.get(COMPONENT_SECTIONS[sec], combo[sec]).plugin
+    keep = {registry.get(sec, combo[sec]).plugin
             for sec in (*keep_sections, "ik", "simulator")}
     blocked = {s.plugin for s in registry.specs() if s.kind in NOT_FOR_DRAWING} - keep
     return ",".join(sorted(blocked))

@@ -204,7 +204,7 @@ def test_registration_hooks_register_through_a_bound_view(run):
     pm = get_plugin_manager(autoload=False, plugins=[recorder])
     registry = get_registry(pm)
     for kind, name in [("perceptual_model", "mean-rnnpb"), ("clusterer", "each-alone"),
-                       ("teacher", "same-shape"), ("ik_solver", "linear"),
+                       ("teacher", "same-shape"), ("ik", "linear"),
                        ("simulator", "echo")]:
         spec = registry.get(kind, name)
         assert spec.plugin == pm.get_name(recorder) and spec.kind == kind

@@ -35,6 +35,37 @@ def test_import_iloci_imports_no_heavy_library():
     assert out.stdout.strip() == "", f"imported at import/registration time: {out.stdout}"
 
 
+def test_the_learner_depends_on_interfaces_not_on_a_plugin():
+    """The learning loop imports no plugin module, the built-in teachers' included."""
+    code = ("import sys, iloci.concepts.learner, iloci.agent; "
+            "print(','.join(m for m in ('iloci.teachers', 'iloci.commands') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == ""
+
+
+def test_one_table_of_component_kinds():
+    """Config sections, registry kinds, hooks and Config fields all come from COMPONENT_KINDS."""
+    import dataclasses
+
+    from test_hooks import hookspec_names
+
+    from iloci.interfaces import COMPONENT_KINDS, KINDS
+    assert KINDS == ("perceptual_model", "clusterer", "teacher", "ik", "simulator")
+    assert {k.hook for k in COMPONENT_KINDS.values()} == {
+        n for n in hookspec_names() if n.startswith("iloci_register_")}
+    fields = [f.name for f in dataclasses.fields(Config)]
+    assert fields[:len(KINDS)] == list(KINDS)
+    assert list(Config().to_dict())[:len(KINDS)] == list(KINDS)
+    assert [k for k, v in COMPONENT_KINDS.items() if v.optional] == ["simulator"]
+    from iloci.registry import FIRST_PARTY
+    assert {kind for kind, _ in FIRST_PARTY} == set(KINDS) - {"teacher"}
+    reg = get_registry()
+    with pytest.raises(InvalidInputError, match="kinds are perceptual_model, clusterer, "
+                       "teacher, ik, simulator"):
+        reg.get("ik_solver", "pinocchio")
+
+
 def test_hookimpl_is_exported_and_pm_has_no_side_effects():
     assert iloci.hookimpl is hookimpl
     pm1, pm2 = get_plugin_manager(), get_plugin_manager()
@@ -108,7 +139,7 @@ def _full(reg):
     Only component *names* are needed to validate a config; nothing is built.
     """
     for kind, name in [("perceptual_model", "jax-rnnpb"), ("clusterer", "scipy"),
-                       ("ik_solver", "pinocchio")]:
+                       ("ik", "pinocchio")]:
         if (kind, name) not in reg:
             reg.add(kind, name, "iloci_missing_for_test:X", plugin="test")
     return reg
@@ -240,7 +271,7 @@ def _real_components() -> dict:
         return {"perceptual_model": full.build("perceptual_model", "jax-rnnpb",
                                                {"epochs": 5}, seed=0),
                 "clusterer": full.build("clusterer", "scipy"),
-                "ik": full.build("ik_solver", "pinocchio")}
+                "ik": full.build("ik", "pinocchio")}
     except MissingBackendError as exc:
         pytest.skip(str(exc))
 

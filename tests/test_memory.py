@@ -129,7 +129,7 @@ def test_scipy_and_sklearn_give_identical_partitions_on_real_pbs():
         b = registry.build("clusterer", "sklearn")
         model = registry.build("perceptual_model", "jax-rnnpb",
                                {"epochs": 300, "recognition_steps": 30}, seed=0)
-        ik = registry.build("ik_solver", "pinocchio")
+        ik = registry.build("ik", "pinocchio")
     except Exception:  # noqa: BLE001 - a back end missing
         pytest.skip("needs scipy, sklearn, jax-rnnpb and pinocchio")
     from iloci.config import SensorimotorConfig

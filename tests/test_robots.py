@@ -239,9 +239,9 @@ def test_conformance_catches_a_solver_that_jumps_between_branches():
                                                        starts[i % 2])
                               for i in range(len(points))])
 
-    assert check_component(lambda seed: PinocchioIK(), "ik_solver",
+    assert check_component(lambda seed: PinocchioIK(), "ik",
                            checks=["ik_continuous_path"])[0].passed
-    res = check_component(lambda seed: Jumpy(), "ik_solver", checks=["ik_continuous_path"],
+    res = check_component(lambda seed: Jumpy(), "ik", checks=["ik_continuous_path"],
                           raise_on_failure=False)
     assert not res[0].passed and "joint path jumps" in res[0].message
 

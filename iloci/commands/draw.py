@@ -294,7 +294,7 @@ def _saved_section(saved: dict, section: str, registry, source: str):
     Only this section is resolved: a back end the memory names elsewhere (its
     clusterer, say) or a default one need not be installed.
     """
-    from iloci.config import COMPONENT_SECTIONS, DEFAULT_NAMES
+    from iloci.config import DEFAULT_NAMES
     from iloci.registry import validate_params
 
     values = saved.get(section) or {}
@@ -306,7 +306,7 @@ def _saved_section(saved: dict, section: str, registry, source: str):
     if not isinstance(name, str) or name == "none":
         raise ConfigError(f"{section}.name of the saved config must name a component, got "
                           f"{name!r}.", source=source, key=f"{section}.name")
-    spec = registry.get(COMPONENT_SECTIONS[section], name)
+    spec = registry.get(section, name)
     return spec, validate_params(spec, values, source=source)
 
 

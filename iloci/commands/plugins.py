@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from iloci.interfaces import COMPONENT_KINDS
 from iloci.plugins import get_plugin_manager, get_registry, plugin_infos
-from iloci.registry import LABELS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,7 +23,7 @@ def rows() -> tuple[list[dict], list[dict]]:
     for spec in registry.specs():
         missing = spec.missing()
         out.append({
-            "kind": LABELS[spec.kind], "name": spec.name,
+            "kind": COMPONENT_KINDS[spec.kind].label, "name": spec.name,
             "distribution": spec.distribution or "-", "version": spec.version or "-",
             "status": "available" if not missing else
             f"missing {', '.join(missing)}: {spec.install or 'pip install ' + ' '.join(missing)}",

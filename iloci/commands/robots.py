@@ -93,5 +93,5 @@ def describe(name: str | None, config: str | None) -> dict:
         import dataclasses
         robot_cfg = dataclasses.replace(robot_cfg, name=name, urdf="")
     robot, mode = robot_from_config(robot_cfg, pm)
-    ik = registry.build("ik_solver", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot)
+    ik = registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot)
     return place_robot(robot, mode, ik, robot_cfg).describe()

@@ -65,7 +65,7 @@ def _components(config_file: str | None):
     robot, mode = robot_from_config(cfg.robot, pm)
 
     def make(robot):
-        return registry.build("ik_solver", cfg.ik.name, cfg.ik.params, seed=cfg.seed,
+        return registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed,
                               robot=robot)
 
     ik = make(robot)

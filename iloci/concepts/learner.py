@@ -40,8 +40,7 @@ from iloci.config import LearnerConfig
 from iloci.errors import InvalidInputError, NotFittedError
 from iloci.events import InteractionEvent, RehearsalEvent
 from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Response, Simulator,
-                              Teacher)
-from iloci.teachers import check_feedback
+                              Teacher, check_feedback)
 
 __all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "ik_joint_limits"]
 

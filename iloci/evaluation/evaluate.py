@@ -266,20 +266,19 @@ def _resolved_specs(config: Config, pm: Any) -> list[Any]:
     """
     import pickle
 
-    from iloci.config import COMPONENT_SECTIONS
+    from iloci.interfaces import COMPONENT_KINDS
     from iloci.plugins import get_registry
-    from iloci.registry import LABELS
     registry = get_registry(pm)
     specs, problems = [], []
-    for sec, kind in COMPONENT_SECTIONS.items():
+    for sec, kind in COMPONENT_KINDS.items():
         name = getattr(config, sec).name
         if name == "none":
             continue
-        spec = registry.get(kind, name)
+        spec = registry.get(sec, name)
         try:
             pickle.dumps(spec)
         except (pickle.PicklingError, AttributeError, TypeError) as exc:  # e.g. local objects
-            problems.append(f"{LABELS[kind]} {name!r} (plugin {spec.plugin!r}): "
+            problems.append(f"{kind.label} {name!r} (plugin {spec.plugin!r}): "
                             f"{type(exc).__name__}: {exc}")
         specs.append(spec)
     if problems:

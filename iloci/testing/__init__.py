@@ -81,7 +81,7 @@ def check_component(component: Any, kind: str, *, checks: Iterable[str] | None =
     component : callable or object
         ``make(seed) -> instance`` (preferred), or an instance.
     kind : str
-        One of ``perceptual_model``, ``clusterer``, ``teacher``, ``ik_solver``,
+        One of ``perceptual_model``, ``clusterer``, ``teacher``, ``ik``,
         ``simulator``.
     checks : iterable of str, optional
         Names of the checks to run (default: all of the kind).

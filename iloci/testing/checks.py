@@ -443,6 +443,6 @@ CHECKS: dict[str, list[Callable[[Factory], None]]] = {
     "perceptual_model": PERCEPTUAL_MODEL_CHECKS,
     "clusterer": CLUSTERER_CHECKS,
     "teacher": TEACHER_CHECKS,
-    "ik_solver": IK_SOLVER_CHECKS,
+    "ik": IK_SOLVER_CHECKS,
     "simulator": SIMULATOR_CHECKS,
 }

@@ -26,7 +26,7 @@ def robot():
 
 @pytest.fixture(scope="module")
 def ik():
-    return get_registry().build("ik_solver", "pinocchio")
+    return get_registry().build("ik", "pinocchio")
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +39,7 @@ def test_registered_by_name_and_satisfies_protocol(ik, robot):
     from iloci_pinocchio.ik import PinocchioIK
 
     assert isinstance(ik, PinocchioIK) and isinstance(ik, IKSolver)
-    spec = get_registry().get("ik_solver", "pinocchio")
+    spec = get_registry().get("ik", "pinocchio")
     assert spec.distribution == "iloci-pinocchio"
     assert ik.joint_names == robot.joint_names
     assert np.array_equal(ik.lower, robot.lower) and np.array_equal(ik.upper, robot.upper)
@@ -220,13 +220,13 @@ def test_deterministic(ik, motions):
 
 def test_config_params_are_validated(ik):
     registry = get_registry()
-    spec = registry.get("ik_solver", "pinocchio")
+    spec = registry.get("ik", "pinocchio")
     from iloci.registry import validate_params
     with pytest.raises(ConfigError, match="max_error"):
         validate_params(spec, {"tolerance": 1e-3, "max_error": 1e-4})
     with pytest.raises(ConfigError):
         validate_params(spec, {"tolerence": 1e-6})
-    built = registry.build("ik_solver", "pinocchio", {"max_error": 1e-3})
+    built = registry.build("ik", "pinocchio", {"max_error": 1e-3})
     assert built.max_error == 1e-3
 
 
