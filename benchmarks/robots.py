@@ -19,6 +19,14 @@ example-robot-data)::
 and ``errors``: the message of each robot error a user can meet (URDF not
 found, frame not found, no reachable plane, a memory of another robot).
 
+``benchmarks/results/robots-panda-draw.png`` is the Panda drawing its
+GShape concept, made by hand (not by this script) with::
+
+    printf '[robot]\nname = "panda"\n[perceptual_model]\nname = "torch-rnnpb"\n' > panda.toml
+    iloci teach --config panda.toml --memory panda.npz GShape/0 GShape/1 GShape/2 \
+        Angle/0 Angle/1 Sshape/0 Sshape/1
+    iloci draw --memory panda.npz --concept GShape --out robots-panda-draw.png
+
 Run: ``python benchmarks/robots.py [--robots nao-v32-right-arm panda ur5]
 [--track-demos 26] [--ccr] [--jobs 2] [--perceptual-model torch-rnnpb]``.
 """

@@ -25,15 +25,6 @@ def arm_urdf(tmp_path_factory) -> Path:
     return write_test_arm(tmp_path_factory.mktemp("arm"))
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _plane_cache(tmp_path_factory):
-    """Planes found by these tests are cached apart from the user's."""
-    mp = pytest.MonkeyPatch()
-    mp.setenv("ILOCI_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
-    yield
-    mp.undo()
-
-
 def arm_config(urdf: Path, **robot) -> dict:
     return {"robot": {"name": "testarm", "urdf": str(urdf), "tip_frame": "pen",
                       "rest": REST, **robot}}

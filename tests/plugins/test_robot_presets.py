@@ -24,14 +24,6 @@ from iloci.sensorimotor.robots import available_robots, get_robot
 PRESETS = {"panda": 7, "ur5": 6}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _plane_cache(tmp_path_factory):
-    mp = pytest.MonkeyPatch()
-    mp.setenv("ILOCI_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
-    yield
-    mp.undo()
-
-
 @pytest.fixture(scope="module", params=sorted(PRESETS))
 def agent(request):
     return iloci.build({"robot": {"name": request.param},
