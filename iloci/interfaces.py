@@ -415,10 +415,6 @@ class Simulator(Protocol):
         """
         ...
 
-    #: Members an implementation may leave out: an executor driving a real
-    #: arm renders nothing (``iloci draw`` then cannot picture it).
-    __optional_members__ = ("render",)
-
     def render(self, execution: Execution, width: int = 480,
                height: int = 360) -> np.ndarray:
         """Image of the arm in its last posture and the path its pen drew (optional).
@@ -510,6 +506,12 @@ COMPONENT_KINDS: Mapping[str, ComponentKind] = MappingProxyType({k.name: k for k
 KINDS: tuple[str, ...] = tuple(COMPONENT_KINDS)
 
 
+#: Protocol name -> members an implementation may leave out: an executor
+#: driving a real arm renders nothing (``iloci draw`` then cannot picture it).
+#: :func:`unmet_members` does not require them.
+OPTIONAL_MEMBERS: Mapping[str, tuple[str, ...]] = MappingProxyType({"Simulator": ("render",)})
+
+
 def unmet_members(obj: Any, protocol: type) -> list[str]:
     """Members of ``protocol`` that ``obj`` lacks, or has but cannot call, sorted.
 
@@ -518,7 +520,7 @@ def unmet_members(obj: Any, protocol: type) -> list[str]:
     empty list means ``obj`` satisfies the protocol's shape (not that it
     behaves: see :mod:`iloci.testing` for that).
     """
-    optional = set(vars(protocol).get("__optional_members__", ()))
+    optional = set(OPTIONAL_MEMBERS.get(protocol.__name__, ()))
     attributes = set(vars(protocol).get("__annotations__", {})) - optional
     methods = {n for n, v in vars(protocol).items()
                if callable(v) and not n.startswith("_")} - optional
