@@ -24,7 +24,7 @@ import pluggy
 
 from iloci.config import Config, load_config
 from iloci.errors import (InvalidDemonstrationError, InvalidInputError, MemoryFileError,
-                          NotFittedError)
+                          NotFittedError, ObserverError)
 from iloci.interfaces import Demonstration
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.registry import Registry
@@ -199,7 +199,9 @@ class Agent:
         ----------
         demos : iterable
             Each a :class:`~iloci.interfaces.Demonstration`, a path to a
-            ``.npy`` / ``.csv`` trajectory, or an (N, 2) array.
+            ``.npy`` / ``.csv`` trajectory, or an (N, 2) array. Files of
+            one name in different folders get distinct keys (``circle/0``,
+            ``circle/1``; see :func:`~iloci.data.files.trajectory_files`).
         on_change : callable, optional
             Called with each :class:`~iloci.concepts.learner.LearnOutcome`
             after the memory changed (e.g. to save it).
@@ -215,12 +217,25 @@ class Agent:
         the reason; the memory is untouched by it and the stream goes on.
         When the memory has no encoder yet, its scales are fitted on every
         usable demonstration of the stream first.
+
+        Raises
+        ------
+        ObserverError
+            An observer hook raised. The demonstration it observed is
+            learned and ``on_change`` was called with its outcome (so a
+            saving callback saved it); the stream stops there.
         """
         t0 = time.perf_counter()
         skipped: list[tuple[str, str]] = []
 
+        from iloci.data.files import TrajectoryFile, trajectory_files
+        numbered: dict[str, dict[str, int]] = {}  # files of one stem: distinct keys
+
         def prepared(items: Iterable[Any]):
             for i, item in enumerate(items):
+                if isinstance(item, (str, os.PathLike)) and not isinstance(item,
+                                                                          TrajectoryFile):
+                    item = trajectory_files([item], numbered)[0]
                 name = _describe(item, i)
                 try:
                     demo = _as_demonstration(item, i)
@@ -240,7 +255,12 @@ class Agent:
         outcomes = []
         for demo, motion in stream:
             seq, start = self._encode(motion)
-            outcome = self.learner.learn(demo, seq, start, motion.dt)
+            try:
+                outcome = self.learner.learn(demo, seq, start, motion.dt)
+            except ObserverError as exc:  # learned, then an observer failed
+                if on_change is not None:
+                    on_change(exc.outcome)
+                raise
             outcomes.append(outcome)
             if on_change is not None:
                 on_change(outcome)
@@ -283,14 +303,17 @@ class Agent:
         return self.learner.respond(self.memory.performer_of(concept))
 
     # -- persistence --------------------------------------------------------------------
-    def save(self, path: str | os.PathLike[str]) -> Path:
+    def save(self, path: str | os.PathLike[str], *,
+             extra: dict[str, Any] | None = None) -> Path:
         """Save the memory, the network and the config to one ``.npz`` file, atomically.
 
-        See :mod:`iloci.concepts.memory` for the format. Returns the path.
+        See :mod:`iloci.concepts.memory` for the format. ``extra``: more
+        JSON-able header values (``iloci teach`` keeps its progress through
+        a stream there). Returns the path.
         """
         from iloci.concepts.memory import save_memory
         return save_memory(path, self.memory, self.perceptual_model.state(),
-                           extra={"config": self.config.to_dict(),
+                           extra={**dict(extra or {}), "config": self.config.to_dict(),
                                   "robot": _robot_record(self.robot)})
 
     @classmethod
@@ -314,19 +337,31 @@ class Agent:
         ------
         MemoryFileError
             Missing, truncated, tampered with or written by a newer iloci.
+        MemoryConfigError
+            ``config`` changes a setting the memory's entries depend on
+            (see :func:`~iloci.config.memory_conflicts`), such as
+            ``[sensorimotor] steps`` or the network's sizes.
         """
         from iloci.concepts.memory import load_memory
         memory, net_state, header = load_memory(path)
+        saved = header.get("config")
         if config is None:
-            config = header.get("config")
+            config = saved
             if not isinstance(config, dict):
                 raise MemoryFileError(f"{path} holds no config; pass config= to load it.")
             config = _upgrade_config(config)
         agent = build(config, plugin_manager=plugin_manager, **overrides)
-        saved = header.get("robot") or {"name": "nao-v32-right-arm",
-                                         "joints": list(agent.robot.joint_names)
-                                         if agent.robot.name == "nao-v32-right-arm" else []}
-        _check_same_robot(path, saved, agent.robot, memory)
+        saved_robot = header.get("robot") or {
+            "name": "nao-v32-right-arm",
+            "joints": list(agent.robot.joint_names) if agent.robot.name == "nao-v32-right-arm"
+            else []}
+        _check_same_robot(path, saved_robot, agent.robot, memory)
+        if isinstance(saved, dict) and config is not saved:
+            from iloci.config import memory_conflicts
+            from iloci.errors import MemoryConfigError
+            conflicts = memory_conflicts(saved, agent.config)
+            if conflicts:
+                raise MemoryConfigError(str(path), conflicts, source=agent.config.source)
         if net_state:
             try:
                 agent.perceptual_model.load_state(net_state)
@@ -506,6 +541,8 @@ def _check_overrides(overrides: dict[str, Any]) -> None:
 def _describe(item: Any, i: int) -> str:
     if isinstance(item, Demonstration):
         return repr(item.key)
+    if isinstance(item, os.PathLike):  # a TrajectoryFile too: named by its path
+        return repr(os.fspath(item))
     if isinstance(item, (str, os.PathLike)):
         return repr(str(item))
     return f"#{i} of the stream"
@@ -515,6 +552,9 @@ def _as_demonstration(item: Any, i: int) -> Demonstration:
     """A stream item as a Demonstration (validation errors propagate)."""
     if isinstance(item, Demonstration):
         return item
+    from iloci.data.files import TrajectoryFile
+    if isinstance(item, TrajectoryFile):
+        return item.load()
     if isinstance(item, (str, os.PathLike)):
         from iloci.data import load_trajectory
         return load_trajectory(item)

@@ -14,6 +14,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 from iloci.errors import IlociError
@@ -48,6 +49,11 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one ``warning: ...`` line on stderr (no source line)."""
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the exit code."""
     parser = make_parser()
@@ -57,7 +63,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     show_tb = args.traceback or os.environ.get("ILOCI_TRACEBACK") == "1"
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():  # restores showwarning for in-process callers
+            warnings.showwarning = _show_warning
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)
         return 130

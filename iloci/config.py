@@ -19,6 +19,7 @@ Example::
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+import dataclasses
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
@@ -38,6 +39,8 @@ __all__ = [
     "RobotConfig",
     "DataConfig",
     "EvaluationConfig",
+    "check_installed",
+    "memory_conflicts",
     "load_config",
     "to_toml",
 ]
@@ -229,6 +232,16 @@ class DataConfig:
         if self.dataset != "lasa":
             raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; load your "
                              "own trajectories with iloci.data.load_trajectory")
+        from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
+        known = LASA_SHAPES + MULTI_MODEL_SHAPES
+        for shape in self.shapes:
+            if shape not in known:
+                from iloci.errors import did_you_mean
+                raise ValueError(f"shapes: unknown LASA shape {shape!r}."
+                                 f"{did_you_mean(shape, known)} Known shapes: "
+                                 f"{', '.join(known)}.")
+        if len(set(self.shapes)) != len(self.shapes):
+            raise ValueError(f"shapes names a shape twice: {list(self.shapes)}")
 
 
 @dataclass(frozen=True)
@@ -248,8 +261,12 @@ class EvaluationConfig:
     jobs: int = 1
 
     def validate(self) -> None:
-        if self.folds < 1:
-            raise ValueError(f"folds must be >= 1, got {self.folds}")
+        if not 2 <= self.folds <= 7:
+            # each LASA shape has 7 demonstrations, dealt into the folds
+            raise ValueError(f"folds must be in 2..7 (LASA has 7 demonstrations of each "
+                             f"shape), got {self.folds}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
         if not 0 < self.train_fraction < 1:
             raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
         if self.jobs < 1:
@@ -329,13 +346,23 @@ _LINE_RE = re.compile(r"line (\d+)")
 
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
-        text = path.read_bytes().decode("utf-8")
+        raw = path.read_bytes()
+        if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+            raise ConfigError("config is UTF-16 text (it starts with a UTF-16 byte-order "
+                              "mark); TOML files are UTF-8: save it as UTF-8.",
+                              source=str(path))
+        # a UTF-8 byte-order mark (what Notepad and PowerShell write) is no content
+        text = raw.decode("utf-8-sig")
     except FileNotFoundError:
         raise ConfigError(f"config file not found: {path}. Pass an existing TOML "
                           "file, or see `iloci config show` for a full example.",
                           source=str(path)) from None
     except UnicodeDecodeError as exc:
-        raise ConfigError(f"config is not UTF-8 text ({exc.reason}).",
+        raise ConfigError(f"config is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+                          "TOML files are UTF-8: save it as UTF-8.",
+                          source=str(path)) from None
+    except IsADirectoryError:
+        raise ConfigError("config path is a directory; pass a TOML file.",
                           source=str(path)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read config: {exc.strerror}.", source=str(path)) from None
@@ -451,9 +478,112 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
+    pm_params = getattr(kwargs.get("perceptual_model"), "params", None)
+    size = getattr(pm_params, "input_size", None)
+    default = getattr(type(pm_params), "input_size", None) if pm_params is not None else None
+    if isinstance(size, int) and size != default:
+        # the network's input is the robot's 2 + J features per step; the
+        # default is sized from the robot by iloci.build
+        from iloci.sensorimotor.encoding import feature_names
+        from iloci.sensorimotor.robots import robot_from_config
+        robot, _ = robot_from_config(kwargs["robot"])
+        names = feature_names(robot.dof)
+        if size != len(names):
+            raise ConfigError(
+                f"perceptual_model.input_size is {size}, but robot {robot.name!r} gives "
+                f"every encoded demonstration {len(names)} features per step "
+                f"({', '.join(names)}): set it to {len(names)} or leave it out (it is sized "
+                "from the robot).", source=origin, key="perceptual_model.input_size")
     if missing is not None:
         raise missing
     return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))
+
+
+#: Sections every setting of which a saved memory's entries depend on.
+MEMORY_SECTIONS = ("sensorimotor", "robot")
+
+
+def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
+    """Settings of ``config`` that change what a saved memory's entries mean.
+
+    A memory's entries are PB vectors of its network for sequences encoded
+    with its settings: every ``[sensorimotor]`` setting (steps, resampling,
+    smoothing), every ``[robot]`` setting (the arm and its drawing plane) and
+    each component's ``MEMORY_KEYS`` (a class attribute of its parameter
+    schema: the RNNPB's sizes and PB range, the IK's null-space pull). Changing one would make the memory misread its own
+    demonstrations, so a config that does is refused; every other setting
+    (teacher, thresholds, epochs, recognition, simulator) may change.
+
+    Parameters
+    ----------
+    saved : mapping
+        The config saved with the memory (:meth:`Config.to_dict` form).
+    config : Config
+        The config it is about to be used with.
+
+    Returns
+    -------
+    list of str
+        One ``"section.key = saved value, now new value"`` per conflict;
+        empty when the memory can be used with ``config``.
+    """
+    out: list[str] = []
+    new = config.to_dict()
+    keys: dict[str, tuple[str, ...]] = {}
+    for sec in MEMORY_SECTIONS:
+        keys[sec] = tuple(f.name for f in dataclasses.fields(getattr(config, sec)))
+    for sec in COMPONENT_KINDS:
+        params = getattr(config, sec).params
+        keys[sec] = tuple(getattr(params, "MEMORY_KEYS", ())) if params is not None else ()
+    for sec, names in keys.items():
+        old_sec = saved.get(sec) if isinstance(saved.get(sec), Mapping) else {}
+        defaults = params_to_dict(type(getattr(config, sec))()) if sec in MEMORY_SECTIONS \
+            else None
+        for key in names:
+            if key not in new.get(sec, {}):
+                continue
+            now = new[sec][key]
+            if key in old_sec:
+                was = old_sec[key]
+            elif defaults is not None:
+                was = defaults.get(key)
+            else:  # a component key the saved config left out: its schema's default
+                params = getattr(config, sec).params
+                was = params_to_dict(type(params)()).get(key)
+            if isinstance(was, list) or isinstance(now, list):
+                was, now = list(was or ()), list(now or ())
+            if was != now:
+                out.append(f"{sec}.{key} = {was!r} in the memory, {now!r} in the config")
+    return out
+
+
+def check_installed(config: Config, registry: Registry | None = None) -> None:
+    """Raise unless every configured component's back-end modules can be imported.
+
+    :func:`load_config` checks that each configured name is registered
+    (its plugin installed and loaded); this checks what the plugin needs
+    (``torch``, ``pinocchio``, ...) without importing it, so ``iloci config
+    check`` and ``iloci evaluate`` report a missing library before anything
+    runs rather than when the component is built.
+
+    Raises
+    ------
+    MissingBackendError
+        Naming the component, the missing modules and the install command.
+    """
+    registry = registry or config._registry
+    if registry is None:
+        from iloci.plugins import get_registry
+        registry = get_registry()
+    for sec, kind in COMPONENT_KINDS.items():
+        name = getattr(config, sec).name
+        if name == "none" or sec in config._supplied:
+            continue
+        spec = registry.get(sec, name)
+        missing = spec.missing()
+        if missing:
+            raise MissingBackendError(kind.label, name, missing,
+                                      spec.install or f"pip install {' '.join(missing)}")
 
 
 def _toml_value(v: Any) -> str:

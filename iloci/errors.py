@@ -17,12 +17,15 @@ __all__ = [
     "UnknownComponentError",
     "MissingBackendError",
     "PluginError",
+    "PluginNotLoadedError",
+    "ObserverError",
     "InvalidDemonstrationError",
     "InvalidInputError",
     "UnreachableTargetError",
     "FeedbackError",
     "NotFittedError",
     "MemoryFileError",
+    "MemoryConfigError",
 ]
 
 
@@ -70,6 +73,28 @@ class ConfigError(IlociError, ValueError):
         super().__init__(where + message)
 
 
+class MemoryConfigError(ConfigError):
+    """A config changes a setting that a saved memory's entries depend on.
+
+    Attributes
+    ----------
+    conflicts : list of str
+        One ``"section.key = saved, now new"`` per setting.
+    """
+
+    def __init__(self, memory: str, conflicts: Sequence[str], *,
+                 source: str | None = None) -> None:
+        self.memory = memory
+        self.conflicts = list(conflicts)
+        super().__init__(
+            f"the memory {memory} cannot be used with this config: "
+            + "; ".join(self.conflicts)
+            + ". Its entries were learned with the memory's settings and would no longer "
+            "recognize their own demonstrations. Leave these settings as the memory has "
+            "them (or leave out --config to use the memory's own config), or teach a new "
+            "memory. The memory file is unchanged.", source=source)
+
+
 def did_you_mean(name: str, known: Iterable[str]) -> str:
     """Return ``" Did you mean 'x'?"`` for the closest known name, or ``""``."""
     close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.5)
@@ -108,6 +133,56 @@ class MissingBackendError(IlociError, ImportError):
 
 class PluginError(IlociError):
     """A plugin failed to load or implements a hook that does not exist."""
+
+
+class PluginNotLoadedError(MissingBackendError):
+    """A configured component's plugin is installed but was not loaded.
+
+    Blocked (``ILOCI_BLOCK_PLUGINS``), not autoloaded
+    (``ILOCI_DISABLE_PLUGIN_AUTOLOAD``) or failed to load: the message says
+    which. A :class:`MissingBackendError`, since the back end cannot be
+    built, but never worded "not installed".
+    """
+
+    def __init__(self, kind: str, name: str, why: str) -> None:
+        IlociError.__init__(self, f"{kind} {name!r} is not available: {why}.")
+        self.kind = kind
+        self.name = name
+        self.missing: list[str] = []
+        self.install = ""
+
+
+class ObserverError(PluginError):
+    """An observer hook raised while being told about a committed learning step.
+
+    The learning step it observed is complete (memory updated); observers
+    run only after that, so a fault never leaves it half done.
+
+    Attributes
+    ----------
+    hook : str
+        The hook, e.g. ``"iloci_on_interaction"``.
+    plugin : str
+        The plugin whose implementation raised (the first, when several did).
+    error : Exception
+        What it raised.
+    outcome : LearnOutcome
+        What the learning step did: the demonstration is learned.
+    """
+
+    def __init__(self, hook: str, plugin: str, error: BaseException, outcome: Any,
+                 faults: int = 1) -> None:
+        self.hook = hook
+        self.plugin = plugin
+        self.error = error
+        self.outcome = outcome
+        more = f" ({faults - 1} more observer fault(s) in this step)" if faults > 1 else ""
+        demo = getattr(outcome, "demo", "?")
+        super().__init__(
+            f"observer hook {hook} of plugin {plugin!r} raised {type(error).__name__}: "
+            f"{error}{more}. The demonstration {demo!r} was learned (the memory is "
+            "updated and every other observer was told); do not teach it again. Fix or "
+            f"block the plugin (ILOCI_BLOCK_PLUGINS={plugin}).")
 
 
 class InvalidInputError(IlociError, ValueError):

@@ -9,6 +9,7 @@ same kind share a schema so a config can switch back end by changing only
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 __all__ = ["RNNPBParams"]
 
@@ -20,6 +21,14 @@ class RNNPBParams:
     Sizes are the paper's: 6 inputs/outputs (dy, dz, four joint deltas),
     25 context units, 4 PB units, 60 hidden units.
     """
+
+    #: Settings a saved memory's entries depend on: its network's sizes and
+    #: the PB range (a PB means a point of [-pb_bound, pb_bound]^pb). A memory
+    #: refuses a config that changes one (see
+    #: :func:`iloci.config.memory_conflicts`); the others only steer training
+    #: and recognition.
+    MEMORY_KEYS: ClassVar[tuple[str, ...]] = ("input_size", "hidden", "context", "pb",
+                                              "pb_bound")
 
     #: Features per step: 2 sensory + J motor, set from the robot by
     #: :func:`iloci.build` (paper: 6, the Nao arm's 4 joints); a value that

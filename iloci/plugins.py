@@ -34,6 +34,7 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "PluginInfo",
     "PluginLoadWarning",
+    "STATUSES",
     "get_plugin_manager",
     "get_registry",
     "plugin_infos",
@@ -46,17 +47,50 @@ DEFAULT_PLUGINS = ("iloci.teachers",)
 ENTRY_POINT_GROUP = "iloci"
 
 class PluginLoadWarning(UserWarning):
-    """An installed plugin failed to import; it was skipped."""
+    """An installed plugin failed to import or to register; it was skipped."""
+
+
+#: :attr:`PluginInfo.status` values.
+STATUSES = ("loaded", "failed", "blocked", "not autoloaded")
 
 
 @dataclass(frozen=True)
 class PluginInfo:
-    """Where a registered plugin came from."""
+    """Where a plugin came from and whether it was loaded.
+
+    Attributes
+    ----------
+    name : str
+        Plugin name (the entry-point name; ``NAME@DISTRIBUTION`` for the
+        second of two distributions with the same entry-point name).
+    distribution, version : str or None
+    error : str or None
+        Why it failed, for ``status == "failed"``.
+    status : str
+        One of :data:`STATUSES`: ``"blocked"`` (``ILOCI_BLOCK_PLUGINS`` or
+        ``block=``), ``"not autoloaded"`` (``ILOCI_DISABLE_PLUGIN_AUTOLOAD``
+        or ``autoload=False``).
+    """
 
     name: str
     distribution: str | None
     version: str | None
     error: str | None = None
+    status: str = "loaded"
+
+    @property
+    def why_unloaded(self) -> str:
+        """What to tell a user whose config needs this plugin's components."""
+        dist = f" (distribution {self.distribution})" if self.distribution else ""
+        if self.status == "blocked":
+            return (f"plugin {self.name!r}{dist} is installed but blocked by "
+                    "ILOCI_BLOCK_PLUGINS (or block=); unblock it to use its components")
+        if self.status == "not autoloaded":
+            return (f"plugin {self.name!r}{dist} is installed but was not loaded: plugin "
+                    "autoloading is off (ILOCI_DISABLE_PLUGIN_AUTOLOAD, or autoload=False)")
+        if self.status == "failed":
+            return f"plugin {self.name!r}{dist} is installed but failed to load: {self.error}"
+        return f"plugin {self.name!r}{dist} is loaded"
 
 
 def _truthy(value: str | None) -> bool:
@@ -68,10 +102,64 @@ def _blocked_from_env() -> set[str]:
     return {p.strip() for p in raw.split(",") if p.strip()}
 
 
+def _warn(message: str) -> None:
+    warnings.warn(message, PluginLoadWarning, stacklevel=3)
+
+
+def _entry_points() -> list[tuple[str, md.EntryPoint, str | None, str | None]]:
+    """(plugin name, entry point, distribution, version) of every ``iloci`` entry point.
+
+    Entry points are sorted by name, then distribution. When two
+    distributions use one entry-point name, the first keeps it and the
+    others are named ``NAME@DISTRIBUTION``, with a warning naming both.
+    """
+    found = []
+    for ep in md.entry_points(group=ENTRY_POINT_GROUP):
+        dist = getattr(ep, "dist", None)
+        dist_name = dist.metadata["Name"] if dist is not None else None
+        found.append((ep, dist_name, dist.version if dist is not None else None))
+    found.sort(key=lambda f: (f[0].name, f[1] or ""))
+    out = []
+    first: dict[str, tuple[str | None, str | None]] = {}
+    for ep, dist_name, version in found:
+        name = ep.name
+        if name in first:
+            name = f"{ep.name}@{dist_name}"
+            other, other_version = first[ep.name]
+            _warn(f"two distributions register an iloci plugin named {ep.name!r}: "
+                  f"{other} {other_version} and {dist_name} {version}; both are loaded, the "
+                  f"second as {name!r}. Block either with ILOCI_BLOCK_PLUGINS.")
+        else:
+            first[name] = (dist_name, version)
+        out.append((name, ep, dist_name, version))
+    return out
+
+
+def _register_isolated(pm: pluggy.PluginManager, plugin: object, name: str) -> str | None:
+    """Register ``plugin``; on a validation error unregister it and return the error."""
+    if pm.get_plugin(name) is not None:
+        return f"another plugin is already registered as {name!r}"
+    try:
+        pm.register(plugin, name=name)
+        pm.check_pending()
+    except (pluggy.PluginValidationError, ValueError) as exc:
+        # pluggy adds hook implementations one by one: drop those it added
+        if pm.get_plugin(name) is not None:
+            pm.unregister(name=name)
+        return f"{type(exc).__name__}: {exc}".replace("\n", " ")
+    return None
+
+
 def get_plugin_manager(*, autoload: bool | None = None,
                        block: Iterable[str] = (),
                        plugins: Iterable[object] = ()) -> pluggy.PluginManager:
     """Build a plugin manager with iloci's hook specs and plugins.
+
+    A faulty installed plugin never breaks iloci: one that fails to import,
+    or whose hooks do not match iloci's (a misspelt hook or argument name),
+    is skipped with a :class:`PluginLoadWarning` and listed as failed by
+    ``iloci plugins``. Two distributions with the same entry-point name are
+    both loaded, with a warning naming both (see :func:`_entry_points`).
 
     Parameters
     ----------
@@ -80,6 +168,7 @@ def get_plugin_manager(*, autoload: bool | None = None,
         ``ILOCI_DISABLE_PLUGIN_AUTOLOAD`` is set.
     block : iterable of str
         Plugin names not to register, in addition to ``ILOCI_BLOCK_PLUGINS``.
+        An entry-point name blocks every distribution using it.
     plugins : iterable of object
         Extra plugin objects (modules or instances with hook implementations)
         to register, e.g. from an embedding robot stack.
@@ -87,13 +176,14 @@ def get_plugin_manager(*, autoload: bool | None = None,
     Returns
     -------
     pluggy.PluginManager
-        With attribute ``iloci_plugin_info`` (name -> :class:`PluginInfo`).
+        With attribute ``iloci_plugin_info`` (name -> :class:`PluginInfo`,
+        blocked and not-autoloaded entry points included).
 
     Raises
     ------
     PluginError
-        A plugin implements a hook that iloci does not specify (e.g. a
-        misspelled hook name).
+        One of the given ``plugins`` implements a hook that iloci does not
+        specify (e.g. a misspelled hook name), or misnames its arguments.
     """
     pm = pluggy.PluginManager(hookspecs.PROJECT)
     pm.add_hookspecs(hookspecs)
@@ -104,40 +194,52 @@ def get_plugin_manager(*, autoload: bool | None = None,
     version = _own_version()
     for mod_name in DEFAULT_PLUGINS:
         if mod_name in blocked:
+            info[mod_name] = PluginInfo(mod_name, "iloci", version, status="blocked")
             continue
         pm.register(importlib.import_module(mod_name), name=mod_name)
         info[mod_name] = PluginInfo(mod_name, "iloci", version)
     if autoload is None:
         autoload = not _truthy(os.environ.get("ILOCI_DISABLE_PLUGIN_AUTOLOAD"))
-    if autoload:
-        for ep in sorted(md.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
-            if ep.name in blocked or pm.get_plugin(ep.name) is not None:
-                continue
-            dist = getattr(ep, "dist", None)
-            dist_name = dist.metadata["Name"] if dist is not None else None
-            dist_version = dist.version if dist is not None else None
-            try:
-                plugin = ep.load()
-            except Exception as exc:  # a broken plugin must not break iloci
-                msg = f"{type(exc).__name__}: {exc}"
-                info[ep.name] = PluginInfo(ep.name, dist_name, dist_version, msg)
-                warnings.warn(
-                    f"iloci plugin {ep.name!r} (distribution {dist_name!r}) failed to "
-                    f"import and was skipped: {msg}", PluginLoadWarning, stacklevel=2)
-                continue
-            pm.register(plugin, name=ep.name)
-            info[ep.name] = PluginInfo(ep.name, dist_name, dist_version)
+    for name, ep, dist_name, dist_version in _entry_points():
+        if ep.name in blocked or name in blocked:
+            info[name] = PluginInfo(name, dist_name, dist_version, status="blocked")
+            continue
+        if not autoload:
+            info[name] = PluginInfo(name, dist_name, dist_version, status="not autoloaded")
+            continue
+        try:
+            plugin = ep.load()
+        except Exception as exc:  # a broken plugin must not break iloci
+            msg = f"{type(exc).__name__}: {exc}"
+            info[name] = PluginInfo(name, dist_name, dist_version, msg, "failed")
+            _warn(f"iloci plugin {name!r} (distribution {dist_name!r}) failed to "
+                  f"import and was skipped: {msg}")
+            continue
+        if pm.is_registered(plugin):  # two entry points naming one module
+            other = pm.get_name(plugin)
+            _warn(f"iloci plugin {name!r} (distribution {dist_name!r}) is the same object "
+                  f"as plugin {other!r}; it is registered once, as {other!r}.")
+            continue
+        error = _register_isolated(pm, plugin, name)
+        if error is not None:
+            info[name] = PluginInfo(name, dist_name, dist_version, error, "failed")
+            _warn(f"iloci plugin {name!r} (distribution {dist_name!r}) does not match "
+                  f"iloci's hooks and was skipped: {error}. Check its hook and argument "
+                  "names against `iloci.hookspecs`.")
+            continue
+        info[name] = PluginInfo(name, dist_name, dist_version)
     for i, plugin in enumerate(plugins):
         name = getattr(plugin, "__name__", None) or f"extra-{i}"
-        pm.register(plugin, name=name)
+        try:
+            pm.register(plugin, name=name)
+            pm.check_pending()
+        except pluggy.PluginValidationError as exc:
+            raise PluginError(
+                f"{exc}. A plugin implements a hook that iloci does not define, or names "
+                "its arguments differently; check the spelling against `iloci.hookspecs` "
+                "(hooks start with 'iloci_')."
+            ) from None
         info[name] = PluginInfo(name, None, None)
-    try:
-        pm.check_pending()
-    except pluggy.PluginValidationError as exc:
-        raise PluginError(
-            f"{exc}. A plugin implements a hook that iloci does not define; check "
-            "the spelling against `iloci.hookspecs` (hooks start with 'iloci_')."
-        ) from None
     pm.iloci_plugin_info = info  # type: ignore[attr-defined]
     return pm
 
@@ -163,21 +265,39 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
     """
     if pm is None:
         pm = get_plugin_manager()
-    info = plugin_infos(pm)
+    info = getattr(pm, "iloci_plugin_info", None)
+    if info is None:
+        info = pm.iloci_plugin_info = {}  # type: ignore[attr-defined]
     registry = Registry()
+    failed: set[str] = set()
     for kind in COMPONENT_KINDS.values():
         caller = getattr(pm.hook, kind.hook)
-        # Reverse pluggy's LIFO order so built-ins register first.
-        for impl in reversed(caller.get_hookimpls()):
+        # registration order: built-ins first, then installed plugins, then the
+        # caller's, so a name registered twice is blamed on the later plugin
+        for impl in caller.get_hookimpls():
+            if impl.plugin_name in failed:
+                continue
             pinfo = info.get(impl.plugin_name, PluginInfo(impl.plugin_name, None, None))
             view = registry.view(kind.name, plugin=impl.plugin_name,
                                  distribution=pinfo.distribution, version=pinfo.version)
             try:
                 impl.function(**{arg: view for arg in impl.argnames})
-            except PluginError:
-                raise
             except Exception as exc:
-                raise PluginError(
+                error = exc if isinstance(exc, PluginError) else PluginError(
                     f"plugin {impl.plugin_name!r} failed in {caller.name}: "
-                    f"{type(exc).__name__}: {exc}") from exc
+                    f"{type(exc).__name__}: {exc}")
+                if pinfo.distribution is None or pinfo.distribution == "iloci":
+                    # a plugin object the caller passed, or iloci's own: their bug
+                    if error is exc:
+                        raise
+                    raise error from exc
+                # an installed plugin: skip it, keep the rest working
+                failed.add(impl.plugin_name)
+                registry.remove_plugin(impl.plugin_name)
+                info[impl.plugin_name] = PluginInfo(pinfo.name, pinfo.distribution,
+                                                    pinfo.version, str(error), "failed")
+                _warn(f"iloci plugin {impl.plugin_name!r} (distribution "
+                      f"{pinfo.distribution!r}) failed to register its components and was "
+                      f"skipped: {error}")
+    registry.unloaded = [i for i in info.values() if i.status != "loaded"]
     return registry

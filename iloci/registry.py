@@ -16,12 +16,13 @@ from dataclasses import dataclass
 import importlib
 import importlib.util
 import inspect
+import math
 import types
 import typing
 from typing import Any, Union
 
 from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
-                          UnknownComponentError)
+                          PluginNotLoadedError, UnknownComponentError)
 from iloci.interfaces import COMPONENT_KINDS, KINDS
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
@@ -123,6 +124,17 @@ class Registry:
 
     def __init__(self) -> None:
         self._specs: dict[str, dict[str, ComponentSpec]] = {k: {} for k in KINDS}
+        #: Installed plugins that were not loaded (blocked, not autoloaded,
+        #: failed): :class:`~iloci.plugins.PluginInfo` each, set by
+        #: :func:`~iloci.plugins.get_registry`, so a config naming one of
+        #: their components is told why it is missing.
+        self.unloaded: list[Any] = []
+
+    def remove_plugin(self, plugin: str) -> None:
+        """Forget every component registered by ``plugin``."""
+        for specs in self._specs.values():
+            for name in [n for n, s in specs.items() if s.plugin == plugin]:
+                del specs[name]
 
     def add(self, kind: str, name: str, factory: str | Callable[..., Any], *,
             params: type | None = None, requires: Iterable[str] = (),
@@ -143,10 +155,12 @@ class Registry:
                               "a dataclass type.")
         old = self._specs[kind].get(name)
         if old is not None:
+            def who(p: str, d: str | None) -> str:
+                return f"plugin {p!r}" + (f" (distribution {d})" if d else "")
             raise PluginError(
-                f"{_label(kind)} {name!r} is registered twice: by plugin "
-                f"{old.plugin!r} and by plugin {plugin!r}. Uninstall one, or block "
-                "one with ILOCI_BLOCK_PLUGINS."
+                f"{_label(kind)} {name!r} is registered twice: by "
+                f"{who(old.plugin, old.distribution)} and by {who(plugin, distribution)}. "
+                "Uninstall one, or block one with ILOCI_BLOCK_PLUGINS."
             )
         spec = ComponentSpec(kind, name, factory, params, tuple(requires),
                              install or "", summary, plugin, distribution, version)
@@ -174,12 +188,19 @@ class Registry:
         try:
             return self._specs[kind][name]
         except KeyError:
-            dist = FIRST_PARTY.get((kind, name))
-            if dist is not None:
-                raise MissingBackendError(_label(kind), name, [dist],
-                                          install_command(dist)) from None
-            raise UnknownComponentError(_label(kind), name,
-                                        list(self._specs.get(kind, {}))) from None
+            pass
+        dist = FIRST_PARTY.get((kind, name))
+        if dist is not None:
+            for info in self.unloaded:
+                if info.distribution == dist:
+                    raise PluginNotLoadedError(_label(kind), name, info.why_unloaded)
+            raise MissingBackendError(_label(kind), name, [dist], install_command(dist))
+        exc = UnknownComponentError(_label(kind), name,
+                                    list(self._specs.get(kind, {})))
+        if self.unloaded:
+            exc.args = (exc.args[0] + " Installed plugins that were not loaded: "
+                        + "; ".join(i.why_unloaded for i in self.unloaded) + ".",)
+        raise exc
 
     def __contains__(self, item: tuple[str, str]) -> bool:
         kind, name = item
@@ -354,15 +375,32 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
             raise ConfigError(
                 f"{section}.{key} must be {_type_name(hints.get(key))}, got "
                 f"{value!r} ({type(value).__name__}).", source=source, key=f"{section}.{key}")
+        if not _all_finite(coerced):
+            raise ConfigError(
+                f"{section}.{key} must be a finite number, got {value!r}: TOML spells "
+                "nan and inf, but no setting of iloci means either.",
+                source=source, key=f"{section}.{key}")
+        if isinstance(coerced, int) and not -2**63 <= coerced < 2**63:
+            raise ConfigError(f"{section}.{key} is out of range: {value!r} does not fit in "
+                              "a 64-bit integer.", source=source, key=f"{section}.{key}")
         kwargs[key] = coerced
     try:
         obj = cls(**kwargs)
         check = getattr(obj, "validate", None)
         if callable(check):
             check()
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, OverflowError) as exc:
         raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
     return obj
+
+
+def _all_finite(value: Any) -> bool:
+    """False when ``value`` is, or holds, a float nan or inf."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, (list, tuple)):
+        return all(_all_finite(v) for v in value)
+    return True
 
 
 def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,

@@ -11,6 +11,16 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
+try:  # property tests (tests/test_properties.py): few examples in CI, many by hand
+    from hypothesis import settings as _hypothesis_settings
+except ImportError:  # the bare kernel's environment may lack hypothesis
+    pass
+else:
+    _hypothesis_settings.register_profile("ci", max_examples=60, deadline=None,
+                                          print_blob=True, derandomize=True)
+    _hypothesis_settings.register_profile("thorough", max_examples=2000, deadline=None)
+    _hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
 
 def run_cli(*args: str, env: dict | None = None, input: str | None = None,
             cwd: str | Path | None = None) -> subprocess.CompletedProcess:

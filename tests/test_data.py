@@ -149,10 +149,12 @@ def test_load_csv_without_header(tmp_path):
     ("0,0\n1,inf\n2,0\n", "NaN or inf"),
     ("0,0\n1,1\n", "at least 3"),
     ("1,1\n1,1\n1,1\n1,1\n", "zero extent"),
-    ("0,0,0,0\n1,1,1,1\n2,2,0,2\n", r"N x 2"),
-    ("0,0\n1,1,1\n2,0\n", "different numbers of columns"),
-    ("0,0\n1,x\n2,0\n", "non-numeric"),
-    ("0,0,0\n0,1,1\n2,2,0\n", "strictly increasing"),
+    ("0,0,0,0\n1,1,1,1\n2,2,0,2\n", "4 columns and no header"),
+    ("0,0\n1,1,1\n2,0\n", "line 2 has 3 fields where line 1 has 2"),
+    ("0,0\n1,x\n2,0\n", "line 2, column 'y': 'x' is not a number"),
+    ("0,0,0\n0,1,1\n2,2,0\n", "line 2: time 0 is not after the previous row's 0; times "
+                                 "must be strictly increasing"),
+    ("0,0\n1,nan\n2,0\n", "line 2, column 'y' is nan: NaN or inf"),
 ])
 def test_bad_csv(tmp_path, content, match):
     f = tmp_path / "bad.csv"

@@ -169,7 +169,9 @@ def test_draw_needs_only_the_memorys_network_ik_and_simulator(taught, tmp_path):
 @needs_simulator
 def test_draw_without_the_memorys_network_names_the_back_end_to_install(taught, tmp_path):
     """Drawing regenerates the concept with the memory's network: without its perceptual
-    model the command says which one, why, and the pip command."""
+    model the command says which one, why, and why it is missing: here its plugin is
+    installed but blocked, which is said as such (not "not installed", not a pip
+    command)."""
     combo, memory, _ = taught
     image = tmp_path / "gshape.png"
     res = run_cli("draw", "--memory", str(memory), "--concept", "GShape",
@@ -178,5 +180,6 @@ def test_draw_without_the_memorys_network_names_the_back_end_to_install(taught, 
     assert res.returncode == 2, res.stderr[-3000:]
     err = res.stderr
     assert f"perceptual model {combo['perceptual_model']!r}" in err
-    assert "iloci draw" in err and "pip install ./plugins/iloci-" in err
+    assert "iloci draw" in err and "blocked by ILOCI_BLOCK_PLUGINS" in err
+    assert "not installed" not in err
     assert "Traceback" not in err and not image.exists()

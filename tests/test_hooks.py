@@ -229,3 +229,142 @@ def test_observers_see_the_whole_learning_phase(run):
     (done,) = recorder.calls["iloci_on_fold_finished"]
     assert isinstance(done, FoldEvent)
     assert done.fold == 0 and done.metrics["ccr"] == metrics["ccr_folds"][0]
+
+
+# -- observer faults -------------------------------------------------------------
+
+class FaultyObserver:
+    """An observer plugin whose interaction hook raises after the first event."""
+
+    def __init__(self) -> None:
+        self.seen = 0
+
+    @hookimpl
+    def iloci_on_interaction(self, event):
+        self.seen += 1
+        raise RuntimeError("observer broke")
+
+
+def _agent_with(*plugins):
+    import iloci
+    from iloci.config import load_config
+    pm = get_plugin_manager(autoload=False, plugins=[Recorder(), *plugins])
+    return iloci.build(load_config(CONFIG, registry=get_registry(pm)), plugin_manager=pm)
+
+
+def test_observer_fault_leaves_learning_committed_and_names_hook_and_plugin():
+    from iloci.data import load_lasa
+    from iloci.errors import ObserverError
+
+    faulty = FaultyObserver()
+    agent = _agent_with(faulty)
+    recorder = agent.plugin_manager.get_plugins() - {faulty}
+    recorder = next(p for p in recorder if isinstance(p, Recorder))
+    demos = load_lasa(["GShape", "Sine"])
+    saved = []
+    with pytest.raises(ObserverError) as e:
+        agent.teach(demos[:3], on_change=saved.append)
+    err = e.value
+    assert err.hook == "iloci_on_interaction" and err.plugin == "extra-1"
+    assert "iloci_on_interaction" in str(err) and "'extra-1'" in str(err)
+    assert "observer broke" in str(err) and "do not teach it again" in str(err)
+    # committed, not half: the first demonstration is learned, once, and was saved
+    assert agent.memory.demonstrations_seen == 1 and len(agent.memory) == 1
+    assert err.outcome.demo == demos[0].key and saved == [err.outcome]
+    # every other observer was told everything about it
+    assert [ev.demo for ev in recorder.calls["iloci_on_interaction"]] == [demos[0].key]
+    assert len(recorder.calls["iloci_on_rehearsal"]) == 1
+    assert faulty.seen == 1
+    # the caller goes on after the learned demonstration: nothing is learned twice
+    agent.plugin_manager.unregister(faulty)
+    report = agent.teach(demos[1:3])
+    assert agent.memory.demonstrations_seen == 3
+    assert [o.demo for o in report.outcomes] == [d.key for d in demos[1:3]]
+
+
+def test_events_of_a_step_that_fails_are_not_sent():
+    """A teacher fault leaves the memory as it was, and observers hear nothing of it."""
+    from iloci.data import load_lasa
+    from iloci.errors import FeedbackError
+
+    agent = _agent_with()
+    recorder = next(p for p in agent.plugin_manager.get_plugins() if isinstance(p, Recorder))
+    demos = load_lasa(["GShape", "Sine"])
+    agent.teach(demos[:1])
+    before = len(recorder.calls["iloci_on_interaction"])
+
+    class Bad:
+        def feedback(self, demo, response):
+            return 0
+
+    agent.teacher = Bad()
+    with pytest.raises(FeedbackError):
+        agent.learn(demos[8])
+    assert len(recorder.calls["iloci_on_interaction"]) == before
+    assert agent.memory.demonstrations_seen == 1
+
+
+# -- a memory refuses settings that change what its entries mean ----------------------
+
+@pytest.mark.parametrize("change, conflict", [
+    ({"sensorimotor": {"steps": 80}}, "sensorimotor.steps = 50 in the memory, 80 in the config"),
+    ({"sensorimotor": {"resample": "arc_length"}}, "sensorimotor.resample"),
+    ({"sensorimotor": {"smoothing_window": 11}}, "sensorimotor.smoothing_window"),
+])
+def test_memory_refuses_a_config_that_changes_its_meaning(tmp_path, change, conflict):
+    import iloci
+    from iloci.config import load_config
+    from iloci.data import load_lasa
+    from iloci.errors import ConfigError, MemoryConfigError
+
+    agent = _agent_with()
+    agent.teach(load_lasa(["GShape"])[:2])
+    path = agent.save(tmp_path / "m.npz")
+    before = path.read_bytes()
+    pm = agent.plugin_manager
+    registry = get_registry(pm)
+    changed = {**CONFIG, **{k: {**CONFIG.get(k, {}), **v} for k, v in change.items()}}
+    with pytest.raises(MemoryConfigError, match=conflict) as e:
+        iloci.Agent.load(path, load_config(changed, registry=registry), plugin_manager=pm)
+    assert isinstance(e.value, ConfigError) and "unchanged" in str(e.value)
+    assert path.read_bytes() == before
+    # settings that only steer learning may change
+    fine = {**CONFIG, "learner": {"num_threshold": 5, "k_cutoff": 0.3}, "teacher": CONFIG["teacher"]}
+    again = iloci.Agent.load(path, load_config(fine, registry=registry), plugin_manager=pm)
+    assert again.memory.demonstrations_seen == 2
+
+
+def test_memory_conflicts_cover_component_memory_keys():
+    from iloci.config import load_config, memory_conflicts
+    from iloci.errors import MissingBackendError
+    from iloci.params import RNNPBParams
+
+    assert {"hidden", "context", "pb", "pb_bound", "input_size"} == set(RNNPBParams.MEMORY_KEYS)
+    registry = get_registry()
+    models = registry.names("perceptual_model")
+    if not models:
+        pytest.skip("no perceptual model installed")
+    try:
+        saved = load_config({"perceptual_model": {"name": models[0]}}).to_dict()
+    except MissingBackendError as exc:  # a tox env without the default clusterer or IK
+        pytest.skip(str(exc))
+    cfg = load_config({"perceptual_model": {"name": models[0], "pb": 3, "epochs": 9}})
+    assert memory_conflicts(saved, cfg) == [
+        "perceptual_model.pb = 4 in the memory, 3 in the config"]  # epochs may change
+    del saved["perceptual_model"]["pb"]  # a key the saved config leaves out: its default
+    assert memory_conflicts(saved, cfg) == [
+        "perceptual_model.pb = 4 in the memory, 3 in the config"]
+
+
+def test_teach_gives_files_of_one_name_distinct_keys(tmp_path):
+    import math
+    agent = _agent_with()
+    paths = []
+    for person, r in (("s01", 1.0), ("s02", 2.0)):
+        (tmp_path / person).mkdir()
+        p = tmp_path / person / "circle.csv"
+        p.write_text("x,y\n" + "\n".join(f"{r * math.cos(a)},{r * math.sin(a)}"
+                                          for a in np.linspace(0, 6, 40)))
+        paths.append(str(p))
+    report = agent.teach(paths)
+    assert [o.demo for o in report.outcomes] == ["circle/0", "circle/1"]

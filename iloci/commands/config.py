@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from iloci.config import load_config, to_toml
+from iloci.config import check_installed, load_config, to_toml
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -13,7 +13,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     show = csub.add_parser("show", help="print the resolved config (defaults filled in) as TOML")
     show.add_argument("file", nargs="?", help="TOML config (default: the built-in defaults)")
     show.set_defaults(func=run_show)
-    check = csub.add_parser("check", help="validate a config file")
+    check = csub.add_parser(
+        "check", help="validate a config file: every key and value, and that every "
+                      "configured back end is installed and loaded")
     check.add_argument("file", help="TOML config")
     check.set_defaults(func=run_check)
 
@@ -25,6 +27,7 @@ def run_show(args: argparse.Namespace) -> int:
 
 def run_check(args: argparse.Namespace) -> int:
     cfg = load_config(args.file)
+    check_installed(cfg)
     names = ", ".join(f"{sec}={getattr(cfg, sec).name}" for sec in
                       ("perceptual_model", "clusterer", "teacher", "ik", "simulator"))
     print(f"{args.file}: ok ({names})")

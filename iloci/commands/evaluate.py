@@ -88,12 +88,35 @@ class Progress:
             print(self._line(changed, f), file=self.stream, flush=True)
 
 
+def _check_out_dir(out: str) -> None:
+    """Raise InvalidInputError unless the report can be written under ``out``."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from iloci.errors import InvalidInputError
+    path = Path(out)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise InvalidInputError(f"--out {out}: the report cannot be written there "
+                                f"({exc.strerror or exc}); choose another directory."
+                                ) from None
+    if not os.access(path, os.W_OK):
+        raise InvalidInputError(f"--out {out}: directory is not writable.")
+
+
 def run(args: argparse.Namespace) -> int:
     from iloci.config import load_config
     from iloci.evaluation.evaluate import evaluate
-    from iloci.evaluation.report import headline, write_outputs
+    from iloci.evaluation.report import check_report_extras, headline, write_outputs
 
     config = load_config(args.config)
+    # fail now, not after the first fold: the report's libraries, a writable --out
+    check_report_extras(baseline=not args.no_baseline)
+    _check_out_dir(args.out)
     progress = None if args.quiet else Progress()
     print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "

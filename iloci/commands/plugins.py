@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def rows() -> tuple[list[dict], list[dict]]:
-    """(component rows, plugins that failed to load)."""
+    """(component rows, plugins not loaded: failed, blocked or not autoloaded)."""
     pm = get_plugin_manager()
     registry = get_registry(pm)
     out = []
@@ -29,15 +29,19 @@ def rows() -> tuple[list[dict], list[dict]]:
             f"missing {', '.join(missing)}: {spec.install or 'pip install ' + ' '.join(missing)}",
             "summary": spec.summary,
         })
-    broken = [{"plugin": i.name, "distribution": i.distribution, "error": i.error}
-              for i in plugin_infos(pm).values() if i.error]
+    broken = [{"plugin": i.name, "distribution": i.distribution, "status": i.status,
+               "error": i.error, "why": i.why_unloaded}
+              for i in plugin_infos(pm).values() if i.status != "loaded"]
     return out, broken
 
 
 def run(args: argparse.Namespace) -> int:
     table, broken = rows()
     if args.json:
-        print(json.dumps({"components": table, "failed_plugins": broken}, indent=2))
+        print(json.dumps({"components": table,
+                          "failed_plugins": [b for b in broken if b["status"] == "failed"],
+                          "unloaded_plugins": [b for b in broken if b["status"] != "failed"]},
+                         indent=2))
         return 0
     cols = ("kind", "name", "distribution", "version", "status")
     widths = {c: max(len(c), *(len(str(r[c])) for r in table)) if table else len(c)
@@ -46,5 +50,8 @@ def run(args: argparse.Namespace) -> int:
     for r in table:
         print("  ".join(str(r[c]).ljust(widths[c]) for c in cols).rstrip())
     for b in broken:
-        print(f"plugin {b['plugin']!r} ({b['distribution']}) failed to load: {b['error']}")
+        if b["status"] == "failed":
+            print(f"failed: plugin {b['plugin']!r} ({b['distribution']}): {b['error']}")
+        else:
+            print(f"{b['status']}: {b['why']}")
     return 0

@@ -26,10 +26,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from iloci.agent import Agent
     from iloci.commands.teach import resolve_demos
-    from iloci.data import load_trajectory
+    from iloci.data.files import TrajectoryFile
 
     agent = Agent.load(args.memory)
-    demos = [load_trajectory(d) if isinstance(d, str) else d for d in resolve_demos(args.files)]
+    demos = [d.load() if isinstance(d, TrajectoryFile) else d
+             for d in resolve_demos(args.files)]
     for r in agent.recognize(demos):
         if args.json:
             print(json.dumps({"demo": r.demo, "concept": r.concept,

@@ -1,7 +1,12 @@
 """``iloci teach``: learn concepts from a stream of demonstrations with feedback.
 
-The memory is saved after every demonstration that changed it, so an
-interrupted session loses at most the demonstration being taught.
+The memory is saved after every demonstration that changed it, atomically,
+with how far through the stream the session got (see :mod:`iloci.progress`):
+a session killed at any moment (even ``kill -9``) leaves a memory that
+loads, and the same command run again resumes after the last demonstration
+learned, ending with the memory an uninterrupted run gives. The memory file
+is locked (``FILE.lock``) while it is taught: a second ``iloci teach`` on it
+gets an error instead of racing the first.
 """
 
 from __future__ import annotations
@@ -39,7 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="teacher to use: console (asks you), oracle or noisy (default: the "
                         "config's)")
     p.add_argument("--memory", metavar="FILE", default=DEFAULT_MEMORY,
-                   help=f"memory file to continue from and save to (default {DEFAULT_MEMORY})")
+                   help=f"memory file to continue from and save to (default {DEFAULT_MEMORY}); "
+                        "locked while teaching (FILE.lock)")
+    p.add_argument("--again", action="store_true",
+                   help="teach every demonstration given, even those an interrupted earlier "
+                        "run of the same stream already learned (default: resume after them)")
     p.set_defaults(func=run)
 
 
@@ -68,16 +77,26 @@ def resolve_demos(tokens: Sequence[str]) -> list:
 
     ``SHAPE/INDEX`` and ``SHAPE`` name LASA demonstrations (checked now:
     a misspelt name is an error); anything else is a trajectory file,
-    passed on as a path so a bad file is skipped when its turn comes.
+    passed on as a :class:`~iloci.data.files.TrajectoryFile` so a bad file
+    is skipped when its turn comes. Files of the same name in different
+    folders get numbered keys (``circle/0``, ``circle/1``; a note on
+    stderr says which is which).
     """
     from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa
     from iloci.data.lasa import DEMOS_PER_SHAPE
 
+    from iloci.data.files import shared_stems, trajectory_files
+
     items: list = []
+    files = [tok for tok in tokens
+             if Path(tok).suffix.lower() in (".npy", ".csv") or Path(tok).is_file()]
+    numbered = iter(trajectory_files(files))
+    for group in shared_stems(trajectory_files(files)):
+        print("note: " + ", ".join(f"{f.path} is {f.key}" for f in group) + " (files of "
+              "the same name get numbered keys)", file=sys.stderr)
     for tok in tokens:
-        path = Path(tok)
-        if path.suffix.lower() in (".npy", ".csv") or path.is_file():
-            items.append(tok)
+        if tok in files:
+            items.append(next(numbered))
             continue
         shape, sep, index = tok.partition("/")
         if shape not in LASA_SHAPES + MULTI_MODEL_SHAPES:
@@ -110,11 +129,21 @@ def _describe(outcome) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from iloci.progress import teaching_lock
+
+    memory_path = Path(args.memory)
+    if memory_path.parent != Path("") and not memory_path.parent.is_dir():
+        memory_path.parent.mkdir(parents=True, exist_ok=True)
+    with teaching_lock(memory_path):
+        return _teach(args, memory_path)
+
+
+def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     from iloci.agent import Agent, SkippedDemonstrationWarning, build
     from iloci.concepts.memory import load_memory
     from iloci.config import load_config
+    from iloci.progress import PROGRESS_KEY, item_digest, progress_record, resume_point
 
-    memory_path = Path(args.memory)
     header = load_memory(memory_path)[2] if memory_path.exists() else None
     if args.config:
         cfg = load_config(args.config)
@@ -125,12 +154,33 @@ def run(args: argparse.Namespace) -> int:
     if args.teacher:
         cfg = cfg.replace(teacher={"name": args.teacher})
     items = resolve_demos(args.demos) if args.demos else default_stream(cfg)
+    digests = [item_digest(i) for i in items]
+    done = 0
+    if header is not None and not args.again:
+        done = resume_point(header.get(PROGRESS_KEY), digests)
     agent = Agent.load(memory_path, cfg) if header is not None else build(cfg)
     if header is not None:
         print(f"continuing from {memory_path}: {agent.memory.summary().splitlines()[0]}")
+    if done == len(items) and items:
+        print(f"nothing to teach: all {done} demonstration(s) of this stream were learned "
+              "by an earlier run (add --again to teach them again).\n"
+              f"{agent.memory.summary()}\nmemory unchanged ({memory_path})")
+        return 0
+    if done:
+        print(f"resuming: the first {done} of the {len(items)} demonstration(s) of this "
+              "stream were learned by an earlier, interrupted run; teaching the other "
+              f"{len(items) - done} (add --again to teach them all again).")
+    keys = [getattr(i, "key", None) for i in items]
+    position = [done]  # stream items consumed, up to the last one learned
 
     def save(outcome) -> None:
-        agent.save(memory_path)
+        # the learned item is the next one of the stream with the outcome's key
+        # (items in between that produced no outcome were skipped)
+        i = position[0]
+        while i < len(items) and keys[i] != outcome.demo:
+            i += 1
+        position[0] = min(i + 1, len(items))
+        agent.save(memory_path, extra={PROGRESS_KEY: progress_record(digests, position[0])})
         print(_describe(outcome), flush=True)
 
     def show_skip(message, category, filename, lineno, file=None, line=None) -> None:
@@ -139,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("always", SkippedDemonstrationWarning)
         warnings.showwarning = show_skip
-        report = agent.teach(items, on_change=save)
+        report = agent.teach(items[done:], on_change=save)
     fb = report.feedbacks
     rewarded = sum(f == 1 for f in fb)
     print(f"learned {len(report.outcomes)} demonstration(s) in {report.seconds:.1f} s, "

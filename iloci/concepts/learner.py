@@ -198,6 +198,8 @@ class Learner:
         self.simulator = simulator
         self.hook = hook
         self.joint_limits = joint_limits
+        # observer events of the learning step under way, sent once it is committed
+        self._pending: list[tuple[str, Any]] = []
 
     # -- helpers ---------------------------------------------------------------
     @property
@@ -215,8 +217,39 @@ class Learner:
         return self.config.rehearsal_epochs or None
 
     def _emit_interaction(self, event: InteractionEvent) -> None:
-        if self.hook is not None:
-            self.hook.iloci_on_interaction(event=event)
+        self._pending.append(("iloci_on_interaction", event))
+
+    def _deliver(self, outcome: LearnOutcome) -> None:
+        """Send the events of one committed learning step to every observer.
+
+        Each observer (hook implementation) gets every event, even when
+        another one raised; then one :class:`~iloci.errors.ObserverError`
+        names the first failing hook and plugin. Learning is committed
+        before any observer runs, so a fault never leaves it half done.
+        """
+        pending, self._pending = self._pending, []
+        if self.hook is None:
+            return
+        faults: list[tuple[str, str, BaseException]] = []
+        for hook_name, event in pending:
+            caller = getattr(self.hook, hook_name)
+            impls = caller.get_hookimpls() if hasattr(caller, "get_hookimpls") else None
+            if impls is None or any(getattr(i, "hookwrapper", False) or
+                                    getattr(i, "wrapper", False) for i in impls):
+                try:
+                    caller(event=event)
+                except Exception as exc:
+                    faults.append((hook_name, "?", exc))
+                continue
+            for impl in reversed(impls):  # pluggy's calling order
+                try:
+                    impl.function(event=event)
+                except Exception as exc:
+                    faults.append((hook_name, impl.plugin_name, exc))
+        if faults:
+            from iloci.errors import ObserverError
+            hook_name, plugin, exc = faults[0]
+            raise ObserverError(hook_name, plugin, exc, outcome, len(faults)) from exc
 
     def _rehearse(self, reason: str, new_pattern: np.ndarray | None = None,
                   new_entry: Entry | None = None) -> RehearsalEvent:
@@ -230,8 +263,7 @@ class Learner:
         event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0, loss=result.loss,
                                seconds=result.seconds, reason=reason,
                                extra={"concepts": len(self.memory.concepts())})
-        if self.hook is not None:
-            self.hook.iloci_on_rehearsal(event=event)
+        self._pending.append(("iloci_on_rehearsal", event))
         return event
 
     def recognize_pbs(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
@@ -309,7 +341,24 @@ class Learner:
         FeedbackError
             The teacher returned something other than +1 or -1; the memory
             is left as it was.
+        ObserverError
+            An observer hook (``iloci_on_interaction``,
+            ``iloci_on_rehearsal``) raised. Observers are called after the
+            memory has been updated: the demonstration *is* learned (the
+            error's ``outcome`` says how) and must not be taught again.
+            Every other observer received every event.
         """
+        self._pending = []
+        try:
+            outcome = self._learn(demo, sequence, start, dt)
+        except BaseException:
+            self._pending = []  # nothing was committed: nothing to observe
+            raise
+        self._deliver(outcome)
+        return outcome
+
+    def _learn(self, demo: Demonstration, sequence: np.ndarray, start: np.ndarray,
+               dt: float) -> LearnOutcome:
         seq = np.asarray(sequence, dtype=np.float64)
         if seq.ndim != 2 or len(seq) < 2 or not np.all(np.isfinite(seq)):
             raise InvalidInputError(f"sequence of {demo.key!r} must be a finite (T, D) array "

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import codecs
 import csv
 import errno
+import io
+import math
 import os
+import re
 import secrets
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
@@ -16,25 +21,35 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["load_trajectory", "write_atomic", "write_text_atomic"]
-
-_TIME_NAMES = ("t", "time", "times", "timestamp")
-
+__all__ = ["TrajectoryFile", "load_trajectory", "trajectory_files", "write_atomic",
+           "write_text_atomic"]
 
 def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
                     concept: str | None = None, index: int = 0) -> Demonstration:
     """Read one pen trajectory from a file.
 
-    Two layouts, in either format:
+    A ``.npy`` file holds a plain float array (loaded without pickle),
+    ``N x 2`` pen positions ``x, y`` (any unit; times default to ``0, 1,
+    ..., N-1``) or ``N x 3`` ``t, x, y`` with the time stamps (s) first.
 
-    * ``N x 2``: pen positions ``x, y`` (any unit); times default to
-      ``0, 1, ..., N-1``.
-    * ``N x 3``: ``t, x, y`` with the time stamps (s) in the first column.
+    A ``.csv`` file is read with :mod:`csv`:
 
-    A ``.csv`` file is comma separated and may start with one header row;
-    a header names the time column ``t`` or ``time`` (any position) and the
-    other two columns are ``x, y`` in order. A ``.npy`` file holds a plain
-    float array (loaded without pickle).
+    * **Encoding**: UTF-8 (with or without a byte-order mark), UTF-16 and
+      UTF-32 with a byte-order mark, UTF-16 without one (recognised by its
+      zero bytes); other bytes are read as Latin-1.
+    * **Dialect**: fields separated by ``,``, ``;``, tab or ``|`` (found by
+      :class:`csv.Sniffer`, checked against the data) or by spaces; with a
+      separator other than ``,`` a decimal comma (``0,5``) is read as
+      ``0.5``.
+    * **Header**: optional. Columns are taken by name: time ``t``,
+      ``time``, ``timestamp`` (s), ``t_ms``, ``time_ms`` (ms, converted to
+      s), unit suffixes such as ``x_mm`` or ``t [s]`` allowed; positions
+      ``x`` and ``y`` (or ``pos_x``, ``pen_x``, ...). Other columns
+      (pressure, tilt, ...) are ignored. A header that names no ``x`` and
+      ``y`` is accepted only when it is unambiguous: two columns (x, y) or
+      a named time column plus two others (x, y in order); otherwise the
+      error names the header.
+    * Without a header: 2 columns are ``x, y``, 3 are ``t, x, y``.
 
     Parameters
     ----------
@@ -55,75 +70,343 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
     InvalidInputError
         The file is missing, unreadable or not ``.npy`` / ``.csv``.
     InvalidDemonstrationError
-        The array is not N x 2 or N x 3, has NaN or inf, fewer than 3
-        points, zero extent, or non-increasing times.
+        No usable columns (the error names the header), a value that is not
+        a number, NaN or inf, or a time not after the previous one (the
+        error names the file's line), fewer than 3 points or zero extent.
     """
     p = Path(path)
     if not p.is_file():
         raise InvalidInputError(f"trajectory file {str(p)!r} does not exist.")
     suffix = p.suffix.lower()
-    header: list[str] | None = None
+    name = shape if shape is not None else p.stem
     if suffix == ".npy":
-        try:
-            arr = np.load(p, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise InvalidInputError(f"cannot read {str(p)!r} as a numpy array: {exc}. "
-                                    "Save it with numpy.save(path, array).") from None
+        positions, times = _read_npy(p)
     elif suffix == ".csv":
-        arr, header = _read_csv(p)
+        positions, times = _read_csv(p)
     else:
         raise InvalidInputError(f"unsupported trajectory file {p.name!r}: use .npy or .csv "
                                 "(N x 2 positions, or N x 3 with time first).")
+    return Demonstration(positions=positions, times=times, shape=name, index=index,
+                         concept=concept)
+
+
+def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
     try:
-        arr = np.asarray(arr, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidDemonstrationError(f"{p.name}: the array is not numeric.") from None
-    name = shape if shape is not None else p.stem
+        arr = np.load(p, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        raise InvalidInputError(f"cannot read {str(p)!r} as a numpy array: {exc}. "
+                                "Save it with numpy.save(path, array).") from None
+    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "biuf":
+        raise InvalidDemonstrationError(
+            f"{p.name}: the array is not numeric (dtype "
+            f"{getattr(arr, 'dtype', type(arr).__name__)}).")
+    arr = arr.astype(np.float64)
     if arr.ndim != 2 or arr.shape[1] not in (2, 3):
         raise InvalidDemonstrationError(
             f"{p.name}: expected an N x 2 array of positions (x, y) or N x 3 (t, x, y), "
             f"got shape {arr.shape}.")
-    times = None
+    bad = np.argwhere(~np.isfinite(arr))
+    if len(bad):
+        raise InvalidDemonstrationError(f"{p.name}: row {int(bad[0, 0])} contains NaN or inf; "
+                                        "remove or interpolate missing samples.")
     if arr.shape[1] == 3:
-        tcol = 0
-        if header is not None:
-            lowered = [h.strip().lower() for h in header]
-            hits = [i for i, h in enumerate(lowered) if h in _TIME_NAMES]
-            tcol = hits[0] if hits else 0
-        times = arr[:, tcol]
-        arr = np.delete(arr, tcol, axis=1)
-    return Demonstration(positions=arr, times=times, shape=name, index=index,
-                         concept=concept)
+        _check_times(arr[:, 0], [f"row {i}" for i in range(len(arr))], p.name)
+        return arr[:, 1:], arr[:, 0]
+    return arr, None
 
 
-def _read_csv(p: Path) -> tuple[np.ndarray, list[str] | None]:
+@dataclass(frozen=True)
+class TrajectoryFile:
+    """A trajectory file in a learning stream, read when its turn comes.
+
+    Attributes
+    ----------
+    path : str
+    shape : str
+        Shape name of its demonstration (the file's stem).
+    index : int
+        Its index among the stream's files of that stem, so that files of
+        the same name in different folders get different keys
+        (``circle/0``, ``circle/1``).
+    """
+
+    path: str
+    shape: str
+    index: int = 0
+
+    def __fspath__(self) -> str:
+        return self.path
+
+    @property
+    def key(self) -> str:
+        return f"{self.shape}/{self.index}"
+
+    def load(self) -> Demonstration:
+        """The demonstration (see :func:`load_trajectory` for the errors)."""
+        return load_trajectory(self.path, shape=self.shape, index=self.index)
+
+
+def trajectory_files(paths: Iterable[str | os.PathLike[str]],
+                     seen: dict[str, dict[str, int]] | None = None) -> list[TrajectoryFile]:
+    """Stream items for trajectory files, with a distinct key per distinct file.
+
+    Files whose names share a stem (``s01/circle.csv``, ``s02/circle.csv``:
+    one folder per person) are numbered in order, ``circle/0``,
+    ``circle/1``; the same file named twice keeps one key (it is the same
+    demonstration, shown again).
+
+    Parameters
+    ----------
+    paths : iterable of path-like
+    seen : dict, optional
+        Numbering state (stem -> file -> index) to continue from, for a
+        stream whose files arrive one at a time; updated in place.
+
+    Returns
+    -------
+    list of TrajectoryFile
+        One per path, in order.
+    """
+    seen = {} if seen is None else seen
+    out = []
+    for path in paths:
+        p = Path(path)
+        same_stem = seen.setdefault(p.stem, {})
+        ident = os.path.normcase(os.path.abspath(p))
+        index = same_stem.setdefault(ident, len(same_stem))
+        out.append(TrajectoryFile(str(path), p.stem, index))
+    return out
+
+
+def shared_stems(files: Iterable[TrajectoryFile]) -> list[list[TrajectoryFile]]:
+    """Groups of distinct files that share a stem (each group in stream order)."""
+    groups: dict[str, dict[int, TrajectoryFile]] = {}
+    for f in files:
+        groups.setdefault(f.shape, {}).setdefault(f.index, f)
+    return [list(g.values()) for g in groups.values() if len(g) > 1]
+
+
+#: Header names of a time column (lower case, unit suffix removed) -> unit in s.
+_TIME_NAMES = {"t": 1.0, "time": 1.0, "times": 1.0, "timestamp": 1.0, "ts": 1.0,
+               "t_ms": 1e-3, "time_ms": 1e-3, "timestamp_ms": 1e-3, "ms": 1e-3}
+#: Units a header may append to a name (``t_ms``, ``t [ms]``, ``x (mm)``) -> factor to s.
+_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3,
+          "us": 1e-6, "mm": None, "cm": None, "m": None, "px": None, "pixels": None,
+          "in": None}
+_X_NAMES = ("x", "pos_x", "x_pos", "pen_x", "posx", "xpos")
+_Y_NAMES = ("y", "pos_y", "y_pos", "pen_y", "posy", "ypos")
+_DELIMITERS = (",", ";", "\t", "|")
+_NUMBER_RE = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(nan|inf|infinity)",
+                        re.IGNORECASE)
+_DECIMAL_COMMA_RE = re.compile(r"[+-]?\d+,\d+([eE][+-]?\d+)?")
+
+
+def _decode(raw: bytes, name: str) -> tuple[str, str]:
+    """The text of a CSV file and the encoding it was read with."""
+    for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+                     (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
+                     (codecs.BOM_UTF16_BE, "utf-16")):
+        if raw.startswith(bom):
+            break
+    else:
+        enc = "utf-8"
+        if raw[:2] and b"\x00" in raw[:64]:  # UTF-16 without a byte-order mark
+            enc = "utf-16-le" if raw[1:64:2].count(0) > raw[0:64:2].count(0) else "utf-16-be"
     try:
-        with p.open(newline="", encoding="utf-8") as fh:
-            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InvalidInputError(f"cannot read {str(p)!r}: {exc}.") from None
-    header = None
-    if rows and not _numeric(rows[0]):
-        header, rows = rows[0], rows[1:]
-    widths = {len(r) for r in rows}
-    if len(widths) > 1:
-        raise InvalidDemonstrationError(f"{p.name}: rows have different numbers of columns "
-                                        f"{sorted(widths)}.")
-    try:
-        data = np.array([[float(c) for c in r] for r in rows], dtype=np.float64)
-    except ValueError as exc:
-        raise InvalidDemonstrationError(f"{p.name}: non-numeric value ({exc}).") from None
-    if data.size == 0:
-        data = data.reshape(0, len(header) if header else 2)
-    return data, header
+        return raw.decode(enc), enc
+    except UnicodeDecodeError:
+        if enc != "utf-8":
+            raise InvalidInputError(f"cannot read {name}: it is not valid {enc} text. Save "
+                                    "it as UTF-8.") from None
+        return raw.decode("latin-1"), "latin-1"
 
 
-def _numeric(row: list[str]) -> bool:
+def _split_name(cell: str) -> tuple[str, float | None]:
+    """A header cell as (base name, time unit in s or None): 't [ms]' -> ('t', 0.001)."""
+    name = cell.strip().strip('"').strip().lower()
+    m = re.fullmatch(r"(.*?)\s*[\[(]\s*([a-z]+)\s*[\])]", name)
+    if m and m.group(2) in _UNITS:
+        return m.group(1).strip(), _UNITS[m.group(2)]
+    name = re.sub(r"\s+", "_", name)
+    if name in _TIME_NAMES:
+        return name, _TIME_NAMES[name]
+    base, sep, unit = name.rpartition("_")
+    if sep and unit in _UNITS and base:
+        return base, _UNITS[unit]
+    return name, None
+
+
+def _number(cell: str, decimal_comma: bool) -> float | None:
+    c = cell.strip()
+    if decimal_comma and _DECIMAL_COMMA_RE.fullmatch(c):
+        c = c.replace(",", ".")
+    if not _NUMBER_RE.fullmatch(c):
+        return None
+    return float(c)
+
+
+def _rows(text: str, delimiter: str | None) -> list[tuple[int, list[str]]]:
+    """(line number, fields) of every non-blank row; ``None`` splits on white space."""
+    if delimiter is None:
+        return [(i, line.split()) for i, line in enumerate(text.splitlines(), 1)
+                if line.strip()]
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter,
+                        skipinitialspace=True)
+    out = []
     try:
-        [float(c) for c in row]
-    except ValueError:
-        return False
-    return True
+        for fields in reader:
+            if fields and any(f.strip() for f in fields):
+                out.append((reader.line_num, fields))
+    except csv.Error as exc:
+        raise InvalidDemonstrationError(f"line {reader.line_num}: {exc}") from None
+    return out
+
+
+def _numeric_rows(rows: list[tuple[int, list[str]]], decimal_comma: bool) -> bool:
+    return all(_number(c, decimal_comma) is not None for _, r in rows for c in r)
+
+
+def _dialect(text: str) -> tuple[str | None, bool]:
+    """(delimiter, decimal comma) under which the most data cells are numbers.
+
+    :class:`csv.Sniffer`'s guess is tried first, then ``,``, ``;``, tab,
+    ``|`` and white space; a candidate must give every data row one width
+    of at least 2 columns to win over one that does not. A decimal comma is
+    only considered with a separator other than ``,``.
+    """
+    candidates: list[str | None] = []
+    try:
+        sniffed = csv.Sniffer().sniff(text[:8192], delimiters="".join(_DELIMITERS)).delimiter
+        candidates.append(sniffed)
+    except csv.Error:
+        pass
+    candidates += [d for d in _DELIMITERS if d not in candidates] + [None]
+    best: tuple[tuple[int, float], str | None, bool] = ((-1, -1.0), ",", False)
+    for delim in candidates:
+        try:
+            rows = _rows(text, delim)
+        except InvalidDemonstrationError:
+            continue
+        for comma in ((False, True) if delim != "," else (False,)):
+            data = rows[1:] if rows and not _numeric_rows(rows[:1], comma) else rows
+            cells = [c for _, r in data for c in r]
+            widths = {len(r) for _, r in data}
+            consistent = int(len(widths) == 1 and min(widths) >= 2)
+            parsed = sum(_number(c, comma) is not None for c in cells) / max(1, len(cells))
+            if (consistent, parsed) > best[0]:
+                best = ((consistent, parsed), delim, comma)
+            if consistent and parsed == 1.0:
+                return delim, comma
+    return best[1], best[2]
+
+
+def _describe_dialect(delimiter: str | None, decimal_comma: bool, encoding: str) -> str:
+    sep = {None: "white space", "\t": "tabs"}.get(delimiter, repr(delimiter))
+    return (f"read as {encoding} text, fields separated by {sep}"
+            + (", decimal commas" if decimal_comma else ""))
+
+
+def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Positions (N, 2) and times (N,) or None from a CSV file (see :func:`load_trajectory`)."""
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror}.") from None
+    text, encoding = _decode(raw, p.name)
+    delimiter, decimal_comma = _dialect(text)
+    how = _describe_dialect(delimiter, decimal_comma, encoding)
+    try:
+        rows = _rows(text, delimiter)
+    except InvalidDemonstrationError as exc:
+        raise InvalidDemonstrationError(f"{p.name}: {exc} ({how}).") from None
+    if not rows:
+        raise InvalidDemonstrationError(f"{p.name}: the file holds no rows of numbers.")
+    header: list[str] | None = None
+    if not _numeric_rows(rows[:1], decimal_comma):
+        header = [c.strip() for c in rows[0][1]]
+        rows = rows[1:]
+    width = len(header) if header is not None else len(rows[0][1])
+    for line, fields in rows:
+        if len(fields) != width:
+            raise InvalidDemonstrationError(
+                f"{p.name}: line {line} has {len(fields)} fields where "
+                f"{'the header has' if header else 'line ' + str(rows[0][0]) + ' has'} "
+                f"{width} ({how}).")
+    cols = _columns(header, width, p.name, how)
+    names = header or [("t", "x", "y")[i] if width == 3 else ("x", "y")[i]
+                       for i in range(width)]
+    used = [c for c in (cols["t"], cols["x"], cols["y"]) if c is not None]
+    values = np.empty((len(rows), width), dtype=np.float64)
+    lines = [line for line, _ in rows]
+    for r, (line, fields) in enumerate(rows):
+        for c in used:
+            v = _number(fields[c], decimal_comma)
+            if v is None:
+                raise InvalidDemonstrationError(
+                    f"{p.name}: line {line}, column {names[c]!r}: {fields[c]!r} is not a "
+                    f"number ({how}).")
+            if not math.isfinite(v):
+                raise InvalidDemonstrationError(
+                    f"{p.name}: line {line}, column {names[c]!r} is {fields[c].strip()}: "
+                    "NaN or inf; remove or interpolate missing samples.")
+            values[r, c] = v
+    positions = values[:, [cols["x"], cols["y"]]]
+    times = None
+    if cols["t"] is not None:
+        times = values[:, cols["t"]] * cols["unit"]
+        _check_times(times, [f"line {n}" for n in lines], p.name)
+    return positions, times
+
+
+def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[str, Any]:
+    """Indices of the t (or None), x and y columns and the time unit (s)."""
+    if header is None:
+        if width == 2:
+            return {"t": None, "x": 0, "y": 1, "unit": 1.0}
+        if width == 3:
+            return {"t": 0, "x": 1, "y": 2, "unit": 1.0}
+        raise InvalidDemonstrationError(
+            f"{name}: {width} columns and no header; without a header a file holds "
+            "x, y or t, x, y. Add a header naming the columns t, x, y (others are "
+            f"ignored) ({how}).")
+    split = [_split_name(h) for h in header]
+    bases = [b for b, _ in split]
+    shown = ",".join(header)
+
+    def find(names: Iterable[str]) -> list[int]:
+        return [i for i, b in enumerate(bases) if b in names]
+
+    t_hits = [i for i, (b, _) in enumerate(split) if b in _TIME_NAMES or
+              (b in ("t", "time", "timestamp") and split[i][1] is not None)]
+    x_hits, y_hits = find(_X_NAMES), find(_Y_NAMES)
+    for what, hits in (("time", t_hits), ("x", x_hits), ("y", y_hits)):
+        if len(hits) > 1:
+            raise InvalidDemonstrationError(
+                f"{name}: the header {shown!r} names more than one {what} column "
+                f"({', '.join(header[i] for i in hits)}); keep one.")
+    t = t_hits[0] if t_hits else None
+    unit = 1.0
+    if t is not None:
+        base, u = split[t]
+        unit = u if u is not None else _TIME_NAMES.get(base, 1.0)
+    if x_hits and y_hits:
+        return {"t": t, "x": x_hits[0], "y": y_hits[0], "unit": unit}
+    rest = [i for i in range(width) if i != t]
+    if not x_hits and not y_hits and len(rest) == 2 and (t is not None or width == 2):
+        return {"t": t, "x": rest[0], "y": rest[1], "unit": unit}
+    raise InvalidDemonstrationError(
+        f"{name}: cannot tell the pen positions from the header {shown!r}: name them x "
+        "and y (time t, time or t_ms; other columns such as pressure are ignored).")
+
+
+def _check_times(times: np.ndarray, rows: list[str], name: str) -> None:
+    """Raise naming the first row whose time is not after the previous one."""
+    bad = np.flatnonzero(np.diff(times) <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        raise InvalidDemonstrationError(
+            f"{name}: {rows[i]}: time {times[i]:g} is not after the previous row's "
+            f"{times[i - 1]:g}; times must be strictly increasing.")
 
 
 def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any], *,

@@ -408,6 +408,9 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
 
     Raises
     ------
+    MissingBackendError
+        Before the first fold: a configured back end, or (``baseline``)
+        dtaidistance, is not installed.
     InvalidInputError
         Bad ``jobs`` or fold, or (``jobs > 1``) a component resolved
         through ``plugin_manager`` that cannot be sent to a worker.
@@ -417,8 +420,18 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     from iloci.data import load_lasa
     from iloci.plugins import get_plugin_manager, get_registry
 
+    from iloci.config import check_installed
+
     pm = plugin_manager or get_plugin_manager()
-    config = load_config(config, registry=get_registry(pm))
+    registry = get_registry(pm)
+    config = load_config(config, registry=registry)
+    # everything a fold needs is checked before the first one starts
+    check_installed(config, registry)
+    if baseline:
+        from iloci.evaluation.report import BASELINE_MODULES, check_report_extras
+        import importlib.util
+        if any(importlib.util.find_spec(m) is None for m in BASELINE_MODULES):
+            check_report_extras(baseline=True)
     jobs = int(jobs or config.evaluation.jobs)
     if jobs < 1:
         raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")

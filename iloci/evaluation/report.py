@@ -10,9 +10,40 @@ from typing import Any
 import numpy as np
 
 from iloci.data.files import write_text_atomic
+from iloci.errors import MissingBackendError
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
 __all__ = ["write_outputs", "write_json_atomic", "headline"]
+
+
+#: Modules the report needs: figures (matplotlib), the PB-space figure
+#: (scikit-learn's MDS) and the DTW baseline (dtaidistance).
+REPORT_MODULES = {"matplotlib": "matplotlib", "sklearn": "scikit-learn"}
+BASELINE_MODULES = {"dtaidistance": "dtaidistance"}
+
+
+def check_report_extras(*, baseline: bool = True) -> None:
+    """Raise before an evaluation starts if its report could not be written.
+
+    Parameters
+    ----------
+    baseline : bool
+        The DTW 1-NN baseline will run (it needs ``dtaidistance``).
+
+    Raises
+    ------
+    MissingBackendError
+        Naming every missing distribution and ``pip install 'iloci[report]'``.
+    """
+    import importlib.util
+    wanted = dict(REPORT_MODULES, **(BASELINE_MODULES if baseline else {}))
+    missing = [dist for mod, dist in wanted.items() if importlib.util.find_spec(mod) is None]
+    if missing:
+        hint = " (or skip the baseline with --no-baseline)" if baseline and \
+            "dtaidistance" in missing else ""
+        raise MissingBackendError("the evaluation report", "figures and baseline", missing,
+                                  f"pip install 'iloci[report]' from a checkout of iloci, or "
+                                  f"pip install {' '.join(missing)}{hint}")
 
 
 def write_json_atomic(path: str | Path, data: Any) -> Path:

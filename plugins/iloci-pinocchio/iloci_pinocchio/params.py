@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 __all__ = ["PinocchioIKParams"]
 
@@ -10,6 +11,10 @@ __all__ = ["PinocchioIKParams"]
 @dataclass(frozen=True)
 class PinocchioIKParams:
     """Settings of :class:`iloci_pinocchio.ik.PinocchioIK`."""
+
+    #: A saved memory's motor channels are this robot's joint angles, which
+    #: the null-space pull shapes for a redundant arm.
+    MEMORY_KEYS: ClassVar[tuple[str, ...]] = ("posture_gain",)
 
     #: Stop iterating on a point once its position error is below this (m).
     tolerance: float = 1e-7

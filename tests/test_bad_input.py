@@ -1,0 +1,457 @@
+"""Bad input of every kind gets one clear iloci error (exit 2), or is read right.
+
+Each test is the right value of a case tried as a new user would (a config
+saved with a byte-order mark, ``nan`` in a config, a pen-tablet CSV export,
+a European-locale CSV, one folder per person, a plugin with a misnamed hook
+argument, two distributions with one entry-point name), generalised to its
+whole kind.
+"""
+
+from __future__ import annotations
+
+import codecs
+import dataclasses
+import math
+import sys
+import textwrap
+import typing
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iloci.config import _PLAIN_SECTIONS, load_config
+from iloci.data import load_trajectory
+from iloci.data.files import shared_stems, trajectory_files
+from iloci.errors import (
+    ConfigError,
+    InvalidDemonstrationError,
+    MissingBackendError,
+    PluginError,
+    PluginNotLoadedError,
+    UnknownComponentError,
+)
+from iloci.plugins import PluginInfo, PluginLoadWarning, get_plugin_manager, get_registry
+from iloci.registry import Registry
+
+# ------------------------------------------------------------------ config files
+
+
+def test_toml_with_utf8_byte_order_mark_is_read(tmp_path):
+    f = tmp_path / "bom.toml"
+    f.write_bytes(codecs.BOM_UTF8 + b"[learner]\nk_cutoff = 0.7\n")
+    from iloci.interfaces import COMPONENT_KINDS  # no back end looked up: runs in bare too
+    assert load_config(f, supplied=COMPONENT_KINDS).learner.k_cutoff == 0.7
+
+
+def test_toml_in_utf16_says_so(tmp_path):
+    f = tmp_path / "u16.toml"
+    f.write_bytes("[learner]\nk_cutoff = 0.7\n".encode("utf-16"))
+    with pytest.raises(ConfigError, match="UTF-16.*save it as UTF-8"):
+        load_config(f)
+
+
+def _float_fields(cls: type) -> list[str]:
+    hints = typing.get_type_hints(cls)
+    return [f.name for f in dataclasses.fields(cls) if hints.get(f.name) is float]
+
+
+def _every_float_setting() -> list[tuple[str, dict, str]]:
+    """(section, other keys, key) of every float setting, plain and registered schemas."""
+    out = [(sec, {}, key) for sec, cls in _PLAIN_SECTIONS.items() for key in _float_fields(cls)]
+    from iloci.interfaces import COMPONENT_KINDS
+    registry = get_registry()
+    for sec in COMPONENT_KINDS:
+        for spec in registry.specs(sec):
+            if spec.params is not None:
+                out += [(sec, {"name": spec.name}, key) for key in _float_fields(spec.params)]
+    return out
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_no_float_setting_takes_nan_or_inf(bad):
+    settings = _every_float_setting()
+    assert len(settings) >= 4  # k_cutoff, similarity_threshold, train_fraction, noisy p
+    for sec, base, key in settings:
+        with pytest.raises(ConfigError, match=rf"{sec}\.{key} must be a finite number") as e:
+            load_config({sec: {**base, key: bad}})
+        assert e.value.key == f"{sec}.{key}"
+
+
+def test_nan_config_is_refused_by_config_check(tmp_path, cli):
+    f = tmp_path / "nan.toml"
+    f.write_text("[learner]\nsimilarity_threshold = nan\n")
+    out = cli("config", "check", str(f))
+    assert out.returncode == 2
+    assert "learner.similarity_threshold must be a finite number, got nan" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("section, values, match", [
+    ("evaluation", {"seed": -1}, "seed must be >= 0"),
+    ("evaluation", {"folds": 1}, "folds must be in 2..7"),
+    ("evaluation", {"folds": 8}, "folds must be in 2..7"),
+    ("evaluation", {"train_fraction": 1.5}, r"train_fraction must be in \(0, 1\)"),
+    ("evaluation", {"jobs": 0}, "jobs must be >= 1"),
+    ("evaluation", {"seed": 2**70}, "64-bit integer"),
+    ("evaluation", {"seed": "0"}, "evaluation.seed must be int"),
+    ("evaluation", {"seed": 1.5}, "evaluation.seed must be int"),
+    ("evaluation", {"seeds": 1}, "unknown key 'evaluation.seeds'.*Did you mean 'seed'"),
+    ("learner", {"k_cutoff": -0.5}, "k_cutoff must be >= 0"),
+    ("learner", {"num_threshold": True}, "learner.num_threshold must be int"),
+    ("sensorimotor", {"steps": 2}, "steps must be >= 3"),
+    ("sensorimotor", {"robot": "nao"}, r"unknown key 'sensorimotor.robot'"),
+    ("robot", {"plane": "manual"}, r"plane must be 'auto' or \[x, y, z, width, height\]"),
+    ("sensorimotor", {"smoothing_window": 4}, "odd number"),
+    ("data", {"shapes": ["GShape", "Gshape"]}, "unknown LASA shape 'Gshape'"),
+    ("data", {"shapes": ["GShape", "GShape"]}, "names a shape twice"),
+    ("data", {"shapes": "GShape"}, "data.shapes must be"),
+])
+def test_out_of_range_or_mistyped_values_name_their_key(section, values, match):
+    with pytest.raises(ConfigError, match=match):
+        load_config({section: values})
+
+
+def test_input_size_must_match_the_encoding():
+    registry = get_registry()
+    models = registry.names("perceptual_model")
+    if not models:
+        pytest.skip("no perceptual model installed")
+    with pytest.raises(ConfigError, match="input_size is 5.*6 features"):
+        load_config({"perceptual_model": {"name": models[0], "input_size": 5}})
+
+
+# ------------------------------------------------------------------ trajectory files
+
+CIRCLE = [(300 + 100 * math.cos(a), 200 + 100 * math.sin(a))
+          for a in np.linspace(0, 2 * math.pi, 40, endpoint=False)]
+
+
+def _write(tmp_path: Path, name: str, text: str, encoding: str = "utf-8") -> Path:
+    f = tmp_path / name
+    f.write_bytes(text.encode(encoding))
+    return f
+
+
+def test_header_columns_are_taken_by_name_pressure_ignored(tmp_path):
+    rows = "\n".join(f"{x:.3f},{y:.3f},0.5" for x, y in CIRCLE)
+    d = load_trajectory(_write(tmp_path, "p.csv", "x,y,pressure\n" + rows))
+    assert np.allclose(d.positions, CIRCLE, atol=1e-3)
+    assert np.array_equal(d.times, np.arange(len(CIRCLE)))  # no time column: indices
+
+
+def test_time_column_in_milliseconds_anywhere(tmp_path):
+    rows = "\n".join(f"{x:.3f},{y:.3f},{8 * i}" for i, (x, y) in enumerate(CIRCLE))
+    d = load_trajectory(_write(tmp_path, "t.csv", "x,y,t_ms\n" + rows))
+    assert np.allclose(d.positions, CIRCLE, atol=1e-3)
+    assert np.allclose(d.times, 0.008 * np.arange(len(CIRCLE)))
+    rows = "\n".join(f"0.1,{i * 10},{x:.3f},{y:.3f}" for i, (x, y) in enumerate(CIRCLE))
+    d = load_trajectory(_write(tmp_path, "u.csv", "pressure,t [ms],X,Y\n" + rows))
+    assert np.allclose(d.times, 0.01 * np.arange(len(CIRCLE)))
+
+
+@pytest.mark.parametrize("header", ["a,b,c", "x,pressure,tilt", "t,u,v,w"])
+def test_ambiguous_header_is_named_in_the_error(tmp_path, header):
+    n = len(header.split(","))
+    rows = "\n".join(",".join(str(i + k) for k in range(n)) for i in range(5))
+    with pytest.raises(InvalidDemonstrationError, match=f"header '{header}'.*x and y"):
+        load_trajectory(_write(tmp_path, "h.csv", header + "\n" + rows))
+
+
+@pytest.mark.parametrize("name, text, encoding", [
+    ("semicolon decimal comma", "t;x;y\n" + "\n".join(
+        f"{0.02 * i:.3f};{x:.3f};{y:.3f}".replace(".", ",")
+        for i, (x, y) in enumerate(CIRCLE)), "utf-8"),
+    ("tabs", "t\tx\ty\n" + "\n".join(
+        f"{0.02 * i}\t{x}\t{y}" for i, (x, y) in enumerate(CIRCLE)), "utf-8"),
+    ("spaces", "\n".join(f"{0.02 * i}  {x} {y}" for i, (x, y) in enumerate(CIRCLE)),
+     "utf-8"),
+    ("utf-8 bom, crlf", "t,x,y\r\n" + "\r\n".join(
+        f"{0.02 * i},{x},{y}" for i, (x, y) in enumerate(CIRCLE)), "utf-8-sig"),
+    ("utf-16 with bom", "t,x,y\n" + "\n".join(
+        f"{0.02 * i},{x},{y}" for i, (x, y) in enumerate(CIRCLE)), "utf-16"),
+    ("utf-16-le without bom", "t;x;y\n" + "\n".join(
+        f"{0.02 * i};{x};{y}" for i, (x, y) in enumerate(CIRCLE)), "utf-16-le"),
+    ("quoted header, pipes", '"time"|"x"|"y"\n' + "\n".join(
+        f"{0.02 * i}|{x}|{y}" for i, (x, y) in enumerate(CIRCLE)), "utf-8"),
+])
+def test_dialects_and_encodings(tmp_path, name, text, encoding):
+    d = load_trajectory(_write(tmp_path, "d.csv", text, encoding))
+    assert np.allclose(d.positions, CIRCLE, atol=1e-3), name
+    assert np.allclose(d.times, 0.02 * np.arange(len(CIRCLE)), atol=1e-3), name
+
+
+@pytest.mark.parametrize("text, match", [
+    ("t;x;y\n0,0;1,0;0,0\n0,1;1,5;abc\n0,2;2,0;1,0\n",
+     r"line 3, column 'y': 'abc' is not a number \(.*separated by ';', decimal commas\)"),
+    ("x,y\n0,0\n1,\n2,0\n", "line 3, column 'y': '' is not a number"),
+    ("x,y\n0,0\n1,1\n2,0,5\n", "line 4 has 3 fields where the header has 2"),
+    ("t,x,y\n0,0,0\n1,1,1\n1,2,0\n", "line 4: time 1 is not after the previous row's 1"),
+    ("x,y\n", "at least 3"),
+    ("", "holds no rows"),
+])
+def test_bad_values_name_their_line(tmp_path, text, match):
+    with pytest.raises(InvalidDemonstrationError, match=match):
+        load_trajectory(_write(tmp_path, "bad.csv", text))
+
+
+def test_bad_file_on_the_command_line_exits_2(tmp_path, cli):
+    f = _write(tmp_path, "bad.csv", "a,b,c\n1,2,3\n2,3,4\n3,4,5\n")
+    out = cli("show", str(f), "--out", str(tmp_path / "x.png"))
+    assert out.returncode == 2 and "header 'a,b,c'" in out.stderr
+
+
+def test_files_of_one_name_in_different_folders_get_distinct_keys(tmp_path):
+    paths = []
+    for person in ("s01", "s02"):
+        (tmp_path / person).mkdir()
+        for shape in ("circle", "zigzag"):
+            p = tmp_path / person / f"{shape}.csv"
+            p.write_text("x,y\n0,0\n1,1\n2,0\n")
+            paths.append(p)
+    files = trajectory_files(paths + [paths[0]])
+    assert [f.key for f in files] == ["circle/0", "zigzag/0", "circle/1", "zigzag/1",
+                                      "circle/0"]  # the same file again: same key
+    assert [f.load().key for f in files] == [f.key for f in files]
+    groups = shared_stems(files)
+    assert [[f.path for f in g] for g in groups] == [[str(paths[0]), str(paths[2])],
+                                                     [str(paths[1]), str(paths[3])]]
+
+
+def test_teach_names_files_of_one_name(tmp_path, cli):
+    pytest.importorskip("iloci_pinocchio")
+    for person in ("s01", "s02"):
+        (tmp_path / person).mkdir()
+        (tmp_path / person / "circle.csv").write_text(
+            "x,y\n" + "\n".join(f"{x},{y}" for x, y in CIRCLE))
+    from iloci.commands.teach import resolve_demos
+    items = resolve_demos([str(tmp_path / "s01/circle.csv"), "GShape/1",
+                           str(tmp_path / "s02/circle.csv")])
+    assert [getattr(i, "key", None) for i in items] == ["circle/0", "GShape/1", "circle/1"]
+
+
+# ------------------------------------------------------------------ plugins
+
+
+def _fake_distribution(site: Path, dist: str, module: str, entry_name: str,
+                       source: str, version: str = "0.1") -> None:
+    """An installed-looking distribution: a module, dist-info and an ``iloci`` entry point."""
+    site.mkdir(exist_ok=True)
+    (site / f"{module}.py").write_text(textwrap.dedent(source))
+    info = site / f"{dist.replace('-', '_')}-{version}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: {version}\n")
+    (info / "entry_points.txt").write_text(f"[iloci]\n{entry_name} = {module}\n")
+
+
+BAD_ARGNAME = """
+    from iloci import hookimpl
+
+    class Strict:
+        def feedback(self, demo, response):
+            return 1
+
+    @hookimpl
+    def iloci_register_teachers(reg):          # the spec's argument is `registry`
+        reg.add("strict", Strict, summary="rewards everything")
+"""
+
+GOOD_TEACHER = """
+    from iloci import hookimpl
+
+    class Kind:
+        def feedback(self, demo, response):
+            return 1
+
+    @hookimpl
+    def iloci_register_teachers(registry):
+        registry.add("{name}", Kind, summary="rewards everything")
+"""
+
+
+@pytest.fixture
+def site(tmp_path, monkeypatch):
+    path = tmp_path / "site"
+    path.mkdir()
+    monkeypatch.syspath_prepend(str(path))
+    monkeypatch.delenv("ILOCI_BLOCK_PLUGINS", raising=False)
+    monkeypatch.delenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", raising=False)
+    return path
+
+
+def test_plugin_with_a_misnamed_hook_argument_is_skipped_and_listed(site, cli):
+    _fake_distribution(site, "iloci-badarg", "iloci_badarg", "badarg", BAD_ARGNAME)
+    _fake_distribution(site, "iloci-kind", "iloci_kind", "kind",
+                       GOOD_TEACHER.format(name="kind"))
+    with pytest.warns(PluginLoadWarning, match=r"'badarg'.*iloci-badarg.*\{'reg'\}"):
+        pm = get_plugin_manager()
+    info = pm.iloci_plugin_info["badarg"]
+    assert info.status == "failed" and "reg" in info.error
+    assert pm.get_plugin("badarg") is None
+    registry = get_registry(pm)
+    assert "strict" not in registry.names("teacher")
+    assert {"kind", "oracle"} <= set(registry.names("teacher"))  # the rest works
+    env = {"PYTHONPATH": str(site)}
+    out = cli("plugins", env=env)
+    assert out.returncode == 0, out.stderr
+    assert "failed: plugin 'badarg' (iloci-badarg)" in out.stdout
+    assert "warning: iloci plugin 'badarg'" in out.stderr and "Traceback" not in out.stderr
+    if _defaults_installed():
+        ok = site / "ok.toml"
+        ok.write_text("[teacher]\nname = 'kind'\n")
+        out = cli("config", "check", str(ok), env=env)
+        assert out.returncode == 0, out.stderr
+
+
+def test_plugin_failing_in_its_registration_hook_is_isolated(site):
+    _fake_distribution(site, "iloci-boom", "iloci_boom", "boom", """
+        from iloci import hookimpl
+
+        @hookimpl
+        def iloci_register_teachers(registry):
+            registry.add("early", "x:y")
+            raise RuntimeError("boom")
+    """)
+    _fake_distribution(site, "iloci-dup", "iloci_dup", "dup",
+                       GOOD_TEACHER.format(name="oracle"))
+    pm = get_plugin_manager()
+    with pytest.warns(PluginLoadWarning) as caught:
+        registry = get_registry(pm)
+    text = " ".join(str(w.message) for w in caught)
+    assert "'boom'" in text and "RuntimeError: boom" in text
+    # a component name registered twice names both plugins and distributions
+    assert "'oracle' is registered twice: by plugin 'iloci.teachers' (distribution iloci) " \
+           "and by plugin 'dup' (distribution iloci-dup)" in text
+    assert "early" not in registry.names("teacher")  # what it registered is withdrawn
+    assert registry.get("teacher", "oracle").plugin == "iloci.teachers"
+    assert pm.iloci_plugin_info["boom"].status == "failed"
+
+
+def test_entry_point_name_collision_loads_both_and_names_both(site):
+    _fake_distribution(site, "iloci-aaa", "iloci_aaa", "same", GOOD_TEACHER.format(name="a1"))
+    _fake_distribution(site, "iloci-bbb", "iloci_bbb", "same", GOOD_TEACHER.format(name="b1"),
+                       version="0.2")
+    with pytest.warns(PluginLoadWarning, match=r"named 'same': iloci-aaa 0.1 and iloci-bbb 0.2"):
+        pm = get_plugin_manager()
+    registry = get_registry(pm)
+    assert {"a1", "b1"} <= set(registry.names("teacher"))
+    assert registry.get("teacher", "b1").plugin == "same@iloci-bbb"
+    # blocking the entry-point name blocks both
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PluginLoadWarning)
+        registry = get_registry(get_plugin_manager(block=["same"]))
+    assert not {"a1", "b1"} & set(registry.names("teacher"))
+
+
+def test_blocked_or_not_autoloaded_plugin_is_reported_as_such(site):
+    _fake_distribution(site, "iloci-kind", "iloci_kind", "kind",
+                       GOOD_TEACHER.format(name="kind"))
+    registry = get_registry(get_plugin_manager(block=["kind"]))
+    with pytest.raises(UnknownComponentError, match="'kind'.*blocked by ILOCI_BLOCK_PLUGINS"):
+        load_config({"teacher": {"name": "kind"}}, registry=registry)
+    registry = get_registry(get_plugin_manager(autoload=False))
+    with pytest.raises(UnknownComponentError, match="plugin 'kind'.*autoloading is off"):
+        load_config({"teacher": {"name": "kind"}}, registry=registry)
+
+
+@pytest.mark.parametrize("status, match", [
+    ("blocked", "blocked by ILOCI_BLOCK_PLUGINS"),
+    ("not autoloaded", "autoloading is off"),
+    ("failed", "failed to load: ImportError: x"),
+])
+def test_first_party_back_end_not_loaded_is_not_called_not_installed(status, match):
+    registry = Registry()
+    registry.unloaded = [PluginInfo("scipy", "iloci-scipy", "0.1.0", "ImportError: x", status)]
+    with pytest.raises(PluginNotLoadedError, match=match) as e:
+        registry.get("clusterer", "scipy")
+    assert "not installed" not in str(e.value)
+    assert isinstance(e.value, MissingBackendError)
+    with pytest.raises(MissingBackendError, match="not installed"):
+        Registry().get("clusterer", "scipy")
+
+
+def _defaults_installed() -> bool:
+    """Whether the default config's back ends are installed (not in `tox -e bare`)."""
+    try:
+        with warnings.catch_warnings():  # a test's faulty plugins may be on sys.path
+            warnings.simplefilter("ignore", PluginLoadWarning)
+            load_config(None)
+    except MissingBackendError:
+        return False
+    return True
+
+
+def test_config_check_reports_a_back_end_library_that_is_missing(site, cli):
+    if not _defaults_installed():
+        pytest.skip("the default config's back ends are not installed")
+    _fake_distribution(site, "iloci-needs", "iloci_needs", "needs", """
+        from iloci import hookimpl
+
+        @hookimpl
+        def iloci_register_teachers(registry):
+            registry.add("needy", "iloci_needs_impl:T", requires=("no_such_module_xyz",),
+                         install="pip install no-such-module-xyz")
+    """)
+    f = site / "c.toml"
+    f.write_text("[teacher]\nname = 'needy'\n")
+    out = cli("config", "check", str(f), env={"PYTHONPATH": str(site)})
+    assert out.returncode == 2
+    assert "teacher 'needy' needs no_such_module_xyz, which is not installed" in out.stderr
+    assert "pip install no-such-module-xyz" in out.stderr
+
+
+def test_plugins_given_by_the_caller_still_raise(site):
+    from iloci import hookimpl
+
+    class Typo:
+        @hookimpl
+        def iloci_register_teachers(self, reg):
+            pass
+
+    with pytest.raises(PluginError, match="reg"):
+        get_plugin_manager(autoload=False, plugins=[Typo()])
+
+
+def test_evaluate_checks_its_report_libraries_before_fold_0(monkeypatch):
+    import importlib.util
+
+    from iloci.evaluation.report import check_report_extras
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name in ("dtaidistance", "matplotlib")
+                        else real(name, *a))
+    with pytest.raises(MissingBackendError, match="matplotlib, dtaidistance.*--no-baseline"):
+        check_report_extras(baseline=True)
+    with pytest.raises(MissingBackendError, match="matplotlib") as e:
+        check_report_extras(baseline=False)
+    assert "dtaidistance" not in str(e.value)
+
+
+def test_evaluate_refuses_an_unwritable_out_dir_before_fold_0(tmp_path, cli):
+    for plugin in ("iloci_jax", "iloci_scipy", "iloci_pinocchio"):  # the default config's
+        pytest.importorskip(plugin)
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    out = cli("evaluate", "--out", str(blocker / "sub"), "--quiet")
+    assert out.returncode == 2 and "--out" in out.stderr and "fold" not in out.stderr
+
+
+if sys.platform == "win32":  # pragma: no cover
+    pytest.skip("POSIX paths", allow_module_level=True)
+
+
+def test_agent_teach_numbers_files_of_one_name_too(tmp_path):
+    from iloci.agent import _as_demonstration
+    from iloci.data.files import TrajectoryFile
+    seen: dict = {}
+    paths = []
+    for person in ("s01", "s02"):
+        (tmp_path / person).mkdir()
+        p = tmp_path / person / "circle.csv"
+        p.write_text("x,y\n0,0\n1,1\n2,0\n")
+        paths.append(p)
+    files = [trajectory_files([p], seen)[0] for p in paths + paths[:1]]
+    assert [f.key for f in files] == ["circle/0", "circle/1", "circle/0"]
+    assert all(isinstance(f, TrajectoryFile) for f in files)
+    assert _as_demonstration(files[1], 0).key == "circle/1"
