@@ -155,7 +155,8 @@ def test_network_and_encoding_are_sized_from_the_robot(arm_agent):
     _, joints = enc.decode(seq, start)
     assert joints.shape == (len(seq) + 1, 5)
     from iloci.errors import ConfigError
-    with pytest.raises(ConfigError, match=r"input_size = 5 does not fit robot 'testarm'.*= 7"):
+    with pytest.raises(ConfigError, match=r"input_size is 5, but robot 'testarm' gives .* 7 "
+                                          r"features per step \(dy, dz, dq1, .* dq5\)"):
         iloci.build({**arm_config(arm_agent.robot.urdf_path),
                      "perceptual_model": {"input_size": 5}})
 
