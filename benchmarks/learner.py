@@ -70,7 +70,7 @@ def run_fold(backend: str, epochs: int, fold_index: int, seed: int, extra: dict)
     answers = agent.recognize(test)
     rec_s = time.perf_counter() - t0
     names = agent.memory.label_concepts(agent.teacher.concept_of_key)
-    ccr = float(np.mean([names[a.concept] == d.concept for a, d in zip(answers, test)]))
+    ccr = float(np.mean([names[a.concept] == d.true_concept for a, d in zip(answers, test)]))
     reh = report.rehearsals
     by_reason: dict[str, int] = {}
     for r in reh:
@@ -89,7 +89,7 @@ def run_fold(backend: str, epochs: int, fold_index: int, seed: int, extra: dict)
         "first_guess_rate": float(np.mean(firsts)) if firsts else None,
         "ccr": ccr,
         "mean_confidence_correct": float(np.mean(
-            [a.confidence for a, d in zip(answers, test) if names[a.concept] == d.concept]
+            [a.confidence for a, d in zip(answers, test) if names[a.concept] == d.true_concept]
             or [np.nan])),
         "entries": len(agent.memory),
         "prototypes": int(sum(e.prototype for e in agent.memory.entries)),

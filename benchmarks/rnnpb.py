@@ -16,7 +16,7 @@ Writes ``benchmarks/results/rnnpb.json``::
     recognize_146_s_adam the same with recognition_method = "adam" (200 steps,
                          gradient descent on the PB, as in Tani's RNNPB)
     offline_ccr          per back end: correct classification rate per fold of
-                         DESIGN.md section 6 (mean over 3 network seeds; each
+                         docs/method.md's "Evaluation protocol" (mean over 3 network seeds; each
                          run in ``runs``) and mean +- std over folds; each test demo is
                          classified by its nearest PB_rec (PB_rec = recognize() of
                          the learning sequences); also the rate of the
@@ -56,6 +56,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
 #: Training epochs of the offline accuracy check (other settings: defaults).
@@ -213,7 +214,7 @@ def offline_ccr(backend: str, demos, motions, folds, seeds=(0,), **params) -> di
     rate is the mean over those runs: a training is chaotic, so a change in
     the last bit of the arithmetic moves one run's rate by several points.
     """
-    concepts = np.array([d.concept for d in demos])
+    concepts = np.array([d.true_concept for d in demos])
     runs = []                                   # one dict per (fold, seed)
     for k, (learn, test) in enumerate(folds):
         seqs = encoded(motions, learn)
@@ -226,7 +227,7 @@ def offline_ccr(backend: str, demos, motions, folds, seeds=(0,), **params) -> di
             pb_rec = m.recognize(L)
             pb_obs = m.recognize(T)
             seconds = time.perf_counter() - t0
-            nearest = np.linalg.norm(pb_obs[:, None] - pb_rec[None], axis=-1).argmin(axis=1)
+            nearest = cdist(pb_obs, pb_rec).argmin(axis=1)
             ccr = float(np.mean(concepts[learn][nearest] == concepts[test]))
             # the stored PB under which the network predicts the test sequence best
             errors = np.stack([m.prediction_error(T, np.repeat(pb[None], len(T), axis=0))

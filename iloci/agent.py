@@ -111,11 +111,18 @@ class Agent:
         self.memory = Memory()
 
     def __repr__(self) -> str:
-        c = self.config
-        return (f"Agent(perceptual_model={c.perceptual_model.name!r}, "
-                f"clusterer={c.clusterer.name!r}, teacher={c.teacher.name!r}, "
-                f"ik={c.ik.name!r}, simulator={c.simulator.name!r}, "
-                f"entries={len(self.memory)})")
+        from iloci.interfaces import COMPONENT_KINDS
+
+        attribute = {"ik": "ik_solver"}
+        parts = []
+        for sec in COMPONENT_KINDS:
+            obj = getattr(self, attribute.get(sec, sec))
+            name = getattr(self.config, sec).name
+            if sec in self.config._supplied:  # an object the caller passed: say which
+                parts.append(f"{sec}={'None' if obj is None else type(obj).__name__ + '(...)'}")
+            else:
+                parts.append(f"{sec}={name!r}")
+        return f"Agent({', '.join(parts)}, entries={len(self.memory)})"
 
     # -- plumbing ------------------------------------------------------------------
     @property
@@ -299,8 +306,14 @@ class Agent:
         return out[0] if single else out
 
     def respond(self, concept: str):
-        """Perform ``concept``: its entry of lowest generation error, as a Response."""
-        return self.learner.respond(self.memory.performer_of(concept))
+        """Perform ``concept``: its entry of lowest generation error, as a Response.
+
+        See :func:`~iloci.concepts.learner.perform`; executed on the
+        configured simulator, if any.
+        """
+        from iloci.concepts.learner import ik_joint_limits, perform
+        return perform(self.memory, self.perceptual_model, self.memory.performer_of(concept),
+                       joint_limits=ik_joint_limits(self.ik_solver), simulator=self.simulator)
 
     # -- persistence --------------------------------------------------------------------
     def save(self, path: str | os.PathLike[str], *,

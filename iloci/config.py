@@ -586,29 +586,22 @@ def check_installed(config: Config, registry: Registry | None = None) -> None:
                                       spec.install or f"pip install {' '.join(missing)}")
 
 
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if v is None:
-        raise ConfigError("None cannot be written to TOML")
-    raise ConfigError(f"cannot write {type(v).__name__} to TOML")
-
-
 def to_toml(config: Config) -> str:
-    """The resolved config as TOML text (every default written out)."""
-    lines = [f"# iloci configuration (resolved from {config.source})"]
-    for sec, values in config.to_dict().items():
-        lines.append("")
-        lines.append(f"[{sec}]")
-        for k, v in values.items():
-            if v is None:
-                continue
-            lines.append(f"{k} = {_toml_value(v)}")
-    return "\n".join(lines) + "\n"
+    """The resolved config as TOML text (every default written out; tomli-w).
 
+    Raises
+    ------
+    ConfigError
+        A value TOML cannot hold (a component's unvalidated key given an
+        object, say).
+    """
+    import tomli_w
+
+    data = {sec: {k: v for k, v in values.items() if v is not None}
+            for sec, values in config.to_dict().items()}
+    try:
+        body = tomli_w.dumps(data)
+    except TypeError as exc:
+        raise ConfigError(f"cannot write the config as TOML: {exc}", source=config.source) \
+            from None
+    return f"# iloci configuration (resolved from {config.source})\n\n{body}"

@@ -38,6 +38,14 @@ class IlociError(Exception):
         # evaluation worker process then broke the pool instead of reaching the caller.
         return _rebuild_error, (type(self), self.args, dict(self.__dict__))
 
+    def with_context(self, context: str) -> IlociError:
+        """A copy of this error, of the same type and attributes, whose message starts
+        with ``context`` (e.g. why the caller needed what failed)."""
+        exc = _rebuild_error(type(self), (context + str(self),), dict(self.__dict__))
+        if isinstance(exc, ImportError):  # whose str() is its msg
+            exc.msg = exc.args[0]
+        return exc
+
 
 def _rebuild_error(cls: type[IlociError], args: tuple[Any, ...],
                    state: dict[str, Any]) -> IlociError:

@@ -16,11 +16,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
+import warnings
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from iloci.errors import FeedbackError, InvalidDemonstrationError
+from iloci.validation import check_array
 
 __all__ = [
     "Demonstration",
@@ -38,23 +40,7 @@ __all__ = [
     "unmet_members",
 ]
 
-def _check_finite_2d(name: str, arr: Any, width: int) -> np.ndarray:
-    try:
-        a = np.asarray(arr, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InvalidDemonstrationError(
-            f"{name} must be a numeric array of shape (N, {width}); could not "
-            f"convert it ({exc})."
-        ) from None
-    if a.ndim != 2 or a.shape[1] != width:
-        raise InvalidDemonstrationError(
-            f"{name} must have shape (N, {width}), got {a.shape}. Pass one row "
-            f"per sample with {width} columns."
-        )
-    return a
-
-
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Demonstration:
     """One pen trajectory shown by the teacher, validated on creation.
 
@@ -69,9 +55,13 @@ class Demonstration:
         Name of the drawn shape (e.g. ``"GShape"``), or a file name.
     index : int
         Index of this demonstration among those of its shape.
+    true_concept : str or None
+        The concept the demonstration really belongs to (``"Leaf"`` for
+        ``Leaf_1/3``), known to an oracle teacher and to evaluation, never
+        to the learner; ``None`` for a live demonstration. (*Concept* alone
+        means the robot's concept label, ``"c3"``.)
     concept : str or None
-        The true concept, known to an oracle teacher and to evaluation;
-        ``None`` for a live demonstration.
+        Deprecated spelling of ``true_concept`` (a DeprecationWarning).
 
     Raises
     ------
@@ -84,11 +74,37 @@ class Demonstration:
     times: np.ndarray | None = None
     shape: str = "demo"
     index: int = 0
-    concept: str | None = None
+    true_concept: str | None = None
+
+    def __init__(self, positions: Any, times: Any = None, shape: str = "demo",
+                 index: int = 0, true_concept: str | None = None, *,
+                 concept: str | None = None) -> None:
+        if concept is not None:
+            if true_concept is not None and true_concept != concept:
+                raise InvalidDemonstrationError(
+                    "give the true concept once, as true_concept= (concept= is its "
+                    "deprecated spelling).")
+            warnings.warn("Demonstration(concept=...) is deprecated: pass true_concept= "
+                          "(concept means the robot's concept label).", DeprecationWarning,
+                          stacklevel=2)
+            true_concept = concept
+        for name, value in (("positions", positions), ("times", times), ("shape", shape),
+                            ("index", index), ("true_concept", true_concept)):
+            object.__setattr__(self, name, value)
+        self.__post_init__()
+
+    @property
+    def concept(self) -> str | None:
+        """Deprecated: :attr:`true_concept` (a DeprecationWarning)."""
+        warnings.warn("Demonstration.concept is deprecated: read true_concept (concept "
+                      "means the robot's concept label).", DeprecationWarning, stacklevel=2)
+        return self.true_concept
 
     def __post_init__(self) -> None:
         label = f"demonstration {self.key!r}"
-        pos = _check_finite_2d(f"positions of {label}", self.positions, 2)
+        pos = check_array(self.positions, f"positions of {label}", ("N", 2), finite=False,
+                          error=InvalidDemonstrationError,
+                          hint=" Pass one row per sample with 2 columns.")
         if len(pos) < 3:
             raise InvalidDemonstrationError(
                 f"{label} has {len(pos)} point(s); at least 3 are needed to "
@@ -141,7 +157,7 @@ class Demonstration:
 
     def __repr__(self) -> str:
         return (f"Demonstration({self.key!r}, N={len(self.positions)}, "
-                f"concept={self.concept!r})")
+                f"true_concept={self.true_concept!r})")
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,7 @@ def item_digest(item: Any) -> str:
     from iloci.interfaces import Demonstration
     h = hashlib.sha256()
     if isinstance(item, Demonstration):
-        h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.concept).encode())
+        h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.true_concept).encode())
         h.update(np.ascontiguousarray(item.positions, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(item.times, dtype=np.float64).tobytes())
     elif isinstance(item, (str, os.PathLike)):

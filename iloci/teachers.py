@@ -54,7 +54,7 @@ class OracleTeacher:
         return self.concepts.get(shape) or concept_of(shape)
 
     def true_concept(self, demo: Demonstration) -> str:
-        c = demo.concept or self.concepts.get(demo.shape) or concept_of(demo.shape)
+        c = demo.true_concept or self.concepts.get(demo.shape) or concept_of(demo.shape)
         if c is None:
             raise FeedbackError(
                 f"oracle teacher does not know the concept of {demo.key!r}: give the "

@@ -225,7 +225,7 @@ def test_teach_names_files_of_one_name(tmp_path, cli):
         (tmp_path / person).mkdir()
         (tmp_path / person / "circle.csv").write_text(
             "x,y\n" + "\n".join(f"{x},{y}" for x, y in CIRCLE))
-    from iloci.commands.teach import resolve_demos
+    from iloci.data.streams import resolve_demos
     items = resolve_demos([str(tmp_path / "s01/circle.csv"), "GShape/1",
                            str(tmp_path / "s02/circle.csv")])
     assert [getattr(i, "key", None) for i in items] == ["circle/0", "GShape/1", "circle/1"]
@@ -417,10 +417,11 @@ def test_evaluate_checks_its_report_libraries_before_fold_0(monkeypatch):
     import importlib.util
 
     from iloci.evaluation.report import check_report_extras
-    real = importlib.util.find_spec
+    # every other report module counts as installed, so the message is the
+    # same whether or not this environment has scikit-learn (tox -e bare has not)
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name in ("dtaidistance", "matplotlib")
-                        else real(name, *a))
+                        else object())
     with pytest.raises(MissingBackendError, match="matplotlib, dtaidistance.*--no-baseline"):
         check_report_extras(baseline=True)
     with pytest.raises(MissingBackendError, match="matplotlib") as e:
@@ -455,3 +456,27 @@ def test_agent_teach_numbers_files_of_one_name_too(tmp_path):
     assert [f.key for f in files] == ["circle/0", "circle/1", "circle/0"]
     assert all(isinstance(f, TrajectoryFile) for f in files)
     assert _as_demonstration(files[1], 0).key == "circle/1"
+
+
+def test_evaluate_checks_every_back_end_before_fold_0(monkeypatch):
+    """A configured component whose library is missing stops evaluate() before any data."""
+    from iloci import hookimpl
+    from iloci.evaluation import evaluate as ev
+
+    class NeedsLib:
+        @hookimpl
+        def iloci_register_teachers(self, registry):
+            registry.add("needy", "x_mod:T", requires=("no_such_module_xyz",),
+                         install="pip install no-such-module-xyz")
+
+    pm = get_plugin_manager(plugins=[NeedsLib()])
+    if not _defaults_installed():
+        pytest.skip("the default config's back ends are not installed")
+    config = load_config({"teacher": {"name": "needy"}}, registry=get_registry(pm))
+
+    def no_data(*a, **k):
+        raise AssertionError("LASA was loaded before the back ends were checked")
+
+    monkeypatch.setattr("iloci.data.load_lasa", no_data)
+    with pytest.raises(MissingBackendError, match="teacher 'needy' needs no_such_module_xyz"):
+        ev.evaluate(config, plugin_manager=pm, jobs=1)

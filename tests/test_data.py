@@ -18,11 +18,27 @@ from iloci.errors import IlociError, InvalidDemonstrationError, InvalidInputErro
 
 # --------------------------------------------------------------------- Demonstration
 def test_demonstration_is_validated_and_immutable():
-    d = Demonstration(positions=[[0, 0], [1, 2], [2, 1]], shape="s", index=3, concept="c")
+    d = Demonstration(positions=[[0, 0], [1, 2], [2, 1]], shape="s", index=3, true_concept="c")
     assert d.key == "s/3" and len(d) == 3
     assert np.array_equal(d.times, [0.0, 1.0, 2.0])
     with pytest.raises(ValueError):
         d.positions[0, 0] = 5.0
+
+
+def test_true_concept_is_not_the_robots_concept():
+    """A demonstration's true concept has its own name; ``concept`` is its deprecated alias."""
+    import dataclasses
+
+    d = Demonstration([[0, 0], [1, 2], [2, 1]], true_concept="Leaf")
+    assert "concept" not in {f.name for f in dataclasses.fields(Demonstration)}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        d.true_concept = "x"  # type: ignore[misc]
+    with pytest.warns(DeprecationWarning, match="true_concept"):
+        old = Demonstration([[0, 0], [1, 2], [2, 1]], concept="Leaf")
+    assert old.true_concept == "Leaf"
+    with pytest.warns(DeprecationWarning, match="true_concept"):
+        assert d.concept == "Leaf"
+    assert dataclasses.replace(d, index=2).true_concept == "Leaf"
 
 
 @pytest.mark.parametrize("positions, match", [
@@ -58,7 +74,7 @@ def test_load_lasa_all_182_in_order():
     demos = load_lasa()
     assert len(demos) == 182
     assert [d.key for d in demos] == [f"{s}/{i}" for s in LASA_SHAPES for i in range(7)]
-    assert len({d.concept for d in demos}) == 22
+    assert len({d.true_concept for d in demos}) == 22
     for d in demos:
         assert d.positions.shape == (1000, 2)
         assert np.all(np.diff(d.times) > 0)
@@ -68,7 +84,7 @@ def test_load_lasa_all_182_in_order():
 
 
 def test_load_lasa_concepts_merge_pairs():
-    by_key = {d.key: d.concept for d in load_lasa(["JShape_2", "Leaf_1", "Sharpc",
+    by_key = {d.key: d.true_concept for d in load_lasa(["JShape_2", "Leaf_1", "Sharpc",
                                                    "DoubleBendedLine", "GShape"])}
     assert by_key["JShape_2/0"] == "JShape"
     assert by_key["Leaf_1/4"] == "Leaf"
@@ -88,7 +104,7 @@ def test_load_lasa_multi_models_on_request():
     demos = load_lasa(include_multi_models=True)
     assert len(demos) == 210
     multi = load_lasa(["Multi_Models_2"])
-    assert len(multi) == 7 and multi[0].concept == "Multi_Models_2"
+    assert len(multi) == 7 and multi[0].true_concept == "Multi_Models_2"
 
 
 def test_load_lasa_is_deterministic_and_cached():
@@ -112,8 +128,8 @@ def gshape():
 def test_load_npy_two_columns(tmp_path, gshape):
     f = tmp_path / "mine.npy"
     np.save(f, gshape.positions)
-    d = load_trajectory(f, concept="G")
-    assert d.key == "mine/0" and d.concept == "G"
+    d = load_trajectory(f, true_concept="G")
+    assert d.key == "mine/0" and d.true_concept == "G"
     assert np.array_equal(d.positions, gshape.positions)
     assert np.array_equal(d.times, np.arange(1000.0))
 

@@ -244,3 +244,30 @@ def test_guide_names_only_real_command_line_options():
     for _, body in fenced_blocks(guide, "(?:sh|text)"):
         used |= set(re.findall(r"(?m)^(?:\$ )?iloci ([a-z]+)", body))
     assert used <= commands, f"commands the CLI does not have: {sorted(used - commands)}"
+
+
+def test_the_method_is_in_the_repository_with_full_references():
+    """docs/method.md cites the paper and Tani's RNNPB in full; report.md cites it."""
+    text = " ".join(read("method.md").split())  # references wrap across lines
+    for needle in ("Incremental learning of high-level concepts by imitation",
+                   "Alibeigi", "Nili Ahmadabadi", "Araabi", "10.1109/TRO.2016.2623329",
+                   "Tani", "RNNPB", "10.1109/TSMCA.2003.809171",
+                   "10.1016/j.neunet.2004.05.007", "Khansari-Zadeh"):
+        assert needle in text, needle
+    for section in ("## Words", "## Learning phase", "## Inference phase",
+                    "## Where the paper is silent", "## Evaluation protocol", "## References"):
+        assert section in text, section
+    import inspect
+
+    from iloci.evaluation import report
+    assert "docs/method.md" in inspect.getsource(report.write_outputs)
+
+
+def test_no_file_refers_to_a_design_document_outside_the_repository():
+    name = "DESIGN" + ".md"
+    offenders = [str(p.relative_to(ROOT)) for top in ("iloci", "docs", "plugins", "benchmarks",
+                                                       "tests", "README.md", "tox.ini")
+                 for p in ([ROOT / top] if (ROOT / top).is_file() else (ROOT / top).rglob("*"))
+                 if p.is_file() and p.suffix in (".py", ".md", ".toml", ".urdf", ".ini", ".c")
+                 and name in p.read_text(errors="replace")]
+    assert offenders == []

@@ -180,6 +180,6 @@ def test_draw_without_the_memorys_network_names_the_back_end_to_install(taught, 
     assert res.returncode == 2, res.stderr[-3000:]
     err = res.stderr
     assert f"perceptual model {combo['perceptual_model']!r}" in err
-    assert "iloci draw" in err and "blocked by ILOCI_BLOCK_PLUGINS" in err
+    assert "so drawing needs it" in err and "blocked by ILOCI_BLOCK_PLUGINS" in err
     assert "not installed" not in err
     assert "Traceback" not in err and not image.exists()

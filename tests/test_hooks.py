@@ -218,13 +218,13 @@ def test_observers_see_the_whole_learning_phase(run):
     assert all(isinstance(e, InteractionEvent) for e in interactions)
     # every learning demonstration ends in exactly one final action, in stream order
     final = [e for e in interactions if e.action != "next_guess"]
-    assert [e.demo for e in final] == fold["learn"]
-    assert [e.step for e in final] == list(range(len(fold["learn"])))
+    assert [e.demo for e in final] == fold.learn
+    assert [e.step for e in final] == list(range(len(fold.learn)))
     # the feedbacks the observer saw are the fold's reinforcement signal
-    assert [e.feedback for e in interactions if e.feedback] == fold["feedbacks"]
+    assert [e.feedback for e in interactions if e.feedback] == fold.feedbacks
     rehearsals = recorder.calls["iloci_on_rehearsal"]
     assert all(isinstance(e, RehearsalEvent) for e in rehearsals)
-    assert len(rehearsals) == fold["rehearsals"] > 0
+    assert len(rehearsals) == fold.rehearsals > 0
     assert {e.reason for e in rehearsals} <= {"new_concept", "new_exemplar", "clustering"}
     (done,) = recorder.calls["iloci_on_fold_finished"]
     assert isinstance(done, FoldEvent)

@@ -294,6 +294,10 @@ def test_build_with_component_objects_never_looks_up_their_configured_names():
     # the sections of given components are kept as written (saved with the memory)
     assert agent.config.ik.to_dict() == {"name": "pinocchio", "max_error": 1e-3}
     assert agent.config.simulator.name == "pybullet"
+    # the repr names what the agent holds, not the configured name of a given object
+    text = repr(agent)
+    assert f"ik={type(objects['ik']).__name__}(...)" in text and "simulator=None" in text
+    assert "teacher='oracle'" in text and "'pinocchio'" not in text
     # not even a name that no plugin registers anywhere is looked up
     agent = iloci.build({"ik": {"name": "my-robot-ik", "gain": 2}, "clusterer": {"name": "x"}},
                         plugin_manager=bare, **objects)
@@ -336,3 +340,23 @@ def test_errors_survive_a_pickle_round_trip():
         again = pickle.loads(pickle.dumps(exc))
         assert type(again) is type(exc) and str(again) == str(exc)
         assert vars(again) == vars(exc)
+
+
+def test_versions_list_every_plugin_distribution_and_what_it_requires():
+    """metrics.json's versions: read from metadata, so a third-party plugin is listed too."""
+    from iloci.evaluation.evaluate import versions
+    from iloci.plugins import plugin_infos
+
+    pm = get_plugin_manager()
+    out = versions(pm)
+    dists = {i.distribution for i in plugin_infos(pm).values() if i.distribution}
+    assert dists <= set(out), dists - set(out)
+    assert {"python", "iloci", "numpy", "scipy", "pluggy"} <= set(out)
+    import importlib.metadata as md
+    for dist in dists - {"iloci"}:
+        for req in md.requires(dist) or ():
+            name = req.split(";")[0].split(">")[0].split("=")[0].split("<")[0].strip()
+            try:
+                assert md.metadata(name)["Name"] in out, (dist, name)
+            except md.PackageNotFoundError:
+                pass

@@ -1,6 +1,6 @@
 """The ILoCI learning and inference phases on real LASA demonstrations.
 
-Each branch of DESIGN.md section 5 is driven with a real RNNPB
+Each branch of the learning phase (docs/method.md, "Learning phase") is driven with a real RNNPB
 (``torch-rnnpb``), the real IK and real clusterers, kept small: few
 demonstrations, few epochs (set through the config). Learner constants are
 set through the config to make a branch certain (e.g. a similarity

@@ -11,7 +11,7 @@ import pytest
 
 from iloci.concepts.clustering import d_cutoff, medoid, plan_clusters
 from iloci.concepts.learner import confidence
-from iloci.concepts.memory import Entry, Memory, entries_equal
+from iloci.concepts.memory import Entry, Memory, entries_equal, save_memory
 from iloci.errors import InvalidInputError, MemoryFileError
 from iloci.plugins import get_registry
 
@@ -191,7 +191,7 @@ def make_memory() -> Memory:
 
 def test_memory_views():
     mem = make_memory()
-    assert mem.n_prototypes == len(mem) == 3
+    assert mem.n_entries == len(mem) == 3
     assert mem.pbs.shape == mem.pbs_rec.shape == (3, 4)
     assert mem.concepts() == ["c1", "c2"]
     assert mem.indices_of("c1") == [0, 2]
@@ -231,3 +231,33 @@ def test_inconsistent_arrays_are_a_memory_file_error():
     arrays["mem/pb"] = arrays["mem/pb"][:2]
     with pytest.raises(MemoryFileError, match="inconsistent"):
         Memory.from_arrays(arrays, meta)
+
+
+def test_every_output_counts_exemplars_and_prototypes_alike(tmp_path, cli):
+    """metrics.json's counts, the memory summary (`iloci teach`) and `iloci show MEMORY` agree.
+
+    The memory holds a strengthened exemplar (numSamples 2, not a medoid): an
+    exemplar for every one of them (evaluation once counted it a prototype).
+    """
+    import re
+
+    from iloci.evaluation.evaluate import memory_counts
+
+    mem = make_memory()
+    want = {"entries": 3, "exemplars": 2, "prototypes": 1, "concepts": 2}
+    assert memory_counts(mem) == want
+
+    def counts(text: str) -> dict[str, int]:
+        m = re.search(r"(\d+) entries \((\d+) exemplars, (\d+) prototypes\), (\d+) concepts",
+                      text)
+        assert m, text
+        return dict(zip(("entries", "exemplars", "prototypes", "concepts"),
+                        map(int, m.groups())))
+
+    assert counts(mem.summary()) == want
+    path = save_memory(tmp_path / "m.npz", mem, {})
+    res = cli("show", str(path))
+    assert res.returncode == 0, res.stderr
+    assert counts(res.stdout) == want
+    per_concept = re.findall(r"(c\d): (\d+) entries \((\d+) prototypes\)", res.stdout)
+    assert per_concept == [("c1", "2", "0"), ("c2", "1", "1")]

@@ -301,7 +301,7 @@ def test_cli_errors(tmp_path, cli):
 
 def test_default_teaching_stream_is_seeded():
     _needs_default_back_ends()
-    from iloci.commands.teach import default_stream
+    from iloci.data import default_stream
     from iloci.config import load_config
     cfg = load_config({"data": {"shapes": ["GShape", "Angle", "Sine"]},
                        "evaluation": {"seed": 3, "train_fraction": 0.3}})

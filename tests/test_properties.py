@@ -253,6 +253,22 @@ def memory_bytes(tmp_path_factory) -> bytes:
     return _memory_file(tmp_path_factory.mktemp("mem") / "m.npz").read_bytes()
 
 
+@pytest.mark.parametrize("offset_from_end, value", [
+    # found by the thorough profile: a central-directory entry's flag or compression
+    # method byte changed made zipfile raise NotImplementedError / RuntimeError
+    ("method", 1), ("flags", 1)])
+def test_zip_directory_damage_is_a_memory_file_error(tmp_path, memory_bytes, offset_from_end,
+                                                     value):
+    from iloci.errors import MemoryFileError
+    raw = bytearray(memory_bytes)
+    entry = raw.rfind(b"PK\x01\x02")  # the last central-directory entry (the header's)
+    raw[entry + (10 if offset_from_end == "method" else 8)] = value
+    f = tmp_path / "m.npz"
+    f.write_bytes(bytes(raw))
+    with pytest.raises(MemoryFileError, match="truncated, corrupted"):
+        load_memory(f)
+
+
 @FS
 @given(data=st.data())
 def test_any_damaged_memory_file_loads_or_gives_an_iloci_error(tmp_path_factory,

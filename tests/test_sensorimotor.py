@@ -48,7 +48,7 @@ def test_robot_matches_its_urdf(robot):
         lim = joints[name].find("limit")
         assert float(lim.get("lower")) == pytest.approx(robot.lower[k])
         assert float(lim.get("upper")) == pytest.approx(robot.upper[k])
-    # DESIGN.md section 7 limits, degrees
+    # the V3.2 limits (docs/method.md, "The robot"), degrees
     assert np.allclose(np.rad2deg(robot.lower), [-119.5, -94.5, -119.5, 0.5], atol=1e-4)
     assert np.allclose(np.rad2deg(robot.upper), [119.5, -0.5, 119.5, 89.5], atol=1e-4)
     assert joints["RWristYaw"].get("type") == "fixed"

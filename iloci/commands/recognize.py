@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 __all__ = ["register", "run"]
 
@@ -25,12 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from iloci.agent import Agent
-    from iloci.commands.teach import resolve_demos
     from iloci.data.files import TrajectoryFile
+    from iloci.data.streams import resolve_demos, shared_stem_notes
 
     agent = Agent.load(args.memory)
-    demos = [d.load() if isinstance(d, TrajectoryFile) else d
-             for d in resolve_demos(args.files)]
+    items = resolve_demos(args.files)
+    for note in shared_stem_notes(items):
+        print(f"note: {note}", file=sys.stderr)
+    demos = [d.load() if isinstance(d, TrajectoryFile) else d for d in items]
     for r in agent.recognize(demos):
         if args.json:
             print(json.dumps({"demo": r.demo, "concept": r.concept,

@@ -1,8 +1,11 @@
-"""``iloci show SHAPE``: one demonstration through the sensorimotor path, as a figure.
+"""``iloci show``: a demonstration through the sensorimotor path, as a figure; or a memory.
 
-Three panels: the raw pen path (teacher's frame), the path fitted into the
-robot's drawing plane with the forward kinematics of the IK solution over
-it, and the joint angles over time.
+``iloci show MEMORY.npz`` prints what a taught memory holds (entries,
+exemplars, prototypes and concepts, counted as every other output counts
+them). ``iloci show SHAPE/INDEX`` draws three panels: the raw pen path
+(teacher's frame), the path fitted into the robot's drawing plane with the
+forward kinematics of the IK solution over it, and the joint angles over
+time.
 """
 
 from __future__ import annotations
@@ -26,10 +29,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "sees it: the raw pen path, the path fitted into the drawing plane with "
                     "the forward kinematics of the IK solution over it, and the joint "
                     "angles over time.")
-    p.add_argument("shape", metavar="SHAPE",
-                   help="LASA shape name (e.g. GShape) or a .npy/.csv trajectory file")
-    p.add_argument("--demo", type=int, default=0, metavar="I",
-                   help="demonstration index of a LASA shape, 0..6 (default 0)")
+    p.add_argument("shape", metavar="DEMO",
+                   help="LASA demonstration as SHAPE/INDEX (e.g. GShape/3) or SHAPE (its "
+                        "first, or --demo), or a .npy/.csv trajectory file; or a memory "
+                        "file (.npz) written by `iloci teach`, to print what it holds")
+    p.add_argument("--demo", type=int, default=None, metavar="I",
+                   help="demonstration index of a LASA SHAPE, 0..6 (default 0)")
     p.add_argument("--out", metavar="FILE.png",
                    help="image to write (default: SHAPE-I.png in the current directory)")
     p.add_argument("--config", metavar="FILE",
@@ -38,19 +43,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _load_demo(shape: str, demo: int):
-    from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa, load_trajectory
+def _load_demo(token: str, demo: int | None):
+    """The demonstration ``SHAPE/INDEX``, ``SHAPE`` with ``--demo`` (default 0), or a file."""
     from iloci.data.lasa import DEMOS_PER_SHAPE
+    from iloci.data.streams import resolve_demo
 
-    if shape in LASA_SHAPES or shape in MULTI_MODEL_SHAPES:
-        if not 0 <= demo < DEMOS_PER_SHAPE:
-            raise InvalidInputError(f"--demo must be 0..{DEMOS_PER_SHAPE - 1} for a LASA "
-                                    f"shape, got {demo}.")
-        return load_lasa([shape])[demo]
-    if Path(shape).suffix.lower() in (".npy", ".csv") or Path(shape).is_file():
-        return load_trajectory(shape)
-    load_lasa([shape])  # raises the unknown-shape error with "did you mean"
-    raise AssertionError("unreachable")
+    if demo is None:
+        return resolve_demo(token)
+    if Path(token).suffix.lower() in (".npy", ".csv") or Path(token).is_file():
+        raise InvalidInputError(f"--demo picks a demonstration of a LASA shape; {token!r} "
+                                "is a trajectory file (drop --demo).")
+    if "/" in token:
+        raise InvalidInputError(f"give the demonstration once: {token!r} or --demo {demo}, "
+                                "not both.")
+    if not 0 <= demo < DEMOS_PER_SHAPE:
+        raise InvalidInputError(f"--demo must be 0..{DEMOS_PER_SHAPE - 1} for a LASA "
+                                f"shape, got {demo}.")
+    return resolve_demo(f"{token}/{demo}")
 
 
 def _components(config_file: str | None):
@@ -78,6 +87,9 @@ def _components(config_file: str | None):
 def run(args: argparse.Namespace) -> int:
     from iloci.sensorimotor.pipeline import to_motion
 
+    if Path(args.shape).suffix.lower() == ".npz":
+        return _show_memory(args)
+
     demo = _load_demo(args.shape, args.demo)
     ik, sm, robot = _components(args.config)
     motion = to_motion(demo, sm, ik, robot)
@@ -91,6 +103,21 @@ def run(args: argparse.Namespace) -> int:
           f"FK error max {err.max() * 1000:.4f} mm; joints within limits: "
           f"{'yes' if inside else 'NO'}")
     print(f"wrote {out}")
+    return 0
+
+
+def _show_memory(args: argparse.Namespace) -> int:
+    from iloci.concepts.memory import load_memory
+
+    if args.demo is not None or args.out or args.config:
+        raise InvalidInputError("--demo, --out and --config apply to a demonstration, not to "
+                                f"a memory file ({args.shape}).")
+    memory, _, header = load_memory(args.shape)
+    config = header.get("config") if isinstance(header.get("config"), dict) else {}
+    names = ", ".join(f"{sec} = {v['name']}" for sec, v in config.items()
+                      if isinstance(v, dict) and "name" in v)
+    print(f"{args.shape}: {names or 'no saved config'}")
+    print(memory.summary())
     return 0
 
 

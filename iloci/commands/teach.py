@@ -12,16 +12,11 @@ gets an error instead of racing the first.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
 from pathlib import Path
 import sys
 import warnings
 
-import numpy as np
-
-from iloci.errors import InvalidInputError
-
-__all__ = ["register", "run", "resolve_demos", "default_stream"]
+__all__ = ["register", "run"]
 
 #: Memory file used when ``--memory`` is not given.
 DEFAULT_MEMORY = "iloci-memory.npz"
@@ -50,66 +45,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="teach every demonstration given, even those an interrupted earlier "
                         "run of the same stream already learned (default: resume after them)")
     p.set_defaults(func=run)
-
-
-def default_stream(config) -> list:
-    """A seeded LASA learning stream: part of each shape's demonstrations, shuffled.
-
-    ``round(train_fraction * 7)`` (at least 1) demonstrations of each of the
-    config's ``[data] shapes`` (all 26 when empty), chosen and ordered at
-    random with ``[evaluation] seed``.
-    """
-    from iloci.data import LASA_SHAPES, load_lasa
-    from iloci.data.lasa import DEMOS_PER_SHAPE
-
-    shapes = list(config.data.shapes) or list(LASA_SHAPES)
-    rng = np.random.default_rng(config.evaluation.seed)
-    per_shape = max(1, round(config.evaluation.train_fraction * DEMOS_PER_SHAPE))
-    demos = []
-    for shape in shapes:
-        own = load_lasa([shape])
-        demos.extend(own[i] for i in sorted(rng.choice(len(own), per_shape, replace=False)))
-    return [demos[i] for i in rng.permutation(len(demos))]
-
-
-def resolve_demos(tokens: Sequence[str]) -> list:
-    """Stream items for the command-line tokens.
-
-    ``SHAPE/INDEX`` and ``SHAPE`` name LASA demonstrations (checked now:
-    a misspelt name is an error); anything else is a trajectory file,
-    passed on as a :class:`~iloci.data.files.TrajectoryFile` so a bad file
-    is skipped when its turn comes. Files of the same name in different
-    folders get numbered keys (``circle/0``, ``circle/1``; a note on
-    stderr says which is which).
-    """
-    from iloci.data import LASA_SHAPES, MULTI_MODEL_SHAPES, load_lasa
-    from iloci.data.lasa import DEMOS_PER_SHAPE
-
-    from iloci.data.files import shared_stems, trajectory_files
-
-    items: list = []
-    files = [tok for tok in tokens
-             if Path(tok).suffix.lower() in (".npy", ".csv") or Path(tok).is_file()]
-    numbered = iter(trajectory_files(files))
-    for group in shared_stems(trajectory_files(files)):
-        print("note: " + ", ".join(f"{f.path} is {f.key}" for f in group) + " (files of "
-              "the same name get numbered keys)", file=sys.stderr)
-    for tok in tokens:
-        if tok in files:
-            items.append(next(numbered))
-            continue
-        shape, sep, index = tok.partition("/")
-        if shape not in LASA_SHAPES + MULTI_MODEL_SHAPES:
-            load_lasa([shape])  # raises the unknown-shape error with "did you mean"
-        demos = load_lasa([shape])
-        if not sep:
-            items.extend(demos)
-            continue
-        if not index.isdigit() or not 0 <= int(index) < DEMOS_PER_SHAPE:
-            raise InvalidInputError(f"{tok!r}: the demonstration index must be 0.."
-                                    f"{DEMOS_PER_SHAPE - 1}, as in {shape}/3.")
-        items.append(demos[int(index)])
-    return items
 
 
 def _describe(outcome) -> str:
@@ -142,6 +77,7 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     from iloci.agent import Agent, SkippedDemonstrationWarning, build
     from iloci.concepts.memory import load_memory
     from iloci.config import load_config
+    from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
     from iloci.progress import PROGRESS_KEY, item_digest, progress_record, resume_point
 
     header = load_memory(memory_path)[2] if memory_path.exists() else None
@@ -154,6 +90,8 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     if args.teacher:
         cfg = cfg.replace(teacher={"name": args.teacher})
     items = resolve_demos(args.demos) if args.demos else default_stream(cfg)
+    for note in shared_stem_notes(items):
+        print(f"note: {note}", file=sys.stderr)
     digests = [item_digest(i) for i in items]
     done = 0
     if header is not None and not args.again:

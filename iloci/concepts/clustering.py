@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.distance import pdist, squareform
 
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Clusterer
@@ -45,14 +46,15 @@ def pairwise_distances(pbs: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (M, M)
     """
+    return squareform(_pdist(pbs))
+
+
+def _pdist(pbs: np.ndarray) -> np.ndarray:
+    """Condensed Euclidean distances of every pair ``i < j`` (scipy's ``pdist``)."""
     x = np.asarray(pbs, dtype=np.float64)
     if x.ndim != 2:
         raise InvalidInputError(f"PB vectors must have shape (M, P), got {x.shape}.")
-    return np.sqrt(np.maximum(((x[:, None, :] - x[None, :, :]) ** 2).sum(-1), 0.0))
-
-
-def _upper(dist: np.ndarray) -> np.ndarray:
-    return dist[np.triu_indices(len(dist), k=1)]
+    return pdist(x, "euclidean")
 
 
 def d_cutoff(pbs: np.ndarray, k_cutoff: float) -> float:
@@ -69,7 +71,7 @@ def d_cutoff(pbs: np.ndarray, k_cutoff: float) -> float:
     float
         NaN when ``M < 2`` (no pair).
     """
-    d = _upper(pairwise_distances(pbs))
+    d = _pdist(pbs)
     if d.size == 0:
         return float("nan")
     return float(d.mean() - k_cutoff * d.std())
@@ -150,14 +152,13 @@ def plan_clusters(pbs: np.ndarray, num_samples: Sequence[int], exemplar: Sequenc
     if labels.shape != (m,):
         raise InvalidInputError(f"clusterer {type(clusterer).__name__} returned labels of "
                                 f"shape {labels.shape} for {m} points.")
-    dist = pairwise_distances(x)
     valid: list[tuple[int, ...]] = []
     medoids: list[int] = []
     for lab in dict.fromkeys(labels.tolist()):
         members = np.flatnonzero(labels == lab)
         if len(members) < 2:
             continue
-        mean_pair = float(_upper(dist[np.ix_(members, members)]).mean())
+        mean_pair = float(_pdist(x[members]).mean())
         if ns[members].sum() > num_threshold and ex[members].any() and mean_pair < cut:
             valid.append(tuple(int(i) for i in members))
             medoids.append(int(members[medoid(x[members])]))

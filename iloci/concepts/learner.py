@@ -1,6 +1,6 @@
 """ILoCI's learning phase, one demonstration at a time, and its inference phase.
 
-Learning (DESIGN.md section 5, the paper's "Learning Phase")::
+Learning (docs/method.md, "Learning phase"; the paper's "Learning Phase")::
 
     PB_obs = recognize(sequence)                   (multi-start from the stored PBs)
     tried = {}
@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from iloci.concepts import clustering, rehearsal
 from iloci.concepts.memory import Entry, Memory
@@ -42,7 +43,7 @@ from iloci.events import InteractionEvent, RehearsalEvent
 from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Response, Simulator,
                               Teacher, check_feedback)
 
-__all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "ik_joint_limits"]
+__all__ = ["Learner", "LearnOutcome", "Recognition", "confidence", "ik_joint_limits", "perform"]
 
 #: Actions the learner takes on a feedback (InteractionEvent.action).
 ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept")
@@ -122,6 +123,72 @@ class Recognition:
     source: str
     sources: tuple[str, ...]
     pb_obs: np.ndarray = field(repr=False)
+
+
+def perform(memory: Memory, model: PerceptualModel, index: int, *,
+            joint_limits: tuple[np.ndarray, np.ndarray] | None = None,
+            simulator: Simulator | None = None, attempt: int = 1) -> Response:
+    """The robot's answer: entry ``index`` of ``memory`` regenerated, decoded and performed.
+
+    A free function of the network (``model``, its weights) and the memory
+    (the data it regenerates from), so performing needs no clusterer and no
+    teacher: :meth:`Learner.respond`, :meth:`~iloci.agent.Agent.respond` and
+    :func:`iloci.drawing.draw` all call it.
+
+    Parameters
+    ----------
+    memory : Memory
+        With a fitted encoder.
+    model : PerceptualModel
+        The memory's network.
+    index : int
+        Entry of ``memory.entries`` to perform (the paper performs a
+        concept's entry of lowest generation error:
+        :meth:`Memory.performer_of`).
+    joint_limits : (ndarray, ndarray), each shape (J,), optional
+        Lower and upper joint limits (rad) the decoded joint path is
+        clipped to (:func:`ik_joint_limits` reads them off an IK solver).
+    simulator : Simulator, optional
+        Executes the joint path when given.
+    attempt : int
+        1 for the first guess on a demonstration, 2 for the second, ...
+
+    Returns
+    -------
+    Response
+        ``motion`` (T, 2): the regenerated sensory channels decoded into
+        plane points (m); ``joint_path`` (T, J): the regenerated motor
+        channels decoded (rad) and clipped to the joint limits (``T =
+        numSteps + 1``); the simulator's
+        :class:`~iloci.interfaces.Execution` of that joint path when one is
+        given. ``extra`` holds ``entry``, ``generation_error`` and
+        ``clipped`` (how many joint values were moved onto a limit).
+
+    Raises
+    ------
+    NotFittedError
+        The memory has no fitted encoder.
+    """
+    entry = memory.entries[index]
+    encoder = memory.encoder
+    if encoder is None:
+        raise NotFittedError("the memory has no fitted sensorimotor encoder.")
+    seq = rehearsal.regenerate(model, [entry])[0]
+    plane, joints = encoder.decode(seq, entry.start)
+    clipped = 0
+    if joint_limits is not None:
+        lower, upper = (np.asarray(a, dtype=np.float64) for a in joint_limits)
+        inside = np.clip(joints, lower, upper)
+        clipped = int(np.count_nonzero(inside != joints))
+        joints = inside
+    execution = None
+    if simulator is not None:
+        execution = simulator.execute(joints, entry.dt)
+    return Response(concept=entry.concept, motion=plane, joint_path=joints,
+                    source=entry.source, sources=tuple(entry.sources),
+                    execution=execution, attempt=attempt,
+                    extra={"entry": index, "generation_error": entry.generation_error,
+                           "clipped": clipped})
 
 
 def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
@@ -276,45 +343,9 @@ class Learner:
                           dtype=np.float64).reshape(len(sequences), -1)
 
     def respond(self, index: int, attempt: int = 1) -> Response:
-        """The robot's answer: entry ``index`` regenerated, decoded and performed.
-
-        Parameters
-        ----------
-        index : int
-            Entry of ``memory.entries`` to perform.
-        attempt : int
-
-        Returns
-        -------
-        Response
-            ``motion`` (T, 2): the regenerated sensory channels decoded into
-            plane points; ``joint_path`` (T, 4): the regenerated motor
-            channels decoded and clipped to the joint limits (``T =
-            numSteps + 1``); the simulator's
-            :class:`~iloci.interfaces.Execution` of that joint path when one
-            is set. ``extra`` holds ``entry``, ``generation_error`` and
-            ``clipped`` (joint values moved onto a limit).
-        """
-        entry = self.memory.entries[index]
-        encoder = self.memory.encoder
-        if encoder is None:
-            raise NotFittedError("the memory has no fitted sensorimotor encoder.")
-        seq = rehearsal.regenerate(self.model, [entry])[0]
-        plane, joints = encoder.decode(seq, entry.start)
-        clipped = 0
-        if self.joint_limits is not None:
-            lower, upper = (np.asarray(a, dtype=np.float64) for a in self.joint_limits)
-            inside = np.clip(joints, lower, upper)
-            clipped = int(np.count_nonzero(inside != joints))
-            joints = inside
-        execution = None
-        if self.simulator is not None:
-            execution = self.simulator.execute(joints, entry.dt)
-        return Response(concept=entry.concept, motion=plane, joint_path=joints,
-                        source=entry.source, sources=tuple(entry.sources),
-                        execution=execution, attempt=attempt,
-                        extra={"entry": index, "generation_error": entry.generation_error,
-                               "clipped": clipped})
+        """The robot's answer: entry ``index`` performed (see :func:`perform`)."""
+        return perform(self.memory, self.model, index, joint_limits=self.joint_limits,
+                       simulator=self.simulator, attempt=attempt)
 
     # -- learning phase ------------------------------------------------------------
     def learn(self, demo: Demonstration, sequence: np.ndarray, start: np.ndarray,
@@ -493,7 +524,7 @@ class Learner:
             return []
         pb_obs = self.recognize_pbs(seqs)
         pbs_rec = self.memory.pbs_rec
-        dist = np.linalg.norm(pb_obs[:, None, :] - pbs_rec[None, :, :], axis=2)
+        dist = cdist(pb_obs, pbs_rec, "euclidean")
         labels = self.memory.concept_labels
         nearest, conf = confidence(dist, labels)
         out = []

@@ -12,10 +12,11 @@ An *exemplar* is an entry learned from one demonstration; strengthening it
 (a rewarded, highly similar demonstration) raises its numSamples but it
 stays an exemplar, since its PB still encodes that one pattern. A
 *prototype* is the medoid that replaced a valid cluster (numSamples summed);
-:attr:`Entry.prototype` says which. DESIGN.md writes "exemplar
-(numSamples == 1)"; that holds until an exemplar is strengthened, and the
-flag keeps the cluster validity rule "at least one exemplar" meaningful
-afterwards.
+:attr:`Entry.prototype` says which, and it is the only definition iloci
+uses: :attr:`Memory.n_exemplars` and :attr:`Memory.n_prototypes` count by it,
+and every output (``iloci teach``, ``iloci show MEMORY.npz``, ``metrics.json``)
+reads those. The paper's nPrototypes counts every entry; iloci calls that
+:attr:`Memory.n_entries` (docs/method.md, "Words").
 
 File format
 -----------
@@ -43,8 +44,10 @@ import hashlib
 import json
 import os
 from pathlib import Path
+import struct
 from typing import Any
 import zipfile
+import zlib
 
 import numpy as np
 
@@ -154,9 +157,19 @@ class Memory:
         return len(self.entries)
 
     @property
-    def n_prototypes(self) -> int:
-        """Number of consolidated exemplars and prototypes (the paper's nPrototypes)."""
+    def n_entries(self) -> int:
+        """Number of entries, exemplars and prototypes alike (the paper's nPrototypes)."""
         return len(self.entries)
+
+    @property
+    def n_exemplars(self) -> int:
+        """Number of exemplars (entries that are not a cluster's medoid)."""
+        return sum(not e.prototype for e in self.entries)
+
+    @property
+    def n_prototypes(self) -> int:
+        """Number of prototypes (entries that replaced a valid cluster as its medoid)."""
+        return sum(e.prototype for e in self.entries)
 
     @property
     def pbs(self) -> np.ndarray:
@@ -240,8 +253,9 @@ class Memory:
                       self.demonstrations_seen)
 
     def summary(self) -> str:
-        """One line per concept: entries, prototypes, numSamples."""
-        lines = [(f"{self.n_prototypes} entries, {len(self.concepts())} concepts, "
+        """A header (entries, exemplars, prototypes, concepts) and one line per concept."""
+        lines = [(f"{self.n_entries} entries ({self.n_exemplars} exemplars, "
+                  f"{self.n_prototypes} prototypes), {len(self.concepts())} concepts, "
                   f"{self.demonstrations_seen} demonstrations seen")]
         for label in self.concepts():
             idx = self.indices_of(label)
@@ -403,7 +417,11 @@ def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndar
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError) as exc:
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, zlib.error,
+            struct.error, OverflowError,
+            # a damaged zip directory can claim a compression method zipfile lacks
+            # (NotImplementedError) or an encrypted member (RuntimeError)
+            NotImplementedError, RuntimeError) as exc:
         raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
                               f"or not an iloci memory ({type(exc).__name__}: {exc}).") from None
     raw = arrays.pop("__header__", None)

@@ -1,4 +1,4 @@
-"""The 22 relational concepts of the LASA experiment (DESIGN.md section 6).
+"""The 22 relational concepts of the LASA experiment (docs/method.md, "The LASA concepts").
 
 Four pairs of LASA shapes are the same concept drawn differently; every
 other shape is its own concept.
@@ -6,7 +6,7 @@ other shape is its own concept.
 
 from __future__ import annotations
 
-__all__ = ["LASA_SHAPES", "MULTI_MODEL_SHAPES", "LASA_CONCEPTS", "concept_of"]
+__all__ = ["LASA_SHAPES", "MULTI_MODEL_SHAPES", "LASA_CONCEPTS", "concept_of", "concept_of_key"]
 
 #: The 26 single-pattern LASA shapes (file names without ``.mat``).
 LASA_SHAPES: tuple[str, ...] = (
@@ -36,3 +36,8 @@ LASA_CONCEPTS: dict[str, str] = {s: _MERGED.get(s, s) for s in LASA_SHAPES}
 def concept_of(shape: str) -> str | None:
     """The LASA concept of ``shape``, or ``None`` for a shape outside LASA."""
     return LASA_CONCEPTS.get(shape)
+
+
+def concept_of_key(key: str) -> str | None:
+    """The LASA concept of the demonstration ``"SHAPE/INDEX"``, or ``None`` outside LASA."""
+    return concept_of(key.rsplit("/", 1)[0])

@@ -25,7 +25,7 @@ __all__ = ["TrajectoryFile", "load_trajectory", "trajectory_files", "write_atomi
            "write_text_atomic"]
 
 def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
-                    concept: str | None = None, index: int = 0) -> Demonstration:
+                    true_concept: str | None = None, index: int = 0) -> Demonstration:
     """Read one pen trajectory from a file.
 
     A ``.npy`` file holds a plain float array (loaded without pickle),
@@ -56,8 +56,8 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
     path : str or path-like
     shape : str, optional
         Name of the drawn shape; defaults to the file's stem.
-    concept : str, optional
-        The true concept, if known.
+    true_concept : str, optional
+        The true concept, if known (see :class:`~iloci.interfaces.Demonstration`).
     index : int
         Demonstration index (the key is ``"SHAPE/INDEX"``).
 
@@ -87,7 +87,7 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
         raise InvalidInputError(f"unsupported trajectory file {p.name!r}: use .npy or .csv "
                                 "(N x 2 positions, or N x 3 with time first).")
     return Demonstration(positions=positions, times=times, shape=name, index=index,
-                         concept=concept)
+                         true_concept=true_concept)
 
 
 def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:

@@ -68,7 +68,7 @@ def _load_shape(shape: str) -> tuple[Demonstration, ...]:
         pos = np.asarray(rec["pos"][0, 0], dtype=np.float64).T  # stored (2, N)
         t = np.asarray(rec["t"][0, 0], dtype=np.float64).ravel()
         out.append(Demonstration(positions=pos, times=t, shape=shape, index=i,
-                                 concept=concept))
+                                 true_concept=concept))
     return tuple(out)
 
 
@@ -92,7 +92,7 @@ def load_lasa(shapes: Iterable[str] | str | None = None, *,
         Ordered by shape (in the order of ``shapes``, by default
         :data:`~iloci.data.LASA_SHAPES`) then demonstration index ``0..6``;
         182 for the default. Positions are (1000, 2) in mm, times in s,
-        ``concept`` from the 22-concept map (DESIGN.md section 6).
+        ``true_concept`` from the 22-concept map (docs/method.md, "Evaluation protocol").
         Demonstrations are immutable and cached, so repeated calls are cheap.
 
     Raises

@@ -32,7 +32,7 @@ def dtw_1nn(learn: Sequence[Demonstration], test: Sequence[Demonstration], *,
     Parameters
     ----------
     learn : sequence of Demonstration
-        Labelled (``concept`` set) learning demonstrations.
+        Labelled (``true_concept`` set) learning demonstrations.
     test : sequence of Demonstration
     points : int
         Resampling length.
@@ -55,4 +55,4 @@ def dtw_1nn(learn: Sequence[Demonstration], test: Sequence[Demonstration], *,
         series, block=((0, n), (n, len(series))), parallel=False)
     block = np.asarray(dist)[:n, n:].T
     nearest = np.argmin(block, axis=1)
-    return [str(learn[i].concept) for i in nearest]
+    return [str(learn[i].true_concept) for i in nearest]

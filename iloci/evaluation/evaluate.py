@@ -1,4 +1,4 @@
-"""The paper's experiment: k-fold evaluation on LASA (DESIGN.md section 6).
+"""The paper's experiment: k-fold evaluation on LASA (docs/method.md, "Evaluation protocol").
 
 Per fold: a fresh agent is taught the learning set one demonstration at a
 time (seeded random order, the configured teacher), then recognizes the
@@ -7,45 +7,82 @@ when the demonstration its nearest memory entry stands for has the same
 true concept (what an oracle teacher would reward). The DTW 1-NN baseline
 runs on the same folds.
 
-Folds run in parallel processes (``jobs``); progress (per fold and per
-interaction, with ETA) is reported through a callback fed by the
-``iloci_on_interaction`` observer hook.
+Folds run in parallel processes (``jobs``, :mod:`iloci.evaluation.parallel`);
+progress (per fold and per interaction, with ETA) is reported through a
+callback fed by the ``iloci_on_interaction`` observer hook. Each fold gives
+a :class:`FoldResult`; :func:`summarize` turns them into ``metrics.json``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-import concurrent.futures as cf
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 import importlib.metadata as md
-import multiprocessing as mp
 import os
 import platform
-import signal
-import threading
+import re
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
-from iloci.evaluation.metrics import (confidence_matrix, confusion_matrix,
-                                      correct_classification_rate, mean_std)
+from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["FoldResult", "run_fold", "evaluate", "fold_plan", "summarize"]
+__all__ = ["Evaluation", "FoldResult", "evaluate", "fold_plan", "memory_counts", "run_fold",
+           "summarize", "versions"]
 
 
 @dataclass
 class FoldResult:
-    """Everything one fold produced (JSON-able after :meth:`to_dict`)."""
+    """Everything one fold produced; :meth:`to_dict` is its entry of ``folds.json``.
+
+    Attributes
+    ----------
+    fold : int
+    learn, test : list of str
+        Keys (``"SHAPE/INDEX"``) of the learning demonstrations, in
+        presentation order, and of the test demonstrations.
+    true_concepts : list of str
+        The true concept of each test demonstration.
+    predicted : list of str
+        The true concept of the demonstration each test demonstration's
+        nearest memory entry stands for (what an oracle would reward).
+    confidence : list of float
+        Recognition confidence of each test demonstration, in [0, 1].
+    ccr : float
+        Correct classification rate on the test set, in [0, 1].
+    feedbacks : list of int
+        Every teacher feedback (+1/-1) of the learning phase, in order.
+    first_guess : list of bool
+        Per learning demonstration: was the first guess rewarded.
+    interactions_per_demo : float
+    entries, exemplars, prototypes, concepts : int
+        Of the final memory, as :func:`memory_counts` counts them.
+    generation_error : float
+        Mean generation error of the memory's entries.
+    rehearsals : int
+    rehearsal_seconds, wall_seconds : float
+    skipped : list of [str, str]
+        (demonstration, reason) of each learning demonstration skipped.
+    baseline_predicted : list of str
+    baseline_ccr, baseline_seconds : float
+        The DTW 1-NN baseline on the same fold (NaN when not run).
+    pb_points, pb_concepts, pb_kinds : lists
+        Memory PB_rec with the true concept of each entry's robot concept
+        and its kind (``"exemplar"``/``"prototype"``), then each test
+        PB_obs (kind ``"test"``), for the PB-space figure.
+    shapes : dict of str to list
+        One drawing per true concept, (T, 2) as nested lists (m).
+    """
 
     fold: int
     learn: list[str]
     test: list[str]
-    true: list[str]
+    true_concepts: list[str]
     predicted: list[str]
     confidence: list[float]
     ccr: float
@@ -64,15 +101,41 @@ class FoldResult:
     baseline_predicted: list[str] = field(default_factory=list)
     baseline_ccr: float = float("nan")
     baseline_seconds: float = float("nan")
-    #: Memory PB_rec, their true concepts and kinds; test PB_obs (for MDS).
     pb_points: list[list[float]] = field(default_factory=list)
     pb_concepts: list[str] = field(default_factory=list)
     pb_kinds: list[str] = field(default_factory=list)
-    #: One regenerated drawing per true concept: concept -> (T, 2) as lists.
     shapes: dict[str, list[list[float]]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
+        """A JSON-able dict of every field."""
+        return asdict(self)
+
+
+class Evaluation(NamedTuple):
+    """What :func:`evaluate` returns: ``metrics, folds = evaluate(...)``.
+
+    Attributes
+    ----------
+    metrics : dict
+        The content of ``metrics.json`` (see :func:`summarize`).
+    folds : list of FoldResult
+        One per fold run, in fold order.
+    """
+
+    metrics: dict[str, Any]
+    folds: list[FoldResult]
+
+
+def memory_counts(memory: Any) -> dict[str, int]:
+    """Entries, exemplars, prototypes and concepts of a memory.
+
+    The one count every output uses (``metrics.json``, ``report.md``,
+    :meth:`~iloci.concepts.memory.Memory.summary`): see
+    :class:`~iloci.concepts.memory.Memory` for what an exemplar and a
+    prototype are.
+    """
+    return {"entries": memory.n_entries, "exemplars": memory.n_exemplars,
+            "prototypes": memory.n_prototypes, "concepts": len(memory.concepts())}
 
 
 def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], list[int]]]:
@@ -121,7 +184,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     ----------
     config : Config or mapping
     fold : int
-    learn, test : sequences of Demonstration (with ``concept`` set)
+    learn, test : sequences of Demonstration (with ``true_concept`` set)
     send : callable, optional
         Receives progress dicts (from the observer hooks).
     baseline : bool
@@ -148,8 +211,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         if observer is not None:
             pm.unregister(observer)
     wall = time.perf_counter() - t0
-    known = {d.key: d.concept for d in list(learn) + list(test) if d.concept}
-    true = [d.concept or _true_concept(d.key, known) for d in test]
+    known = {d.key: d.true_concept for d in list(learn) + list(test) if d.true_concept}
+    true = [d.true_concept or _true_concept(d.key, known) for d in test]
     predicted = [_true_concept(r.source, known) for r in recs]
     mem = agent.memory
     entries = mem.entries
@@ -157,17 +220,14 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         fold=fold,
         learn=[d.key for d in learn],
         test=[d.key for d in test],
-        true=true,
+        true_concepts=true,
         predicted=predicted,
         confidence=[float(r.confidence) for r in recs],
         ccr=correct_classification_rate(true, predicted),
         feedbacks=[int(f) for f in report.feedbacks],
         first_guess=[bool(g) for g in report.first_guess_correct],
         interactions_per_demo=len(report.feedbacks) / max(1, len(report.outcomes)),
-        exemplars=sum(1 for e in entries if e.num_samples == 1),
-        prototypes=sum(1 for e in entries if e.num_samples > 1),
-        entries=len(entries),
-        concepts=len(mem.concepts()),
+        **memory_counts(mem),
         generation_error=float(np.mean([e.generation_error for e in entries])),
         rehearsals=len(report.rehearsals),
         rehearsal_seconds=float(sum(r.seconds for r in report.rehearsals)),
@@ -179,7 +239,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         for e in entries:
             res.pb_points.append([float(x) for x in e.pb_rec])
             res.pb_concepts.append(names.get(e.concept) or e.concept)
-            res.pb_kinds.append("exemplar" if e.num_samples == 1 else "prototype")
+            res.pb_kinds.append("prototype" if e.prototype else "exemplar")
         for r, c in zip(recs, true):
             res.pb_points.append([float(x) for x in r.pb_obs])
             res.pb_concepts.append(c)
@@ -200,135 +260,60 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     return res
 
 
-def _worker_init() -> None:
-    # The parent handles Ctrl-C and terminates the workers.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    # A parent killed outright (SIGKILL, SIGTERM) cannot stop its workers;
-    # they notice they were orphaned and exit instead of computing on.
-    parent = os.getppid()
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="iloci-orphan-watch").start()
+_NAME = re.compile(r"[A-Za-z0-9._-]+")
 
 
-class _ResolvedComponents:
-    """Plugin registering components another plugin manager resolved.
+def versions(plugin_manager: Any = None) -> dict[str, str]:
+    """Versions of Python, iloci, every plugin distribution and what each requires.
 
-    A worker process cannot receive the caller's plugin manager (plugin
-    objects and modules do not pickle), only the :class:`ComponentSpec` s
-    its registry resolved the config's names to. Registered alone on a
-    worker's plugin manager, this plugin makes that manager resolve the
-    same names to the same factories and schemas, and nothing else.
+    The requirements are read from the distributions' metadata (extras
+    included), so a third-party plugin and its libraries are listed as
+    iloci's own are; a requirement that is not installed is left out.
     """
+    from iloci.plugins import get_plugin_manager, plugin_infos
 
-    def __init__(self, specs: Sequence[Any]) -> None:
-        self.specs = list(specs)
-        self.__name__ = "iloci.evaluation.resolved"  # its name on the plugin manager
-
-    def _add(self, registry: Any) -> None:
-        for s in self.specs:
-            if s.kind == registry.kind:
-                registry.add(s.name, s.factory, params=s.params, requires=s.requires,
-                             install=s.install, summary=s.summary)
-
-    @hookimpl
-    def iloci_register_perceptual_models(self, registry) -> None:
-        self._add(registry)
-
-    @hookimpl
-    def iloci_register_clusterers(self, registry) -> None:
-        self._add(registry)
-
-    @hookimpl
-    def iloci_register_teachers(self, registry) -> None:
-        self._add(registry)
-
-    @hookimpl
-    def iloci_register_ik_solvers(self, registry) -> None:
-        self._add(registry)
-
-    @hookimpl
-    def iloci_register_simulators(self, registry) -> None:
-        self._add(registry)
-
-
-def _resolved_specs(config: Config, pm: Any) -> list[Any]:
-    """The specs ``pm`` resolves the config's components to, checked to pickle.
-
-    Raises InvalidInputError naming each component whose spec cannot be
-    sent to a worker process (e.g. a lambda or a class defined in a
-    function as its factory or schema).
-    """
-    import pickle
-
-    from iloci.interfaces import COMPONENT_KINDS
-    from iloci.plugins import get_registry
-    registry = get_registry(pm)
-    specs, problems = [], []
-    for sec, kind in COMPONENT_KINDS.items():
-        name = getattr(config, sec).name
-        if name == "none":
-            continue
-        spec = registry.get(sec, name)
+    pm = plugin_manager or get_plugin_manager()
+    dists = ["iloci"] + sorted({i.distribution for i in plugin_infos(pm).values()
+                                if i.distribution and i.distribution != "iloci"})
+    names: list[str] = []
+    for dist in dists:
+        names.append(dist)
         try:
-            pickle.dumps(spec)
-        except (pickle.PicklingError, AttributeError, TypeError) as exc:  # e.g. local objects
-            problems.append(f"{kind.label} {name!r} (plugin {spec.plugin!r}): "
-                            f"{type(exc).__name__}: {exc}")
-        specs.append(spec)
-    if problems:
-        raise InvalidInputError(
-            "jobs > 1 runs each fold in a worker process, which builds the components "
-            "the given plugin_manager resolved from their pickled registry entries, and "
-            "these do not pickle: " + "; ".join(problems) + ". Register the factory as a "
-            "'module:attribute' string (or a module-level callable) and the params "
-            "schema as a module-level dataclass, or evaluate with jobs=1.")
-    return specs
-
-
-def _run_fold_in_worker(config_dict: dict, fold: int, learn_idx: list[int],
-                        test_idx: list[int], shapes: list[str], queue: Any,
-                        baseline: bool, specs: Sequence[Any] | None = None) -> dict:
-    from iloci.data import load_lasa
-    from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
-    demos = load_lasa(shapes or None)
-    # specs: what the caller's plugin manager resolved; None: the default manager's
-    pm = None if specs is None else get_plugin_manager(
-        autoload=False, block=DEFAULT_PLUGINS, plugins=[_ResolvedComponents(specs)])
-
-    def send(msg: dict) -> None:
-        if queue is not None:
-            queue.put(msg)
-
-    # a fold's clock starts when a worker takes it, not when it is queued
-    send({"kind": "fold_start", "fold": fold, "total": len(learn_idx)})
-    res = run_fold(config_dict, fold, [demos[i] for i in learn_idx],
-                   [demos[i] for i in test_idx], send=send, baseline=baseline,
-                   plugin_manager=pm)
-    return res.to_dict()
-
-
-def _versions() -> dict[str, str]:
+            names += [m.group(0) for r in md.requires(dist) or () if (m := _NAME.match(r))]
+        except md.PackageNotFoundError:
+            pass
     out = {"python": platform.python_version()}
-    for dist in ("iloci", "numpy", "scipy", "pluggy", "torch", "jax", "pin", "scikit-learn",
-                 "dtaidistance", "pybullet", "mujoco", "iloci-torch", "iloci-jax",
-                 "iloci-scipy", "iloci-sklearn", "iloci-pinocchio"):
+    for name in dict.fromkeys(names):
         try:
-            out[dist] = md.version(dist)
+            out[md.metadata(name)["Name"]] = md.version(name)
         except md.PackageNotFoundError:
             pass
     return out
 
 
-def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
-              jobs: int) -> dict[str, Any]:
-    """metrics.json content from per-fold results."""
-    results = sorted(results, key=lambda r: r["fold"])
+def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
+              jobs: int, *, plugin_manager: Any = None) -> dict[str, Any]:
+    """The content of ``metrics.json``: per-fold results, their means and provenance.
+
+    Parameters
+    ----------
+    folds : sequence of FoldResult
+    config : Config
+    wall_seconds : float
+        Wall time of the whole evaluation (s).
+    jobs : int
+    plugin_manager : pluggy.PluginManager, optional
+        Whose plugin distributions :func:`versions` lists.
+
+    Returns
+    -------
+    dict
+        ``ccr_mean``, ``ccr_std``, ``ccr_folds``, mean and std of every
+        per-fold count, ``folds`` (per-fold rows), ``paper``, ``baseline``
+        (when every fold ran it), ``seed``, ``config``, ``versions``,
+        ``machine``.
+    """
+    results = [f.to_dict() for f in sorted(folds, key=lambda f: f.fold)]
 
     def ms(key: str) -> dict[str, float]:
         m, s = mean_std([r[key] for r in results])
@@ -356,7 +341,7 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
         "paper": {"ccr_mean": 0.91346, "ccr_std": 0.03511},
         "seed": config.seed,
         "config": config.to_dict(),
-        "versions": _versions(),
+        "versions": versions(plugin_manager),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
     if all(r.get("baseline_predicted") for r in results):
@@ -371,8 +356,8 @@ def summarize(results: Sequence[dict], config: Config, wall_seconds: float,
 def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
-             plugin_manager: Any = None) -> tuple[dict[str, Any], list[dict]]:
-    """Run the k-fold protocol; return (metrics, per-fold results).
+             plugin_manager: Any = None) -> Evaluation:
+    """Run the k-fold protocol; return the metrics and every fold's result.
 
     Parameters
     ----------
@@ -392,19 +377,26 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         ``iloci_on_fold_finished``; with ``jobs == 1`` also the learning
         events. Defaults to :func:`~iloci.plugins.get_plugin_manager`.
 
+    Returns
+    -------
+    Evaluation
+        ``(metrics, folds)``: the content of ``metrics.json`` and a
+        :class:`FoldResult` per fold, in fold order.
+
     Notes
     -----
-    With ``jobs > 1`` the folds run in spawned worker processes, which
-    cannot receive a plugin manager (its plugin objects do not pickle).
-    Without ``plugin_manager``, each worker builds the default one from the
-    installed plugins, as the parent does. With one, the parent resolves
-    the config's component names through it and sends each worker how to
-    build those components (their registry entries: factory, schema,
-    requirements); a worker's plugin manager holds those and nothing else,
-    so the learning events in a worker reach no observer. A component
-    whose factory or schema cannot be pickled (a lambda, a class defined
-    in a function) cannot be sent: that is an :class:`InvalidInputError`
-    before any fold runs, rather than a silent serial run.
+    With ``jobs > 1`` the folds run in spawned worker processes
+    (:mod:`iloci.evaluation.parallel`), which cannot receive a plugin
+    manager (its plugin objects do not pickle). Without ``plugin_manager``,
+    each worker builds the default one from the installed plugins, as the
+    parent does. With one, the parent resolves the config's component names
+    through it and sends each worker how to build those components (their
+    registry entries: factory, schema, requirements); a worker's plugin
+    manager holds those and nothing else, so the learning events in a
+    worker reach no observer. A component whose factory or schema cannot
+    be pickled (a lambda, a class defined in a function) cannot be sent:
+    that is an :class:`InvalidInputError` before any fold runs, rather
+    than a silent serial run.
 
     Raises
     ------
@@ -418,6 +410,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         Re-raised after the workers are stopped.
     """
     from iloci.data import load_lasa
+    from iloci.evaluation.parallel import FoldTask, resolved_specs, run_folds_in_processes
     from iloci.plugins import get_plugin_manager, get_registry
 
     from iloci.config import check_installed
@@ -436,7 +429,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     if jobs < 1:
         raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
     # resolved (and checked to pickle) before any data is loaded or fold run
-    specs = _resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
+    specs = resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
     plan = fold_plan(demos, config)
@@ -446,59 +439,32 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             raise InvalidInputError(f"fold {k} does not exist; folds are 0..{len(plan) - 1}.")
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
-    results: list[dict] = []
-    cfg_dict = config.to_dict()
+    results: list[FoldResult] = []
+
+    def finished(res: FoldResult) -> None:
+        results.append(res)
+        pm.hook.iloci_on_fold_finished(event=_fold_event(res))
+        emit({"kind": "fold_done", "fold": res.fold, "ccr": res.ccr,
+              "seconds": res.wall_seconds})
+
     if jobs == 1:
         for k in wanted:
             learn_idx, test_idx = plan[k]
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
-            res = run_fold(config, k, [demos[i] for i in learn_idx],
-                           [demos[i] for i in test_idx], send=emit, baseline=baseline,
-                           plugin_manager=pm)
-            results.append(res.to_dict())
-            pm.hook.iloci_on_fold_finished(event=_fold_event(results[-1]))
-            emit({"kind": "fold_done", "fold": k, "ccr": res.ccr,
-                  "seconds": res.wall_seconds})
+            finished(run_fold(config, k, [demos[i] for i in learn_idx],
+                              [demos[i] for i in test_idx], send=emit, baseline=baseline,
+                              plugin_manager=pm))
     else:
-        ctx = mp.get_context("spawn")  # no fork: torch/JAX threads do not survive it
-        manager = ctx.Manager()
-        queue = manager.Queue()
-        pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(wanted)), mp_context=ctx,
-                                      initializer=_worker_init)
-        try:
-            futures = {}
-            for k in wanted:
-                learn_idx, test_idx = plan[k]
-                futures[pool.submit(_run_fold_in_worker, cfg_dict, k, learn_idx, test_idx,
-                                    shapes, queue, baseline, specs)] = k
-                emit({"kind": "fold_queued", "fold": k, "total": len(learn_idx)})
-            pending = set(futures)
-            while pending:
-                done, pending = cf.wait(pending, timeout=0.2,
-                                        return_when=cf.FIRST_COMPLETED)
-                while not queue.empty():
-                    emit(queue.get())
-                for fut in done:
-                    res = fut.result()
-                    results.append(res)
-                    pm.hook.iloci_on_fold_finished(event=_fold_event(res))
-                    emit({"kind": "fold_done", "fold": res["fold"], "ccr": res["ccr"],
-                          "seconds": res["wall_seconds"]})
-        except BaseException:
-            for proc in list(getattr(pool, "_processes", {}).values()):
-                proc.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            manager.shutdown()
-            raise
-        pool.shutdown()
-        manager.shutdown()
+        run_folds_in_processes(config.to_dict(), [FoldTask(k, *plan[k]) for k in wanted],
+                               shapes, jobs, baseline=baseline, specs=specs, emit=emit,
+                               on_result=finished)
     wall = time.perf_counter() - t0
-    results.sort(key=lambda r: r["fold"])
-    return summarize(results, config, wall, jobs), results
+    results.sort(key=lambda r: r.fold)
+    return Evaluation(summarize(results, config, wall, jobs, plugin_manager=pm), results)
 
 
-def _fold_event(r: dict):
+def _fold_event(r: FoldResult):
     from iloci.events import FoldEvent
-    return FoldEvent(fold=r["fold"], metrics={k: r[k] for k in (
+    return FoldEvent(fold=r.fold, metrics={k: getattr(r, k) for k in (
         "ccr", "interactions_per_demo", "exemplars", "prototypes", "concepts",
         "generation_error", "wall_seconds", "baseline_ccr")})

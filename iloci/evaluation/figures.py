@@ -146,7 +146,8 @@ def plot_pb_space(pbs: np.ndarray, concepts: Sequence[str], path: str | Path, *,
         raise MissingBackendError("report", "PB-space figure", ["scikit-learn"],
                                   "pip install scikit-learn") from exc
     pbs = np.asarray(pbs, dtype=np.float64)
-    d = np.linalg.norm(pbs[:, None] - pbs[None], axis=-1)
+    from scipy.spatial.distance import pdist, squareform
+    d = squareform(pdist(pbs))
     mds = MDS(n_components=2, metric_mds=False, metric="precomputed", init="random",
               random_state=seed, n_init=4, max_iter=300)
     xy = mds.fit_transform(d)

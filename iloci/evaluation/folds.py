@@ -1,4 +1,4 @@
-"""The five folds of the paper's evaluation, made exact (DESIGN.md section 6).
+"""The five folds of the paper's evaluation, made exact (docs/method.md, "Evaluation protocol").
 
 Each shape's demonstrations are shuffled (seeded) and dealt into ``folds``
 partitions; in fold ``k`` partition ``k`` is the learning set and the rest is

@@ -11,6 +11,7 @@ import numpy as np
 
 from iloci.data.files import write_text_atomic
 from iloci.errors import MissingBackendError
+from iloci.evaluation.evaluate import FoldResult
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
 __all__ = ["write_outputs", "write_json_atomic", "headline"]
@@ -97,19 +98,32 @@ def _sparse_table(concepts: Sequence[str], conf: np.ndarray, cmat: np.ndarray) -
     return rows
 
 
-def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[dict]) -> Path:
-    """Write everything to ``out_dir``; return the path of report.md."""
+def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
+                  results: Sequence[FoldResult]) -> Path:
+    """Write an evaluation to ``out_dir``; return the path of report.md.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Created if missing. Receives ``metrics.json``, ``folds.json``
+        (:meth:`FoldResult.to_dict` of each fold), ``report.md`` and
+        ``figures/*.png``.
+    metrics : dict
+        :func:`~iloci.evaluation.evaluate.summarize`'s result.
+    results : sequence of FoldResult
+        As :func:`~iloci.evaluation.evaluate.evaluate` returns them.
+    """
     from iloci.evaluation import figures
 
     out = Path(out_dir)
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "metrics.json", metrics)
-    write_json_atomic(out / "folds.json", results)
+    write_json_atomic(out / "folds.json", [r.to_dict() for r in results])
 
-    true = [t for r in results for t in r["true"]]
-    pred = [p for r in results for p in r["predicted"]]
-    confs = [c for r in results for c in r["confidence"]]
+    true = [t for r in results for t in r.true_concepts]
+    pred = [p for r in results for p in r.predicted]
+    confs = [c for r in results for c in r.confidence]
     concepts = sorted(set(true) | set(pred))
     conf_m = confusion_matrix(true, pred, concepts)
     conf_c = confidence_matrix(true, pred, confs, concepts)
@@ -117,20 +131,20 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
                         title="normalised confusion (all folds)", cbar_label="fraction of row")
     figures.plot_matrix(conf_c, concepts, fig_dir / "confidence.png",
                         title="mean confidence (all folds)", cbar_label="confidence")
-    figures.plot_reinforcement([r["feedbacks"] for r in results], fig_dir / "reinforcement.png")
-    figures.plot_first_guess([r["first_guess"] for r in results], fig_dir / "first_guess.png")
+    figures.plot_reinforcement([r.feedbacks for r in results], fig_dir / "reinforcement.png")
+    figures.plot_first_guess([r.first_guess for r in results], fig_dir / "first_guess.png")
     first = results[0]
-    have_pb = bool(first.get("pb_points"))
+    have_pb = bool(first.pb_points)
     if have_pb:
-        figures.plot_pb_space(np.asarray(first["pb_points"]), first["pb_concepts"],
-                              fig_dir / "pb_space.png", kinds=first["pb_kinds"])
-    if first.get("shapes"):
-        shapes = {k: np.asarray(v) for k, v in sorted(first["shapes"].items())}
+        figures.plot_pb_space(np.asarray(first.pb_points), first.pb_concepts,
+                              fig_dir / "pb_space.png", kinds=first.pb_kinds)
+    if first.shapes:
+        shapes = {k: np.asarray(v) for k, v in sorted(first.shapes.items())}
         figures.plot_shapes(shapes, fig_dir / "shapes.png",
-                            title=f"one regenerated shape per concept (fold {first['fold']})")
+                            title=f"one regenerated shape per concept (fold {first.fold})")
     baseline_rows = []
     if metrics.get("baseline"):
-        bpred = [p for r in results for p in r["baseline_predicted"]]
+        bpred = [p for r in results for p in r.baseline_predicted]
         figures.plot_matrix(confusion_matrix(true, bpred, concepts), concepts,
                             fig_dir / "baseline_confusion.png",
                             title="DTW 1-NN baseline: normalised confusion",
@@ -141,7 +155,10 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
     lines = [
         "# iloci evaluation report",
         "",
-        f"{len(results)}-fold LASA evaluation (DESIGN.md §6): per fold the learning set is "
+        f"{len(results)}-fold LASA evaluation, the protocol of iloci's docs/method.md "
+        "(\"Evaluation protocol\"; the method of Alibeigi, Nili Ahmadabadi and Araabi, "
+        "\"Incremental learning of high-level concepts by imitation\", IROS 2017, with "
+        "Tani's RNNPB): per fold the learning set is "
         "shown one demonstration at a time with teacher feedback, then the test set is "
         "recognized without feedback. Seed "
         f"{m['seed']}; back ends: "
@@ -167,9 +184,11 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
     lines += [
         "",
         "A test demonstration counts as correct when the memory entry nearest to its "
-        "PB_obs stands for a demonstration of the same concept (what the oracle teacher "
-        "would reward). Confidence is the margin `1 - d_best / d_other` (see "
-        "`iloci.concepts.learner.Recognition`).",
+        "PB_obs stands for a demonstration of the same true concept (what the oracle "
+        "teacher would reward). Confidence is the margin `1 - d_best / d_other` (see "
+        "docs/method.md, \"Inference phase\"). An exemplar is an entry learned from one "
+        "demonstration, a prototype the medoid that replaced a valid cluster "
+        "(docs/method.md, \"Words\").",
         "",
         "## Confusion and confidence",
         "",
@@ -194,11 +213,11 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any], results: list[di
         "",
     ]
     if have_pb:
-        lines += [f"## PB space (fold {first['fold']})", "",
+        lines += [f"## PB space (fold {first.fold})", "",
                   "Memory PB_rec (large: prototypes, medium: exemplars) and test PB_obs "
-                  "(small), by non-metric MDS; one marker per concept.", "",
+                  "(small), by non-metric MDS; one marker per true concept.", "",
                   "![PB space](figures/pb_space.png)", ""]
-    if first.get("shapes"):
+    if first.shapes:
         lines += ["## Regenerated shapes", "",
                   "Each concept's lowest-generation-error entry, generated closed-loop from "
                   "its PB and decoded to the drawing plane (green: start).", "",

@@ -25,6 +25,7 @@ import numpy as np
 
 from iloci.errors import InvalidInputError, NotFittedError
 from iloci.sensorimotor.pipeline import Motion
+from iloci.validation import check_array
 
 __all__ = ["FEATURES", "SensorimotorEncoder", "feature_names"]
 
@@ -201,14 +202,4 @@ class SensorimotorEncoder:
 
 
 def _finite(a: np.ndarray, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
-    want = "(" + ", ".join("T" if s is None else str(s) for s in shape) + ("," if len(shape) == 1
-                                                                            else "") + ")"
-    try:
-        arr = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name} must be a numeric array of shape {want}.") from None
-    if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
-        raise InvalidInputError(f"{name} must have shape {want}, got {arr.shape}.")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidInputError(f"{name} contains NaN or inf.")
-    return arr
+    return check_array(a, name, shape)

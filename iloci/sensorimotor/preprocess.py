@@ -29,6 +29,7 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 from iloci.sensorimotor.robots import DrawingPlane
+from iloci.validation import check_array
 
 __all__ = ["POLYORDER", "fit_to_plane", "preprocess", "resample", "smooth"]
 
@@ -37,21 +38,12 @@ POLYORDER = 3
 
 
 def _points(a: Any, what: str = "positions") -> np.ndarray:
-    try:
-        p = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidDemonstrationError(f"{what} must be a numeric array of shape (N, 2).") \
-            from None
-    if p.ndim != 2 or p.shape[1] != 2:
-        raise InvalidDemonstrationError(f"{what} must have shape (N, 2), got {p.shape}.")
+    p = check_array(a, what, ("N", 2), finite=False, error=InvalidDemonstrationError)
     if len(p) < 3:
         raise InvalidDemonstrationError(f"{what} has {len(p)} point(s); at least 3 are "
                                         "needed to define a motion.")
-    if not np.all(np.isfinite(p)):
-        row = int(np.argwhere(~np.isfinite(p))[0, 0])
-        raise InvalidDemonstrationError(f"{what} contain NaN or inf (first at row {row}); "
-                                        "remove or interpolate missing samples.")
-    return p
+    return check_array(p, what, ("N", 2), error=InvalidDemonstrationError,
+                       finite_hint=" Remove or interpolate missing samples.")
 
 
 def smooth(positions: np.ndarray, window: int = 31) -> np.ndarray:

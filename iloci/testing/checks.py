@@ -162,7 +162,8 @@ PERCEPTUAL_MODEL_CHECKS = [pm_protocol, pm_shapes_and_dtypes, pm_deterministic,
 # -- Clusterer ---------------------------------------------------------------
 
 def _complete_link_ok(x: np.ndarray, labels: np.ndarray, t: float) -> None:
-    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
+    from scipy.spatial.distance import pdist, squareform
+    d = squareform(pdist(x))
     groups = [np.flatnonzero(labels == k) for k in np.unique(labels)]
     for g in groups:
         assert d[np.ix_(g, g)].max() <= t + 1e-12, "a cluster's diameter exceeds the threshold"
@@ -229,7 +230,7 @@ CLUSTERER_CHECKS = [cl_protocol, cl_shapes_and_labels, cl_complete_link, cl_dete
 def _demo(shape: str = "GShape", index: int = 0, concept: str | None = "GShape") -> Demonstration:
     t = np.linspace(0, 1, 30)
     pos = np.column_stack([np.cos(3 * t + index), np.sin(2 * t)])
-    return Demonstration(pos, t, shape=shape, index=index, concept=concept)
+    return Demonstration(pos, t, shape=shape, index=index, true_concept=concept)
 
 
 def _response(source: str) -> Response:

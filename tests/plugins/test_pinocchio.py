@@ -243,6 +243,10 @@ def test_cli_show_writes_a_png(tmp_path, cli):
     f.write_text("0,0\n1,2\n2,0\n3,2\n4,0\n")
     res = cli("show", str(f), "--out", str(tmp_path / "tri.png"))
     assert res.returncode == 0, res.stderr
+    # and the SHAPE/INDEX name teach and recognize take
+    res = cli("show", "GShape/1", "--out", str(tmp_path / "g1.png"))
+    assert res.returncode == 0, res.stderr
+    assert "GShape/1" in res.stdout
 
 
 def test_cli_show_bad_input_exit_2(tmp_path, cli):
@@ -250,6 +254,10 @@ def test_cli_show_bad_input_exit_2(tmp_path, cli):
     assert res.returncode == 2 and "--demo must be 0..6" in res.stderr
     res = cli("show", "Gshape")
     assert res.returncode == 2 and "Did you mean 'GShape'" in res.stderr
+    res = cli("show", "GShape/7")
+    assert res.returncode == 2 and "index must be 0..6" in res.stderr
+    res = cli("show", "GShape/2", "--demo", "1")
+    assert res.returncode == 2 and "not both" in res.stderr
     bad = tmp_path / "bad.csv"
     bad.write_text("0,0\n1,nan\n2,0\n")
     res = cli("show", str(bad), "--out", str(tmp_path / "b.png"))

@@ -48,6 +48,7 @@ import numpy as np
 
 from iloci.errors import InvalidInputError, UnknownComponentError, did_you_mean
 from iloci.sensorimotor.robots.urdf import MOVABLE, read_urdf, resolve_uri
+from iloci.validation import check_array
 
 __all__ = ["ROBOTS", "DrawingPlane", "Robot", "RobotPreset", "available_robots",
            "describe_robot", "get_robot", "place_robot", "robot_from_config"]
@@ -191,15 +192,7 @@ class DrawingPlane:
 
 
 def _as_points(a: np.ndarray, width: int, what: str) -> np.ndarray:
-    try:
-        p = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{what} must be a numeric array of shape (T, {width}).") from None
-    if p.ndim != 2 or p.shape[1] != width:
-        raise InvalidInputError(f"{what} must have shape (T, {width}), got {p.shape}.")
-    if not np.all(np.isfinite(p)):
-        raise InvalidInputError(f"{what} contain NaN or inf; pass finite coordinates.")
-    return p
+    return check_array(a, what, (None, width), finite_hint=" Pass finite coordinates.")
 
 
 def _frozen(a: Any) -> np.ndarray:
@@ -465,7 +458,7 @@ class RobotPreset:
 
 def _nao_v32_right_arm() -> Robot:
     path = Path(str(resources.files("iloci.sensorimotor.robots") / "nao_v32_right_arm.urdf"))
-    # limits as in the URDF, rad
+    # limits as in the URDF (docs/method.md, "The robot"), rad
     lower = _frozen([-2.0856685, -1.6493361, -2.0856685, 0.0087266])
     upper = _frozen([2.0856685, -0.0087266, 2.0856685, 1.5620696])
     return Robot(

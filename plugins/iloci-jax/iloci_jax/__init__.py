@@ -10,6 +10,6 @@ from iloci.params import RNNPBParams
 @hookimpl
 def iloci_register_perceptual_models(registry) -> None:
     registry.add("jax-rnnpb", "iloci_jax.rnnpb:JaxRNNPB", params=RNNPBParams,
-                 requires=("jax",), install="pip install ./plugins/iloci-jax",
+                 requires=("jax",), install="pip install 'jax>=0.4.30' 'jaxlib>=0.4.30'",
                  summary="RNNPB in JAX: jit-compiled closed-loop BPTT, batched multi-start "
                          "recognition")

@@ -34,6 +34,6 @@ choose_opengl()
 @hookimpl
 def iloci_register_simulators(registry) -> None:
     registry.add("mujoco", "iloci_mujoco.sim:MuJoCoSimulator", params=MuJoCoParams,
-                 requires=("mujoco",), install="pip install ./plugins/iloci-mujoco",
+                 requires=("mujoco",), install="pip install 'mujoco>=3.2'",
                  summary="Nao arm (URDF through MjSpec) tracking the joint path with "
                          "position servos in MuJoCo; offscreen images need EGL or OSMesa")

@@ -13,6 +13,6 @@ __all__ = ["PinocchioIKParams"]
 @hookimpl
 def iloci_register_ik_solvers(registry) -> None:
     registry.add("pinocchio", "iloci_pinocchio.ik:PinocchioIK", params=PinocchioIKParams,
-                 requires=("pinocchio",), install="pip install ./plugins/iloci-pinocchio",
+                 requires=("pinocchio",), install="pip install 'pin>=3.0'",
                  summary="position-only damped least squares IK with Pinocchio "
                          "(warm-started, joint limits enforced)")

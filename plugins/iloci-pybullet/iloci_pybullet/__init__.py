@@ -12,6 +12,6 @@ __all__ = ["PyBulletParams"]
 @hookimpl
 def iloci_register_simulators(registry) -> None:
     registry.add("pybullet", "iloci_pybullet.sim:PyBulletSimulator", params=PyBulletParams,
-                 requires=("pybullet",), install="pip install ./plugins/iloci-pybullet",
+                 requires=("pybullet",), install="pip install 'pybullet>=3.2'",
                  summary="Nao arm tracking the joint path under POSITION_CONTROL in "
                          "PyBullet (DIRECT), software-rendered images")

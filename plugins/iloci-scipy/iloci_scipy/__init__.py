@@ -6,5 +6,5 @@ from iloci import hookimpl
 @hookimpl
 def iloci_register_clusterers(registry) -> None:
     registry.add("scipy", "iloci_scipy.clusterer:ScipyClusterer", requires=("scipy",),
-                 install="pip install ./plugins/iloci-scipy",
+                 install="pip install 'scipy>=1.10'",
                  summary="complete-link clustering, scipy linkage/fcluster")

