@@ -66,7 +66,7 @@ def main() -> dict:
     from iloci_pinocchio.ik import PinocchioIK
 
     cfg = SensorimotorConfig()
-    robot = get_robot(cfg.robot)
+    robot = get_robot()
     ik = PinocchioIK(robot)
     demos = load_lasa()
     import scipy.signal  # noqa: F401  (import time is not preprocessing time)
