@@ -2,7 +2,8 @@
 
 The fold is the evaluation's (:func:`iloci.evaluation.folds.lasa_folds`, 36
 or 37 learning demonstrations of 182), shown one at a time in a seeded
-random order to an oracle teacher; the rest is recognized in one batch. Writes ``benchmarks/results/learner.json``::
+random order to an oracle teacher; the rest is recognized in one batch.
+Writes ``benchmarks/results/learner.json``::
 
     backend, epochs, extra   the settings: ``epochs`` is ``[learner]
                              rehearsal_epochs`` (the first training of the

@@ -28,10 +28,28 @@ Writes ``benchmarks/results/rnnpb.json``::
                          ``torch_float64`` and ``jax_float64`` repeat both back
                          ends' folds and seeds in float64.
     naive_step_ms_by_threads   the naive reference at each torch thread count
-    torch_native_kernel  whether torch-rnnpb trained float32 in its native kernel
-                         (``_native.c``; all torch rows above then use it)
+    torch_native_kernel  the kernel torch-rnnpb's float32 training ran here by
+                         default (``_native.c`` and its instruction set; all torch
+                         rows above use it)
     torch_ops_step_ms    torch-rnnpb's paper-size step with torch operations instead
-    targets              the issue's targets and whether this run met them
+    step_ms_by_kernel    torch-rnnpb's paper-size step in each kernel this CPU runs:
+                         the native kernel per instruction set (``avx512``,
+                         ``avx2``, ``portable``; forced with ILOCI_RNNPB_ISA),
+                         ``torch_ops``, jax-rnnpb (``jax``) and ``naive``,
+                         interleaved round by round
+                         so load on the machine hits them alike; ``wall`` and
+                         ``cpu`` (the process's CPU time, all threads: what the step costs when
+                         other processes share the cores)
+    recognize_one_ms     recognizing one demonstration against a memory of 25
+                         entries (PBs of a network trained on 25 learning
+                         sequences): ``pipeline`` (trajectory -> preprocessing ->
+                         IK -> encoded sequence), ``recognize`` (PB_obs by the
+                         model), ``total``; wall and (``_cpu``) process CPU time;
+                         medians over the 145 or 146 test demonstrations,
+                         torch-rnnpb
+    targets              the issues' targets and whether this run met them
+                         (wall-time medians); ``targets_cpu_time``: issue 16's speed
+                         targets against process CPU time
 
 The naive reference is how a user would first write the model: ``nn.Linear``
 layers, a Python loop over the steps, autograd and ``torch.optim.Adam``; it
@@ -41,7 +59,10 @@ IK -> SensorimotorEncoder); the 584-sequence rows repeat the data 4 times.
 
 Run: ``python benchmarks/rnnpb.py`` (needs iloci-torch, iloci-jax and
 iloci-pinocchio; about 12 minutes on 2 cores). ``--quick`` skips the grid's
-largest shapes and runs 2 folds, for a smoke test.
+largest shapes and runs 2 folds, for a smoke test. ``--speed`` measures only
+the speed rows (``step_ms``, ``step_ms_by_kernel``, ``recognize_one_ms``; a
+minute or two) and writes ``benchmarks/results/rnnpb_speed.json`` instead,
+for iterating on a kernel.
 """
 
 from __future__ import annotations
@@ -59,6 +80,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 RESULTS = Path(__file__).resolve().parent / "results" / "rnnpb.json"
+SPEED_RESULTS = RESULTS.with_name("rnnpb_speed.json")
 #: Training epochs of the offline accuracy check (other settings: defaults).
 #: Chosen on a validation split, the folds of seed 1 (the reported folds are
 #: seed 0's), on 2026-11-23: mean CCR over both back ends 89.8 % at 3000
@@ -181,9 +203,8 @@ def time_train(backend: str, seqs, reps: int, epochs: int, native: bool = True) 
     ``native=False`` times torch-rnnpb with torch operations instead of its
     native kernel.
     """
-    m = model_class(backend)(seed=0)
-    if backend == "torch":
-        m.use_native = native
+    m = model_class(backend)(seed=0, **({"kernel": "auto" if native else "torch"}
+                                       if backend == "torch" else {}))
     m.train(seqs, epochs=2)          # compile (JAX) and allocate (torch)
     runs = []
     for _ in range(reps):
@@ -191,6 +212,112 @@ def time_train(backend: str, seqs, reps: int, epochs: int, native: bool = True) 
         m.train(seqs, epochs=epochs)
         runs.append((time.perf_counter() - t0) / epochs * 1e3)
     return statistics.median(runs)
+
+
+def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
+    """torch-rnnpb's step in every kernel this CPU runs, jax-rnnpb's, and the naive reference.
+
+    Each round times every kernel once, one after the other, so a change of
+    load on the machine hits them alike; medians over rounds, of wall time
+    and of the process's CPU time (all its threads: JAX computes on its own).
+    """
+    import torch
+
+    from iloci_torch.native import ISA_ENV, ISAS, native_isas
+    from iloci_torch.rnnpb import TorchRNNPB
+
+    from iloci_jax.rnnpb import JaxRNNPB
+
+    kernels = [*native_isas(), "torch_ops", "jax"]
+    models = {k: TorchRNNPB(seed=0, kernel="torch" if k == "torch_ops" else "native")
+              for k in kernels if k != "jax"}
+    models["jax"] = JaxRNNPB(seed=0)
+    naive = None
+    out: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": []}
+                                              for k in (*kernels, "naive")}
+    before = os.environ.get(ISA_ENV)
+    threads = torch.get_num_threads()
+    try:
+        for r in range(rounds + 1):                # round 0 warms up, not counted
+            for k in kernels:
+                if k in ISAS:
+                    os.environ[ISA_ENV] = k
+                n = 2 if r == 0 else epochs
+                w0, c0 = time.perf_counter(), time.process_time()
+                models[k].train(seqs, epochs=n)
+                if r:
+                    out[k]["wall"].append((time.perf_counter() - w0) / n * 1e3)
+                    out[k]["cpu"].append((time.process_time() - c0) / n * 1e3)
+            torch.set_num_threads(1)               # the naive step's faster setting here
+            if naive is None:
+                naive = naive_step_fn(seqs)
+            calls = 1 if r == 0 else naive_calls
+            w0, c0 = time.perf_counter(), time.process_time()
+            for _ in range(calls):
+                naive()
+            if r:
+                out["naive"]["wall"].append((time.perf_counter() - w0) / calls * 1e3)
+                out["naive"]["cpu"].append((time.process_time() - c0) / calls * 1e3)
+            torch.set_num_threads(threads)
+    finally:
+        if before is None:
+            os.environ.pop(ISA_ENV, None)
+        else:
+            os.environ[ISA_ENV] = before
+    return {k: {m: statistics.median(v) for m, v in d.items()} for k, d in out.items()}
+
+
+def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:
+    """Median ms to recognize one demonstration against ``entries`` stored PBs (torch-rnnpb).
+
+    ``pipeline``: one trajectory through preprocessing, IK and the encoder;
+    ``recognize``: the model's recognize of that sequence with the memory's
+    PBs as candidates; ``total``: both, one after the other.
+    """
+    from iloci.config import SensorimotorConfig
+    from iloci.sensorimotor.encoding import SensorimotorEncoder
+    from iloci.sensorimotor.pipeline import to_motions
+    from iloci_pinocchio.ik import PinocchioIK
+    from iloci_torch.rnnpb import TorchRNNPB
+
+    enc = SensorimotorEncoder().fit([motions[i] for i in learn])
+    seqs, _ = enc.encode_all(motions)
+    m = TorchRNNPB(seed=0)
+    pbs = m.train([seqs[i] for i in learn[:entries]])
+    ik, cfg = PinocchioIK(), SensorimotorConfig(steps=50)
+    out: dict[str, list[float]] = {k: [] for k in ("pipeline", "recognize", "total",
+                                                   "pipeline_cpu", "recognize_cpu",
+                                                   "total_cpu")}
+    for i in test:
+        w0, c0 = time.perf_counter(), time.process_time()
+        seq = enc.encode_all(to_motions([demos[i]], cfg, ik))[0][0]
+        w1, c1 = time.perf_counter(), time.process_time()
+        m.recognize([seq], candidate_pbs=pbs)
+        w2, c2 = time.perf_counter(), time.process_time()
+        for key, a, b in (("pipeline", w0, w1), ("recognize", w1, w2), ("total", w0, w2),
+                          ("pipeline_cpu", c0, c1), ("recognize_cpu", c1, c2),
+                          ("total_cpu", c0, c2)):
+            out[key].append((b - a) * 1e3)
+    return {"entries": entries, "demonstrations": len(test),
+            **{k: statistics.median(v) for k, v in out.items()}}
+
+
+def speed_targets(by_kernel: dict, rec_one: dict, clock: str = "wall") -> dict:
+    """Issue 16's speed targets against one run's figures (medians).
+
+    ``clock="cpu"``: the same against process CPU time, what the targets
+    mean on a machine whose cores other processes share.
+    """
+    wall = {k: v[clock] for k, v in by_kernel.items()}
+    out = {}
+    if "avx2" in wall:
+        out["avx2_le_0.8ms"] = wall["avx2"] <= 0.8
+        out["avx2_ge_10x_naive"] = wall["naive"] / wall["avx2"] >= 10.0
+        out["portable_within_2.5x_avx2"] = wall["portable"] / wall["avx2"] <= 2.5
+    if "avx512" in wall:
+        out["avx512_le_0.42ms"] = wall["avx512"] <= 0.42
+    out["recognize_one_le_20ms"] = rec_one["total" if clock == "wall" else "total_cpu"] <= 20.0
+    return out
 
 
 def time_recognize(backend: str, learn, test, reps: int = 3, **params) -> tuple[float, float]:
@@ -261,6 +388,8 @@ def write(result: dict) -> None:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smoke test: small grid, 2 folds")
+    ap.add_argument("--speed", action="store_true",
+                    help="speed rows only (a minute or two), to results/rnnpb_speed.json")
     args = ap.parse_args(argv)
 
     import jax
@@ -278,9 +407,41 @@ def main(argv=None) -> dict:
     paper = [seqs[i] for i in learn[:36]]
     rest = [seqs[i] for i in test]                     # 146 sequences
 
+    from iloci_torch.native import kernel_info
+
+    print("step time at 36 x 50 per kernel ...", flush=True)
+    load_before = os.getloadavg()
+    by_kernel = step_ms_by_kernel(paper, rounds=5 if args.speed else 7, epochs=200,
+                                  naive_calls=10)
+    for k, v in by_kernel.items():
+        print(f"   {k:10s} wall {v['wall']:.3f} ms, cpu {v['cpu']:.3f} ms", flush=True)
+    print("recognizing one demonstration against 25 entries ...", flush=True)
+    rec_one = recognize_one_ms(demos, motions, learn, test)
+    print("  ", rec_one, flush=True)
+    if args.speed:
+        wall = {k: v["wall"] for k, v in by_kernel.items()}
+        result = {
+            "command": "python benchmarks/rnnpb.py --speed",
+            "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
+                        "cpus": os.cpu_count(), "torch": torch.__version__,
+                        "load_average_before": load_before,
+                        "load_average_after": os.getloadavg()},
+            "torch_native_kernel": kernel_info(),
+            "step_ms_by_kernel": by_kernel,
+            "speedup_vs_naive": {k: wall["naive"] / v for k, v in wall.items() if k != "naive"},
+            "recognize_one_ms": rec_one,
+            "targets": speed_targets(by_kernel, rec_one),
+            "targets_cpu_time": speed_targets(by_kernel, rec_one, "cpu"),
+            "seconds": time.perf_counter() - t_start,
+        }
+        from iloci.evaluation.report import write_json_atomic
+        write_json_atomic(SPEED_RESULTS, result)
+        print(json.dumps({k: result[k] for k in ("speedup_vs_naive", "targets",
+                                                 "targets_cpu_time")}, indent=2))
+        return result
+
     print("step time at 36 x 50 ...", flush=True)
     step_ms = {b: time_train(b, paper, reps=7, epochs=200) for b in backends}
-    from iloci_torch.rnnpb import native_kernel_available
     torch_ops_ms = time_train("torch", paper, reps=7, epochs=200, native=False)
     naive_by_threads: dict[str, float] = {}
     step_ms["naive"] = time_naive(paper, reps=5, calls=10, per_threads=naive_by_threads)
@@ -339,8 +500,10 @@ def main(argv=None) -> dict:
         "offline_epochs": OFFLINE_EPOCHS,
         "step_ms": step_ms,
         "naive_step_ms_by_threads": naive_by_threads,
-        "torch_native_kernel": native_kernel_available(),
+        "torch_native_kernel": kernel_info(),
         "torch_ops_step_ms": torch_ops_ms,
+        "step_ms_by_kernel": by_kernel,
+        "recognize_one_ms": rec_one,
         "speedup_vs_naive": speedup,
         "recognize_146_s": rec,
         "recognize_146_first_call_s": rec_first,
@@ -354,7 +517,9 @@ def main(argv=None) -> dict:
             "torch_ge_4x_naive": speedup["torch"] >= 4.0,
             "recognize_146_le_1s": {b: rec[b] <= 1.0 for b in backends},
             "offline_ccr_mean_ge_90pct": {b: ccr[b]["mean"] >= 0.9 for b in backends},
+            **speed_targets(by_kernel, rec_one),
         },
+        "targets_cpu_time": speed_targets(by_kernel, rec_one, "cpu"),
         "seconds": time.perf_counter() - t_start,
     }
     write(result)

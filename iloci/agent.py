@@ -296,7 +296,8 @@ class Agent:
             A demonstration cannot be preprocessed (the error names it).
         """
         single = isinstance(demos, Demonstration)
-        items = [demos] if single else list(demos)
+        items: list[Demonstration] = ([demos] if isinstance(demos, Demonstration)
+                                      else list(demos))
         if not self.memory.entries:
             raise NotFittedError("the robot has learned nothing yet: teach it at least one "
                                  "demonstration (Agent.learn / `iloci teach`) before "

@@ -5,7 +5,8 @@ invalid input, missing back end); 1 any other failure; 130 interrupted.
 
 Each subcommand lives in a module of :mod:`iloci.commands` with a
 ``register(subparsers)`` function that adds its parser and sets
-``func(args) -> int``.
+``func(args) -> int``. Plugins add theirs through the
+``iloci_add_commands`` hook (e.g. ``iloci sweep`` from ``iloci-ray``).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import os
 import sys
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 from iloci.errors import IlociError
 
@@ -34,8 +36,23 @@ COMMAND_MODULES = (
 )
 
 
-def make_parser() -> argparse.ArgumentParser:
+def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
+    """The ``iloci`` parser: the kernel's commands, then the plugins'.
+
+    Parameters
+    ----------
+    plugin_manager : pluggy.PluginManager, optional
+        Whose ``iloci_add_commands`` implementations add commands
+        (default :func:`~iloci.plugins.get_plugin_manager`).
+
+    Raises
+    ------
+    PluginError
+        A plugin's command has a name already taken.
+    """
     from iloci import __version__
+    from iloci.errors import PluginError
+    from iloci.plugins import get_plugin_manager
 
     parser = argparse.ArgumentParser(
         prog="iloci",
@@ -46,6 +63,11 @@ def make_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for mod in COMMAND_MODULES:
         importlib.import_module(mod).register(sub)
+    pm = plugin_manager or get_plugin_manager()
+    try:
+        pm.hook.iloci_add_commands(subparsers=sub)
+    except argparse.ArgumentError as exc:  # a name taken twice (Python >= 3.11)
+        raise PluginError(f"a plugin's command clashes with another: {exc}") from exc
     return parser
 
 
@@ -56,7 +78,11 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the exit code."""
-    parser = make_parser()
+    try:
+        parser = make_parser()
+    except IlociError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

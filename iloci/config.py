@@ -47,9 +47,12 @@ __all__ = [
 
 #: The component each section names when a config leaves its name out.
 DEFAULT_NAMES = {
-    # JAX: at the memory sizes of a learning phase its compiled training
-    # step is about twice as fast as torch's (benchmarks/results/rnnpb.json)
-    "perceptual_model": "jax-rnnpb",
+    # torch-rnnpb: with AVX2 or AVX-512 its native training kernel is the
+    # fastest training step measured (CPU per paper-size step: AVX-512 0.58 ms,
+    # AVX2 0.99 ms, jax-rnnpb 1.38 ms; its portable C path 1.75 ms is slower
+    # than jax), and its recognition is faster than jax's everywhere
+    # (benchmarks/results/rnnpb_speed.json, step_ms_by_kernel)
+    "perceptual_model": "torch-rnnpb",
     "clusterer": "scipy",
     "teacher": "oracle",
     "ik": "pinocchio",
@@ -257,8 +260,9 @@ class EvaluationConfig:
     #: Seed of everything: fold split, presentation order, network
     #: initialisation, noisy teacher.
     seed: int = 0
-    #: Folds run in parallel processes.
-    jobs: int = 1
+    #: Folds run in parallel processes; 0 (the default): one per CPU core
+    #: this process may use (:func:`iloci.evaluation.evaluate.default_jobs`).
+    jobs: int = 0
 
     def validate(self) -> None:
         if not 2 <= self.folds <= 7:
@@ -269,8 +273,8 @@ class EvaluationConfig:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         if not 0 < self.train_fraction < 1:
             raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
-        if self.jobs < 1:
-            raise ValueError(f"jobs must be >= 1, got {self.jobs}")
+        if self.jobs < 0:
+            raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {
@@ -536,7 +540,8 @@ def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
         params = getattr(config, sec).params
         keys[sec] = tuple(getattr(params, "MEMORY_KEYS", ())) if params is not None else ()
     for sec, names in keys.items():
-        old_sec = saved.get(sec) if isinstance(saved.get(sec), Mapping) else {}
+        section = saved.get(sec)
+        old_sec: Mapping[str, Any] = section if isinstance(section, Mapping) else {}
         defaults = params_to_dict(type(getattr(config, sec))()) if sec in MEMORY_SECTIONS \
             else None
         for key in names:

@@ -69,7 +69,7 @@ def field_docs(cls: type) -> dict[str, str]:
         body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
         for node in body:
             if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-                comments = []
+                comments: list[str] = []
                 i = node.lineno - 2
                 while i >= 0 and lines[i].strip().startswith("#:"):
                     comments.insert(0, lines[i].strip()[2:].strip())

@@ -1,6 +1,6 @@
 """Every pluggy hook specification of iloci.
 
-Two families, all prefixed ``iloci_``:
+Three families, all prefixed ``iloci_``:
 
 * **Registration hooks**, one per interface. Each receives a registry view
   for that kind and adds named components to it; a config then picks a
@@ -10,6 +10,8 @@ Two families, all prefixed ``iloci_``:
   bars, logging, figures and robot-side bookkeeping. Their return values
   are ignored; an exception raised in an observer propagates (observers
   must not fail silently).
+* **Extension hooks**: subcommands of the ``iloci`` command line, and
+  executors that run evaluation folds elsewhere (e.g. on Ray).
 
 A plugin implements any subset::
 
@@ -31,6 +33,9 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:  # pragma: no cover - for annotations only
+    import argparse
+
+    from iloci.evaluation.executors import FoldExecutor
     from iloci.events import FoldEvent, InteractionEvent, RehearsalEvent
     from iloci.registry import KindRegistry
 
@@ -120,4 +125,31 @@ def iloci_on_fold_finished(event: FoldEvent) -> None:
     """Called when one evaluation fold has finished (learning and inference).
 
     ``event`` gives the fold index and its metrics.
+    """
+
+
+# -- extensions ---------------------------------------------------------------
+
+@hookspec
+def iloci_add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Add subcommands to the ``iloci`` command line.
+
+    Called once when the command line builds its parser, after the
+    kernel's own commands. ``subparsers.add_parser(name, help=...)`` adds
+    one; set ``func(args) -> int`` on it with ``set_defaults`` (the exit
+    code; raise an :class:`~iloci.errors.IlociError` for a user error, exit
+    2). A name the kernel or another plugin already uses is an error.
+    """
+
+
+@hookspec(firstresult=True)
+def iloci_make_executor(name: str, jobs: int, address: str | None) -> FoldExecutor | None:
+    """Return the fold executor called ``name``, or None when this plugin has none.
+
+    Called by :func:`iloci.evaluation.executors.make_executor` (``iloci
+    evaluate --executor NAME``) before the kernel's own ``local``; the
+    first non-None result is used. ``jobs`` is the number of folds to run at
+    once, ``address`` where the executor's engine runs (None: start one on
+    this machine). The result follows
+    :class:`iloci.evaluation.executors.FoldExecutor`.
     """

@@ -82,6 +82,15 @@ class RNNPBParams:
     #: or ``"float64"``. ``generate`` and ``prediction_error`` always run in
     #: float64, so both back ends agree on them.
     dtype: str = "float32"
+    #: Which code trains: ``"auto"`` (torch-rnnpb: its native C kernel where
+    #: it was built and the sizes fit, else torch operations), ``"native"``
+    #: (the native kernel or an error; float32 only) or ``"torch"`` (torch
+    #: operations). The native kernel runs the widest instruction set the
+    #: CPU has (AVX-512, AVX2 + FMA, portable C; the environment variable
+    #: ``ILOCI_RNNPB_ISA`` forces one); ``iloci plugins`` says which.
+    #: jax-rnnpb has one kernel, XLA's, and accepts ``"auto"`` only. Like
+    #: ``dtype``, a setting of the loading model, not of a state.
+    kernel: str = "auto"
 
     def validate(self) -> None:
         for name in ("input_size", "hidden", "context", "pb", "epochs",
@@ -102,5 +111,10 @@ class RNNPBParams:
                              f"{self.recognition_method!r}")
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+        if self.kernel not in ("auto", "native", "torch"):
+            raise ValueError(f"kernel must be 'auto', 'native' or 'torch', got {self.kernel!r}")
+        if self.kernel == "native" and self.dtype != "float32":
+            raise ValueError("kernel 'native' trains float32 only; set dtype = 'float32' or "
+                             "kernel = 'auto'")
         if not 0.0 <= self.closed_loop <= 1.0:
             raise ValueError(f"closed_loop must be in [0, 1], got {self.closed_loop}")

@@ -94,7 +94,7 @@ class PluginInfo:
 
 
 def _truthy(value: str | None) -> bool:
-    return bool(value) and value.strip().lower() not in ("0", "false", "no", "")
+    return value is not None and value.strip().lower() not in ("0", "false", "no", "")
 
 
 def _blocked_from_env() -> set[str]:

@@ -86,6 +86,10 @@ class ComponentSpec:
         Name of the plugin that registered it.
     distribution, version : str or None
         The distribution that ships the plugin.
+    describe : str
+        ``"module:function"`` returning one line on how the component runs
+        on this machine (e.g. which compute kernel), for ``iloci plugins``;
+        called only when the component is available. Empty: nothing to say.
     """
 
     kind: str
@@ -98,6 +102,7 @@ class ComponentSpec:
     plugin: str = ""
     distribution: str | None = None
     version: str | None = None
+    describe: str = ""
 
     def missing(self) -> list[str]:
         """Modules in :attr:`requires` that cannot be imported."""
@@ -117,6 +122,20 @@ class ComponentSpec:
 
     def default_params(self) -> Any:
         return self.params() if self.params is not None else None
+
+    def description(self) -> str:
+        """What :attr:`describe` says now ("" without one); its failure, as text.
+
+        Never raises: ``iloci plugins`` must list every component even when
+        one plugin's probe is broken.
+        """
+        if not self.describe or not self.available:
+            return ""
+        module, _, attr = self.describe.partition(":")
+        try:
+            return str(getattr(importlib.import_module(module), attr)())
+        except Exception as exc:  # noqa: BLE001 - a third-party probe may fail any way
+            return f"could not tell ({type(exc).__name__}: {exc})"
 
 
 class Registry:
@@ -139,7 +158,8 @@ class Registry:
     def add(self, kind: str, name: str, factory: str | Callable[..., Any], *,
             params: type | None = None, requires: Iterable[str] = (),
             install: str = "", summary: str = "", plugin: str = "",
-            distribution: str | None = None, version: str | None = None) -> ComponentSpec:
+            distribution: str | None = None, version: str | None = None,
+            describe: str = "") -> ComponentSpec:
         """Register a component. See :class:`ComponentSpec` for the arguments."""
         if kind not in self._specs:
             raise PluginError(f"plugin {plugin!r} registers unknown kind {kind!r}; "
@@ -162,8 +182,11 @@ class Registry:
                 f"{who(old.plugin, old.distribution)} and by {who(plugin, distribution)}. "
                 "Uninstall one, or block one with ILOCI_BLOCK_PLUGINS."
             )
+        if describe and ":" not in describe:
+            raise PluginError(f"plugin {plugin!r}: describe of {kind} {name!r} must be "
+                              f"'module:function', got {describe!r}.")
         spec = ComponentSpec(kind, name, factory, params, tuple(requires),
-                             install or "", summary, plugin, distribution, version)
+                             install or "", summary, plugin, distribution, version, describe)
         self._specs[kind][name] = spec
         return spec
 
@@ -284,12 +307,12 @@ class KindRegistry:
 
     def add(self, name: str, factory: str | Callable[..., Any], *,
             params: type | None = None, requires: Iterable[str] = (),
-            install: str = "", summary: str = "") -> ComponentSpec:
+            install: str = "", summary: str = "", describe: str = "") -> ComponentSpec:
         """Register component ``name`` of this kind (see :class:`ComponentSpec`)."""
         return self._registry.add(self.kind, name, factory, params=params,
                                   requires=requires, install=install, summary=summary,
                                   plugin=self._plugin, distribution=self._distribution,
-                                  version=self._version)
+                                  version=self._version, describe=describe)
 
     def names(self) -> list[str]:
         return self._registry.names(self.kind)

@@ -93,7 +93,7 @@ def test_nan_config_is_refused_by_config_check(tmp_path, cli):
     ("evaluation", {"folds": 1}, "folds must be in 2..7"),
     ("evaluation", {"folds": 8}, "folds must be in 2..7"),
     ("evaluation", {"train_fraction": 1.5}, r"train_fraction must be in \(0, 1\)"),
-    ("evaluation", {"jobs": 0}, "jobs must be >= 1"),
+    ("evaluation", {"jobs": -1}, "jobs must be >= 1, or 0 for one per CPU core"),
     ("evaluation", {"seed": 2**70}, "64-bit integer"),
     ("evaluation", {"seed": "0"}, "evaluation.seed must be int"),
     ("evaluation", {"seed": 1.5}, "evaluation.seed must be int"),
@@ -430,7 +430,7 @@ def test_evaluate_checks_its_report_libraries_before_fold_0(monkeypatch):
 
 
 def test_evaluate_refuses_an_unwritable_out_dir_before_fold_0(tmp_path, cli):
-    for plugin in ("iloci_jax", "iloci_scipy", "iloci_pinocchio"):  # the default config's
+    for plugin in ("iloci_torch", "iloci_scipy", "iloci_pinocchio"):  # the default config's
         pytest.importorskip(plugin)
     blocker = tmp_path / "file"
     blocker.write_text("")

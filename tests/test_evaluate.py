@@ -95,6 +95,25 @@ def test_unknown_fold_is_a_clear_error(small_config):
         evaluate(small_config, folds=[7])
 
 
+def test_jobs_default_to_one_per_core_and_are_checked(small_config, monkeypatch):
+    import os
+
+    from iloci.config import EvaluationConfig, load_config
+    from iloci.errors import ConfigError
+    from iloci.evaluation.evaluate import default_jobs
+    assert EvaluationConfig().jobs == 0                    # 0: one per CPU core
+    if hasattr(os, "sched_getaffinity"):
+        assert default_jobs() == len(os.sched_getaffinity(0))
+    with pytest.raises(InvalidInputError, match="jobs must be >= 1"):
+        evaluate(small_config, jobs=0)                     # an explicit 0 is a mistake
+    with pytest.raises(ConfigError, match="jobs"):
+        load_config({"evaluation": {"jobs": -1}})
+    # one fold asked for: one process, whatever the cores
+    monkeypatch.setattr("iloci.evaluation.evaluate.default_jobs", lambda: 8)
+    metrics, _ = evaluate(small_config, folds=[0], baseline=False)
+    assert metrics["jobs"] == 1
+
+
 # -- a plugin registered on the caller's own plugin manager (no entry point) ----------
 
 def _own_plugin_manager(factory="iloci.teachers:OracleTeacher", **extra):

@@ -18,6 +18,7 @@ import pytest
 from iloci import hookimpl, hookspecs
 from iloci.events import FoldEvent, InteractionEvent, RehearsalEvent
 from iloci.interfaces import Execution
+from iloci.cli import make_parser
 from iloci.plugins import get_plugin_manager, get_registry
 
 
@@ -159,6 +160,17 @@ class Recorder:
     def iloci_on_fold_finished(self, event):
         self.calls["iloci_on_fold_finished"].append(event)
 
+    @hookimpl
+    def iloci_add_commands(self, subparsers):
+        self.calls["iloci_add_commands"].append(subparsers)
+        p = subparsers.add_parser("recorded", help="test stand-in")
+        p.set_defaults(func=lambda args: 0)
+
+    @hookimpl
+    def iloci_make_executor(self, name, jobs, address):
+        self.calls["iloci_make_executor"].append((name, jobs, address))
+        return None  # not ours: the kernel's local executor runs the fold
+
 
 CONFIG = {
     "perceptual_model": {"name": "mean-rnnpb"},
@@ -185,6 +197,7 @@ def run():
     config = load_config(CONFIG, registry=get_registry(pm))
     metrics, results = evaluate(config, jobs=1, folds=[0], baseline=False,
                                 plugin_manager=pm)
+    make_parser(plugin_manager=pm)  # the command line asks plugins for their commands
     return recorder, metrics, results
 
 
@@ -229,6 +242,26 @@ def test_observers_see_the_whole_learning_phase(run):
     (done,) = recorder.calls["iloci_on_fold_finished"]
     assert isinstance(done, FoldEvent)
     assert done.fold == 0 and done.metrics["ccr"] == metrics["ccr_folds"][0]
+
+
+def test_extension_hooks_add_a_command_and_are_asked_for_the_executor(run):
+    recorder, _, _ = run
+    assert recorder.calls["iloci_make_executor"] == [("local", 1, None)]
+    pm = get_plugin_manager(autoload=False, plugins=[recorder])
+    args = make_parser(plugin_manager=pm).parse_args(["recorded"])
+    assert args.func(args) == 0
+
+
+def test_a_plugin_command_named_like_a_kernel_command_is_a_plugin_error():
+    from iloci.errors import PluginError
+
+    class Clash:
+        @hookimpl
+        def iloci_add_commands(self, subparsers):
+            subparsers.add_parser("evaluate")
+
+    with pytest.raises(PluginError, match="clashes"):
+        make_parser(plugin_manager=get_plugin_manager(autoload=False, plugins=[Clash()]))
 
 
 # -- observer faults -------------------------------------------------------------
@@ -329,7 +362,8 @@ def test_memory_refuses_a_config_that_changes_its_meaning(tmp_path, change, conf
     assert isinstance(e.value, ConfigError) and "unchanged" in str(e.value)
     assert path.read_bytes() == before
     # settings that only steer learning may change
-    fine = {**CONFIG, "learner": {"num_threshold": 5, "k_cutoff": 0.3}, "teacher": CONFIG["teacher"]}
+    fine = {**CONFIG, "learner": {"num_threshold": 5, "k_cutoff": 0.3},
+            "teacher": CONFIG["teacher"]}
     again = iloci.Agent.load(path, load_config(fine, registry=registry), plugin_manager=pm)
     assert again.memory.demonstrations_seen == 2
 

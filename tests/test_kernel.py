@@ -140,8 +140,9 @@ def _full(reg):
 
     Only component *names* are needed to validate a config; nothing is built.
     """
-    for kind, name in [("perceptual_model", "jax-rnnpb"), ("clusterer", "scipy"),
-                       ("ik", "pinocchio")]:
+    from iloci.config import DEFAULT_NAMES
+    for kind in ("perceptual_model", "clusterer", "ik"):
+        name = DEFAULT_NAMES[kind]
         if (kind, name) not in reg:
             reg.add(kind, name, "iloci_missing_for_test:X", plugin="test")
     return reg

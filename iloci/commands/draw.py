@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
                                 f"{out}.")
     loaded = load_memory(args.memory)
     header = loaded[2]
-    saved = header.get("config") if isinstance(header.get("config"), dict) else {}
+    config = header.get("config")
+    saved: dict = config if isinstance(config, dict) else {}
     name = _simulator_name(args, saved)
     registry = get_registry()
     # resolve the names before loading the network: a typo fails fast, with "did you mean"

@@ -28,6 +28,7 @@ def rows() -> tuple[list[dict], list[dict]]:
             "status": "available" if not missing else
             f"missing {', '.join(missing)}: {spec.install or 'pip install ' + ' '.join(missing)}",
             "summary": spec.summary,
+            "here": spec.description(),
         })
     broken = [{"plugin": i.name, "distribution": i.distribution, "status": i.status,
                "error": i.error, "why": i.why_unloaded}
@@ -49,6 +50,9 @@ def run(args: argparse.Namespace) -> int:
     print("  ".join(c.upper().ljust(widths[c]) for c in cols).rstrip())
     for r in table:
         print("  ".join(str(r[c]).ljust(widths[c]) for c in cols).rstrip())
+    for r in table:
+        if r["here"]:
+            print(f"{r['kind']} {r['name']}: {r['here']}")
     for b in broken:
         if b["status"] == "failed":
             print(f"failed: plugin {b['plugin']!r} ({b['distribution']}): {b['error']}")

@@ -113,7 +113,8 @@ def _show_memory(args: argparse.Namespace) -> int:
         raise InvalidInputError("--demo, --out and --config apply to a demonstration, not to "
                                 f"a memory file ({args.shape}).")
     memory, _, header = load_memory(args.shape)
-    config = header.get("config") if isinstance(header.get("config"), dict) else {}
+    saved = header.get("config")
+    config: dict = saved if isinstance(saved, dict) else {}
     names = ", ".join(f"{sec} = {v['name']}" for sec, v in config.items()
                       if isinstance(v, dict) and "name" in v)
     print(f"{args.shape}: {names or 'no saved config'}")

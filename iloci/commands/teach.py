@@ -12,6 +12,7 @@ gets an error instead of racing the first.
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 import sys
 import warnings
@@ -78,6 +79,7 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     from iloci.concepts.memory import load_memory
     from iloci.config import load_config
     from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
+    from iloci.display import Bars
     from iloci.progress import PROGRESS_KEY, item_digest, progress_record, resume_point
 
     header = load_memory(memory_path)[2] if memory_path.exists() else None
@@ -110,6 +112,18 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
               f"{len(items) - done} (add --again to teach them all again).")
     keys = [getattr(i, "key", None) for i in items]
     position = [done]  # stream items consumed, up to the last one learned
+    # A bar over the stream on a terminal or in a notebook (stderr); a log gets
+    # the line per demonstration below and nothing else. None with the
+    # console teacher, whose questions need the terminal.
+    bars = Bars(unit="demos") if cfg.teacher.name != "console" else None
+    if bars is not None and not bars.live:
+        bars = None
+    shown = [done]  # a resumed stream's bar starts where the earlier run stopped
+
+    def advance() -> None:
+        shown[0] += 1
+        if bars is not None:
+            bars.update("teach", shown[0])
 
     def save(outcome) -> None:
         # the learned item is the next one of the stream with the outcome's key
@@ -120,11 +134,16 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
         position[0] = min(i + 1, len(items))
         agent.save(memory_path, extra={PROGRESS_KEY: progress_record(digests, position[0])})
         print(_describe(outcome), flush=True)
+        advance()
 
     def show_skip(message, category, filename, lineno, file=None, line=None) -> None:
         print(f"warning: {message}", file=sys.stderr, flush=True)
+        advance()
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), bars or contextlib.nullcontext():
+        if bars is not None:
+            bars.add("teach", "teaching", len(items))
+            bars.update("teach", done)
         warnings.simplefilter("always", SkippedDemonstrationWarning)
         warnings.showwarning = show_skip
         report = agent.teach(items[done:], on_change=save)

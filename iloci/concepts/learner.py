@@ -315,8 +315,8 @@ class Learner:
                     faults.append((hook_name, impl.plugin_name, exc))
         if faults:
             from iloci.errors import ObserverError
-            hook_name, plugin, exc = faults[0]
-            raise ObserverError(hook_name, plugin, exc, outcome, len(faults)) from exc
+            hook_name, plugin, first = faults[0]
+            raise ObserverError(hook_name, plugin, first, outcome, len(faults)) from first
 
     def _rehearse(self, reason: str, new_pattern: np.ndarray | None = None,
                   new_entry: Entry | None = None) -> RehearsalEvent:
@@ -327,8 +327,8 @@ class Learner:
         if new_entry is not None:
             self.memory.entries.append(new_entry)
         rehearsal.apply(result, self.memory.entries)
-        event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0, loss=result.loss,
-                               seconds=result.seconds, reason=reason,
+        event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0,
+                               loss=result.loss, seconds=result.seconds, reason=reason,
                                extra={"concepts": len(self.memory.concepts())})
         self._pending.append(("iloci_on_rehearsal", event))
         return event

@@ -390,7 +390,7 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
                               "iloci": __version__, "memory": meta, **dict(extra or {})}
     header["checksum"] = _checksum(header, arrays)
     arrays["__header__"] = np.frombuffer(json.dumps(header, sort_keys=True).encode(), np.uint8)
-    return write_atomic(path, lambda fh: np.savez(fh, **arrays), mkdir=True)
+    return write_atomic(path, lambda fh: np.savez(fh, allow_pickle=False, **arrays), mkdir=True)
 
 
 def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndarray],

@@ -203,7 +203,7 @@ _DECIMAL_COMMA_RE = re.compile(r"[+-]?\d+,\d+([eE][+-]?\d+)?")
 
 def _decode(raw: bytes, name: str) -> tuple[str, str]:
     """The text of a CSV file and the encoding it was read with."""
-    for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+    for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),  # noqa: B007 (enc: the one found, used after the loop)
                      (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
                      (codecs.BOM_UTF16_BE, "utf-16")):
         if raw.startswith(bom):

@@ -21,6 +21,7 @@ __all__ = ["resample_positions", "dtw_1nn"]
 def resample_positions(demo: Demonstration, points: int = 50) -> np.ndarray:
     """Positions linearly resampled at ``points`` equal time steps, shape (points, 2)."""
     t = demo.times
+    assert t is not None  # Demonstration fills in times when none are given
     grid = np.linspace(t[0], t[-1], points)
     return np.column_stack([np.interp(grid, t, demo.positions[:, k]) for k in range(2)])
 

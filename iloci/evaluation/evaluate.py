@@ -7,7 +7,8 @@ when the demonstration its nearest memory entry stands for has the same
 true concept (what an oracle teacher would reward). The DTW 1-NN baseline
 runs on the same folds.
 
-Folds run in parallel processes (``jobs``, :mod:`iloci.evaluation.parallel`);
+Folds run in parallel (``jobs``, :mod:`iloci.evaluation.parallel`) on an
+executor (:mod:`iloci.evaluation.executors`: worker processes here, or Ray);
 progress (per fold and per interaction, with ETA) is reported through a
 callback fed by the ``iloci_on_interaction`` observer hook. Each fold gives
 a :class:`FoldResult`; :func:`summarize` turns them into ``metrics.json``.
@@ -32,7 +33,7 @@ from iloci.errors import InvalidInputError
 from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["Evaluation", "FoldResult", "evaluate", "fold_plan", "memory_counts", "run_fold",
+__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan", "memory_counts", "run_fold",
            "summarize", "versions"]
 
 
@@ -216,6 +217,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     predicted = [_true_concept(r.source, known) for r in recs]
     mem = agent.memory
     entries = mem.entries
+    counts = memory_counts(mem)
     res = FoldResult(
         fold=fold,
         learn=[d.key for d in learn],
@@ -227,7 +229,8 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         feedbacks=[int(f) for f in report.feedbacks],
         first_guess=[bool(g) for g in report.first_guess_correct],
         interactions_per_demo=len(report.feedbacks) / max(1, len(report.outcomes)),
-        **memory_counts(mem),
+        entries=counts["entries"], exemplars=counts["exemplars"],
+        prototypes=counts["prototypes"], concepts=counts["concepts"],
         generation_error=float(np.mean([e.generation_error for e in entries])),
         rehearsals=len(report.rehearsals),
         rehearsal_seconds=float(sum(r.seconds for r in report.rehearsals)),
@@ -353,17 +356,36 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
     return out
 
 
+def default_jobs() -> int:
+    """Folds to run at once when neither ``--jobs`` nor ``evaluation.jobs`` says.
+
+    One per CPU core this process may run on (its affinity mask where the
+    system has one, e.g. under ``taskset`` or a container's CPU set; else
+    :func:`os.cpu_count`); at least 1. A fold is single-threaded (the RNNPB
+    back ends train on one thread), so more processes than cores only
+    share them.
+    """
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        n = os.cpu_count() or 1
+    return max(1, n)
+
+
 def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
-             plugin_manager: Any = None) -> Evaluation:
+             plugin_manager: Any = None, executor: str = "local",
+             address: str | None = None) -> Evaluation:
     """Run the k-fold protocol; return the metrics and every fold's result.
 
     Parameters
     ----------
     config : Config, path, mapping or None
     jobs : int, optional
-        Parallel processes (default ``config.evaluation.jobs``).
+        Folds run at once (default ``config.evaluation.jobs``; 0 there means
+        :func:`default_jobs`, one per CPU core, at most one per fold). With
+        ``executor="local"`` and ``jobs == 1`` they run in this process.
     progress : callable, optional
         Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
         "rehearsal"|"fold_done", "fold": k, ...}``.
@@ -376,6 +398,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         only on this manager can be evaluated) and receives
         ``iloci_on_fold_finished``; with ``jobs == 1`` also the learning
         events. Defaults to :func:`~iloci.plugins.get_plugin_manager`.
+    executor : str
+        Where the folds run (:func:`~iloci.evaluation.executors.make_executor`):
+        ``"local"`` (worker processes of joblib's loky pool) or ``"ray"``
+        (the ``iloci-ray`` plugin).
+    address : str, optional
+        The executor's engine (e.g. a running Ray cluster, ``HOST:PORT``).
 
     Returns
     -------
@@ -385,8 +413,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
 
     Notes
     -----
-    With ``jobs > 1`` the folds run in spawned worker processes
-    (:mod:`iloci.evaluation.parallel`), which cannot receive a plugin
+    Results do not depend on the executor or ``jobs``: each fold's seeds
+    come from the config and the fold index.
+
+    In parallel (``jobs > 1`` or an executor other than ``local``) the folds
+    run in worker processes (:mod:`iloci.evaluation.parallel`), which cannot
+    receive a plugin
     manager (its plugin objects do not pickle). Without ``plugin_manager``,
     each worker builds the default one from the installed plugins, as the
     parent does. With one, the parent resolves the config's component names
@@ -410,6 +442,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         Re-raised after the workers are stopped.
     """
     from iloci.data import load_lasa
+    from iloci.evaluation.executors import LocalExecutor, make_executor
     from iloci.evaluation.parallel import FoldTask, resolved_specs, run_folds_in_processes
     from iloci.plugins import get_plugin_manager, get_registry
 
@@ -425,18 +458,31 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         import importlib.util
         if any(importlib.util.find_spec(m) is None for m in BASELINE_MODULES):
             check_report_extras(baseline=True)
-    jobs = int(jobs or config.evaluation.jobs)
-    if jobs < 1:
-        raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
+    asked = int(jobs if jobs is not None else config.evaluation.jobs)
+    if asked < 0 or (jobs is not None and asked == 0):
+        raise InvalidInputError(f"jobs must be >= 1, got {asked}.")
+    n_folds = config.evaluation.folds
+    wanted = list(range(n_folds)) if folds is None else list(folds)
+    for k in wanted:
+        if not 0 <= k < n_folds:
+            raise InvalidInputError(f"fold {k} does not exist; folds are 0..{n_folds - 1}.")
+    # 0: one per core, never more than folds; serial where the given plugin
+    # manager's components could not be sent to a worker (parallelism the
+    # caller did not ask for must not fail the run)
+    jobs = asked or min(default_jobs(), len(wanted))
+    if asked == 0 and jobs > 1 and executor == "local" and plugin_manager is not None:
+        try:
+            resolved_specs(config, pm)
+        except InvalidInputError:
+            jobs = 1
+    runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
+    serial = jobs == 1 and isinstance(runner, LocalExecutor)
     # resolved (and checked to pickle) before any data is loaded or fold run
-    specs = resolved_specs(config, pm) if jobs > 1 and plugin_manager is not None else None
+    specs = (resolved_specs(config, pm) if not serial and plugin_manager is not None
+             else None)
     shapes = list(config.data.shapes)
     demos = load_lasa(shapes or None)
-    plan = fold_plan(demos, config)
-    wanted = list(range(len(plan))) if folds is None else list(folds)
-    for k in wanted:
-        if not 0 <= k < len(plan):
-            raise InvalidInputError(f"fold {k} does not exist; folds are 0..{len(plan) - 1}.")
+    plan = fold_plan(demos, config)  # one (learn, test) pair per fold
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
     results: list[FoldResult] = []
@@ -447,7 +493,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         emit({"kind": "fold_done", "fold": res.fold, "ccr": res.ccr,
               "seconds": res.wall_seconds})
 
-    if jobs == 1:
+    if serial:  # in this process: the observers see every learning event
         for k in wanted:
             learn_idx, test_idx = plan[k]
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
@@ -456,7 +502,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
                               plugin_manager=pm))
     else:
         run_folds_in_processes(config.to_dict(), [FoldTask(k, *plan[k]) for k in wanted],
-                               shapes, jobs, baseline=baseline, specs=specs, emit=emit,
+                               shapes, runner, baseline=baseline, specs=specs, emit=emit,
                                on_result=finished)
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r.fold)

@@ -67,7 +67,7 @@ def plot_matrix(matrix: np.ndarray, concepts: Sequence[str], path: str | Path, *
     return _save(fig, path)
 
 
-def _pad(rows: Sequence[Sequence[float]]) -> np.ndarray:
+def _pad(rows: Sequence[Sequence[float] | np.ndarray]) -> np.ndarray:
     width = max((len(r) for r in rows), default=0)
     out = np.full((len(rows), width), np.nan)
     for i, r in enumerate(rows):
@@ -160,7 +160,8 @@ def plot_pb_space(pbs: np.ndarray, concepts: Sequence[str], path: str | Path, *,
         idx = [i for i, c in enumerate(concepts) if c == name]
         s = [sizes.get(kinds[i], 30) if kinds else 30 for i in idx]
         ax.scatter(xy[idx, 0], xy[idx, 1], s=s, marker=markers[k % len(markers)],
-                   color=cmap((2 * k) % 20 + (k // 10) % 2), label=name, alpha=0.8, edgecolors="none")
+                   color=cmap((2 * k) % 20 + (k // 10) % 2), label=name, alpha=0.8,
+                   edgecolors="none")
     ax.set_title("PB space (non-metric MDS)")
     ax.set_xticks([])
     ax.set_yticks([])

@@ -57,7 +57,7 @@ def confidence_matrix(true: Sequence[str], predicted: Sequence[str],
         return np.where(counts > 0, sums / counts, np.nan)
 
 
-def backward_moving_average(x: Sequence[float], window: int = 7) -> np.ndarray:
+def backward_moving_average(x: Sequence[float] | np.ndarray, window: int = 7) -> np.ndarray:
     """``y[i] = mean(x[max(0, i - window + 1) : i + 1])``, shape (len(x),).
 
     The paper smooths the +1/-1 reinforcement signal this way (window 7).

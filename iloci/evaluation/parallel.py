@@ -1,7 +1,8 @@
 """Evaluation folds in worker processes.
 
 :func:`run_folds_in_processes` runs folds of :func:`iloci.evaluation.evaluate.evaluate`
-in a pool of spawned processes and relays their progress messages. A worker
+on an executor (:mod:`iloci.evaluation.executors`: joblib's loky pool here, or a
+plugin's, e.g. Ray) and relays their progress messages. A worker
 cannot receive the caller's plugin manager (plugin objects and modules do
 not pickle); when the caller has one, the worker gets the registry entries
 it resolved the config's component names to (:func:`resolved_specs`) and
@@ -11,13 +12,7 @@ registers them alone (:class:`ResolvedComponents`).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-import concurrent.futures as cf
 from dataclasses import dataclass
-import multiprocessing as mp
-import os
-import signal
-import threading
-import time
 from typing import Any
 
 from iloci.errors import InvalidInputError
@@ -41,22 +36,6 @@ class FoldTask:
     fold: int
     learn: list[int]
     test: list[int]
-
-
-def _worker_init() -> None:
-    # The parent handles Ctrl-C and terminates the workers.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    # A parent killed outright (SIGKILL, SIGTERM) cannot stop its workers;
-    # they notice they were orphaned and exit instead of computing on.
-    parent = os.getppid()
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="iloci-orphan-watch").start()
 
 
 class ResolvedComponents:
@@ -137,8 +116,9 @@ def resolved_specs(config: Any, pm: Any) -> list[Any]:
     return specs
 
 
-def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], queue: Any,
-                        baseline: bool, specs: Sequence[Any] | None = None) -> Any:
+def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
+                        specs: Sequence[Any] | None, queue: Any) -> Any:
+    """One fold in an executor's worker; ``queue.put`` receives its progress messages."""
     from iloci.data import load_lasa
     from iloci.evaluation.evaluate import run_fold
     from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
@@ -159,10 +139,10 @@ def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], qu
 
 
 def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
-                           jobs: int, *, baseline: bool, specs: Sequence[Any] | None,
+                           runner: Any, *, baseline: bool, specs: Sequence[Any] | None,
                            emit: Callable[[dict], None],
                            on_result: Callable[[Any], None]) -> None:
-    """Run ``tasks`` in up to ``jobs`` spawned processes.
+    """Run ``tasks`` on ``runner``, an executor (:mod:`iloci.evaluation.executors`).
 
     Parameters
     ----------
@@ -171,7 +151,8 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
     tasks : sequence of FoldTask
     shapes : list of str
         ``[data] shapes``, so each worker loads the same demonstrations.
-    jobs : int
+    runner : FoldExecutor
+        ``local`` (joblib's loky pool) or a plugin's (e.g. Ray).
     baseline : bool
         Run the DTW 1-NN baseline in each fold too.
     specs : sequence of ComponentSpec, optional
@@ -187,32 +168,12 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
     Raises
     ------
     BaseException
-        Whatever a fold raised, or KeyboardInterrupt: the workers are
-        terminated first.
+        Whatever a fold raised, or KeyboardInterrupt: the executor stops
+        its workers first.
     """
-    ctx = mp.get_context("spawn")  # no fork: torch/JAX threads do not survive it
-    manager = ctx.Manager()
-    queue = manager.Queue()
-    pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx,
-                                  initializer=_worker_init)
-    try:
-        futures = {}
-        for task in tasks:
-            futures[pool.submit(_run_fold_in_worker, config_dict, task, shapes, queue,
-                                baseline, specs)] = task.fold
-            emit({"kind": "fold_queued", "fold": task.fold, "total": len(task.learn)})
-        pending = set(futures)
-        while pending:
-            done, pending = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_COMPLETED)
-            while not queue.empty():
-                emit(queue.get())
-            for fut in done:
-                on_result(fut.result())
-    except BaseException:
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
-        manager.shutdown()
-        raise
-    pool.shutdown()
-    manager.shutdown()
+    calls = []
+    for task in tasks:
+        calls.append((config_dict, task, shapes, baseline, specs))
+        emit({"kind": "fold_queued", "fold": task.fold, "total": len(task.learn)})
+    for res in runner.run(_run_fold_in_worker, calls, emit):
+        on_result(res)

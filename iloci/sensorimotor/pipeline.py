@@ -113,6 +113,7 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     targets = robot.plane.to_3d(plane_points)
     joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
     times = demo.times
+    assert times is not None  # Demonstration fills in times when none are given
     dt = float(times[-1] - times[0]) / (cfg.steps - 1)
     return Motion(demo.key, plane_points, targets, joint_path, dt)
 

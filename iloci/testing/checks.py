@@ -18,11 +18,14 @@ from iloci.errors import IlociError, InvalidInputError
 from iloci.interfaces import Demonstration, Execution, Response
 
 Factory = Callable[[int], Any]
+#: A conformance check: raises when the component ``make`` builds misbehaves.
+Check = Callable[[Factory], None]
 
 
 # -- helpers -----------------------------------------------------------------
 
-def _expect_error(fn: Callable[[], Any], what: str, types: tuple[type, ...] = (IlociError,)) -> None:
+def _expect_error(fn: Callable[[], Any], what: str,
+                  types: tuple[type[BaseException], ...] = (IlociError,)) -> None:
     """``fn`` must raise one of ``types`` (an iloci error), not a deep traceback."""
     try:
         fn()
@@ -103,7 +106,7 @@ def pm_state_round_trip(make: Factory) -> None:
     assert isinstance(state, dict) and state, "state() must be a non-empty dict"
     # Must survive a pickle-free file round trip.
     buf = io.BytesIO()
-    np.savez(buf, **{k: np.asarray(v) for k, v in state.items()})
+    np.savez(buf, allow_pickle=False, **{k: np.asarray(v) for k, v in state.items()})
     buf.seek(0)
     with np.load(buf, allow_pickle=False) as f:
         loaded = {k: f[k] for k in f.files}
@@ -155,8 +158,8 @@ def pm_bad_input(make: Factory) -> None:
         _expect_error(fn, name, (InvalidInputError,))
 
 
-PERCEPTUAL_MODEL_CHECKS = [pm_protocol, pm_shapes_and_dtypes, pm_deterministic,
-                           pm_state_round_trip, pm_batch_vs_single, pm_bad_input]
+PERCEPTUAL_MODEL_CHECKS: list[Check] = [pm_protocol, pm_shapes_and_dtypes, pm_deterministic,
+                                        pm_state_round_trip, pm_batch_vs_single, pm_bad_input]
 
 
 # -- Clusterer ---------------------------------------------------------------
@@ -196,7 +199,7 @@ def cl_shapes_and_labels(make: Factory) -> None:
 def cl_complete_link(make: Factory) -> None:
     c = make(0)
     rng = np.random.default_rng(1)
-    for trial in range(20):
+    for _ in range(20):
         x = rng.normal(size=(int(rng.integers(2, 25)), 3))
         t = float(rng.uniform(0.3, 3.0))
         _complete_link_ok(x, np.asarray(c.cluster(x, t)), t)
@@ -221,8 +224,8 @@ def cl_bad_input(make: Factory) -> None:
                   (InvalidInputError,))
 
 
-CLUSTERER_CHECKS = [cl_protocol, cl_shapes_and_labels, cl_complete_link, cl_deterministic,
-                    cl_bad_input]
+CLUSTERER_CHECKS: list[Check] = [cl_protocol, cl_shapes_and_labels, cl_complete_link,
+                                 cl_deterministic, cl_bad_input]
 
 
 # -- Teacher -----------------------------------------------------------------
@@ -258,7 +261,7 @@ def te_deterministic(make: Factory) -> None:
     assert run(make(5)) == run(make(5)), "same seed must give the same feedback sequence"
 
 
-TEACHER_CHECKS = [te_protocol, te_feedback_values, te_deterministic]
+TEACHER_CHECKS: list[Check] = [te_protocol, te_feedback_values, te_deterministic]
 
 
 # -- IKSolver ----------------------------------------------------------------
@@ -363,8 +366,9 @@ def ik_continuous_path(make: Factory) -> None:
         "point from the previous solution and keep the nearest solution.")
 
 
-IK_SOLVER_CHECKS = [ik_protocol, ik_forward_shapes_batch_vs_single, ik_solve_reaches_targets,
-                    ik_deterministic, ik_continuous_path, ik_bad_input]
+IK_SOLVER_CHECKS: list[Check] = [ik_protocol, ik_forward_shapes_batch_vs_single,
+                                 ik_solve_reaches_targets, ik_deterministic,
+                                 ik_continuous_path, ik_bad_input]
 
 
 # -- Simulator ---------------------------------------------------------------
@@ -437,10 +441,11 @@ def sim_bad_input(make: Factory) -> None:
         sim.close()
 
 
-SIMULATOR_CHECKS = [sim_protocol, sim_execute_shapes_deterministic, sim_render, sim_bad_input]
+SIMULATOR_CHECKS: list[Check] = [sim_protocol, sim_execute_shapes_deterministic, sim_render,
+                                 sim_bad_input]
 
 
-CHECKS: dict[str, list[Callable[[Factory], None]]] = {
+CHECKS: dict[str, list[Check]] = {
     "perceptual_model": PERCEPTUAL_MODEL_CHECKS,
     "clusterer": CLUSTERER_CHECKS,
     "teacher": TEACHER_CHECKS,

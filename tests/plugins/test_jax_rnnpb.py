@@ -12,7 +12,7 @@ jax = pytest.importorskip("jax")
 
 import jax.numpy as jnp  # noqa: E402
 
-from iloci.rnnpb_common import init_weights, make_params, pad_sequences  # noqa: E402
+from iloci.rnnpb import init_weights, make_params, pad_sequences  # noqa: E402
 from iloci.testing import parametrize_with_checks, registry_factory  # noqa: E402
 from iloci.testing.checks import synthetic_sequences  # noqa: E402
 from iloci_jax import rnnpb as jr  # noqa: E402

@@ -32,7 +32,7 @@ import pytest
 pytest.importorskip("torch")
 pytest.importorskip("jax")
 
-from iloci.rnnpb_common import WEIGHT_NAMES  # noqa: E402
+from iloci.rnnpb import WEIGHT_NAMES  # noqa: E402
 from iloci.testing.checks import synthetic_sequences  # noqa: E402
 from iloci_jax.rnnpb import JaxRNNPB  # noqa: E402
 from iloci_torch.rnnpb import TorchRNNPB  # noqa: E402

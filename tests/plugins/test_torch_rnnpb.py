@@ -10,7 +10,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from iloci.rnnpb_common import init_weights, make_params, pad_sequences  # noqa: E402
+from iloci.errors import InvalidInputError  # noqa: E402
+from iloci.rnnpb import init_weights, make_params, pad_sequences  # noqa: E402
 from iloci.testing import parametrize_with_checks, registry_factory  # noqa: E402
 from iloci.testing.checks import synthetic_sequences  # noqa: E402
 from iloci_torch.rnnpb import TorchRNNPB, _Net  # noqa: E402
@@ -88,16 +89,17 @@ def test_float32_and_float64_train_alike():
 
 # -- the native float32 training kernel (_native.c) ----------------------------------
 
-from iloci_torch.rnnpb import native_kernel_available  # noqa: E402
+from iloci_torch.native import (ISA_ENV, ISAS, kernel_info, native_isas,  # noqa: E402
+                                native_kernel_available)
 
 needs_native = pytest.mark.skipif(not native_kernel_available(),
-                                  reason="native kernel not built or no AVX-512 here")
+                                  reason="native kernel not built")
 
 
 def _train_both(seqs, epochs, **params):
     """The same training with the native kernel and with torch operations."""
-    native, ops = TorchRNNPB(seed=4, **params), TorchRNNPB(seed=4, **params)
-    ops.use_native = False
+    native = TorchRNNPB(seed=4, kernel="native", **params)
+    ops = TorchRNNPB(seed=4, kernel="torch", **params)
     return native, native.train(seqs, epochs=epochs), ops, ops.train(seqs, epochs=epochs)
 
 
@@ -107,16 +109,21 @@ def _max_weight_difference(a, b):
 
 
 @needs_native
+@pytest.mark.parametrize("isa", list(ISAS))
 @pytest.mark.parametrize("params", [
     {},                                                       # paper sizes: 31 -> 32, 60 -> 64
     {"closed_loop": 0.5, "warmup_epochs": 3, "learning_rate_decay": 0.5},
     {"hidden": 20, "context": 5, "pb": 2},                   # 11 -> 16, 20 -> 32
     {"hidden": 100, "context": 40},                          # 7 and 3 registers per row
 ], ids=["paper", "teacher-forced-warmup-decay", "small", "wide"])
-def test_native_kernel_trains_like_the_torch_operations(params):
+def test_native_kernel_trains_like_the_torch_operations(params, isa, monkeypatch):
+    if isa not in native_isas():
+        pytest.skip(f"this CPU cannot run {isa}")
+    monkeypatch.setenv(ISA_ENV, isa)
     # lengths differ (masking), the row count is no multiple of the kernel's row block
     seqs = synthetic_sequences(7, 6, lengths=(12, 17, 9))
     native, pbs_native, ops, pbs_ops = _train_both(seqs, 5, **params)
+    assert native.kernel_ == f"native kernel ({isa})" and ops.kernel_ == "torch operations"
     # float32, different rounding: 5 epochs stay within a few float32 ulps of the weights
     assert _max_weight_difference(native, ops) < 1e-5
     np.testing.assert_allclose(pbs_native, pbs_ops, atol=1e-5)
@@ -133,11 +140,54 @@ def test_native_kernel_continues_from_the_current_weights():
 
 
 def test_sizes_beyond_the_native_kernel_use_torch_operations():
-    # 130 hidden units need 9 registers per row, more than the kernel's 8
+    # 257 hidden units pad to 272 columns, more than the kernel's 256
     seqs = synthetic_sequences(3, 6)
-    a, pbs_a, b, pbs_b = _train_both(seqs, 2, hidden=130)
+    a = TorchRNNPB(seed=4, hidden=257)
+    b = TorchRNNPB(seed=4, hidden=257, kernel="torch")
+    pbs_a, pbs_b = a.train(seqs, epochs=2), b.train(seqs, epochs=2)
+    assert a.kernel_ == "torch operations"
     assert _max_weight_difference(a, b) == 0.0
     np.testing.assert_array_equal(pbs_a, pbs_b)
+
+
+@needs_native
+def test_kernel_native_refuses_what_it_cannot_train():
+    from iloci.errors import IlociError
+    with pytest.raises(IlociError, match="256 hidden or state units"):
+        TorchRNNPB(seed=0, hidden=257, kernel="native").train(synthetic_sequences(2, 6),
+                                                               epochs=1)
+
+
+def test_kernel_setting_is_checked():
+    with pytest.raises(InvalidInputError, match="kernel must be"):
+        TorchRNNPB(kernel="fast")
+    with pytest.raises(InvalidInputError, match="float32 only"):
+        TorchRNNPB(kernel="native", dtype="float64")
+
+
+def test_kernel_torch_trains_with_torch_operations():
+    m = TorchRNNPB(seed=0, kernel="torch")
+    m.train(synthetic_sequences(2, 6), epochs=1)
+    assert m.kernel_ == "torch operations"
+    assert kernel_info("torch").startswith("torch operations")
+    assert kernel_info("auto", "float64").startswith("torch operations")
+
+
+@needs_native
+def test_forcing_an_instruction_set(monkeypatch):
+    from iloci.errors import IlociError
+    monkeypatch.setenv(ISA_ENV, "portable")             # runs everywhere it was built
+    assert kernel_info() == f"native kernel (portable; forced by {ISA_ENV})"
+    monkeypatch.setenv(ISA_ENV, "sse9")
+    with pytest.raises(IlociError, match="no instruction set"):
+        TorchRNNPB(seed=0).train(synthetic_sequences(2, 6), epochs=1)
+    missing = [isa for isa in ISAS if isa not in native_isas()]
+    if missing:
+        monkeypatch.setenv(ISA_ENV, missing[0])
+        with pytest.raises(IlociError, match="cannot run"):
+            kernel_info()
+    monkeypatch.setenv(ISA_ENV, "auto")
+    assert kernel_info() == f"native kernel ({native_isas()[0]})"
 
 
 @needs_native
@@ -154,17 +204,23 @@ def test_native_divergence_leaves_the_model_unchanged():
 
 def test_native_kernel_is_built_and_used_where_it_can_be():
     # The extension is optional, so a failed build installs silently: catch
-    # that here, on machines that have a C compiler (and AVX-512 to run it).
+    # that here, on machines that have a C compiler.
     import importlib.util
-    import platform
     import shutil
-    if platform.machine() != "x86_64" or not (shutil.which("cc") or shutil.which("gcc")):
-        pytest.skip("no x86-64 C compiler: the native kernel is not expected")
+    if not (shutil.which("cc") or shutil.which("gcc")):
+        pytest.skip("no C compiler: the native kernel is not expected")
     assert importlib.util.find_spec("iloci_torch._native") is not None, \
         "iloci_torch._native was not compiled at install time"
+    assert native_kernel_available()
     try:
         with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
-            flags = fh.read()
-    except OSError:
-        pytest.skip("no /proc/cpuinfo to tell whether the CPU has AVX-512")
-    assert native_kernel_available() == (" avx512f" in flags and " fma" in flags)
+            flags = set(next(line for line in fh if line.startswith("flags")).split())
+    except (OSError, StopIteration):
+        pytest.skip("no /proc/cpuinfo flags to tell which instruction sets the CPU has")
+    expected = tuple(isa for isa, needs in [("avx512", {"avx512f", "fma"}),
+                                            ("avx2", {"avx2", "fma"}), ("portable", set())]
+                     if needs <= flags)
+    assert native_isas() == expected
+    m = TorchRNNPB(seed=0)
+    m.train(synthetic_sequences(2, 6), epochs=1)
+    assert m.kernel_ == f"native kernel ({expected[0]})" == kernel_info()

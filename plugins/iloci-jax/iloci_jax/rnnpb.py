@@ -1,6 +1,6 @@
 """The RNNPB in JAX: jit-compiled closed-loop BPTT over padded batches.
 
-The model is defined in :mod:`iloci.rnnpb_common`. Here every kernel is
+The model is defined in :mod:`iloci.rnnpb`. Here every kernel is
 one ``jax.jit`` function over padded, time-major arrays: the time loop is a
 ``lax.scan``, the whole training (all epochs, Adam, clipping) or recognition
 (all Levenberg-Marquardt steps, the Jacobian by ``jax.linearize``) is one
@@ -23,8 +23,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
-                                 WEIGHT_NAMES, RNNPBBase, diverged_error)
+from iloci.errors import InvalidInputError
+from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
+                          WEIGHT_NAMES, RNNPBBase, diverged_error)
 
 __all__ = ["JaxRNNPB"]
 
@@ -251,8 +252,8 @@ class JaxRNNPB(RNNPBBase):
 
     Implements :class:`iloci.interfaces.PerceptualModel`; the public
     methods and their contract are documented in
-    :class:`iloci.rnnpb_common.RNNPBBase`, the network in
-    :mod:`iloci.rnnpb_common`.
+    :class:`iloci.rnnpb.RNNPBBase`, the network in
+    :mod:`iloci.rnnpb`.
 
     Parameters
     ----------
@@ -275,6 +276,11 @@ class JaxRNNPB(RNNPBBase):
     geometric_buckets = True
 
     def _setup(self) -> None:
+        if self.params.kernel != "auto":
+            raise InvalidInputError(
+                f"jax-rnnpb has one kernel (XLA's), got kernel = {self.params.kernel!r}; "
+                "remove the setting or set kernel = \"auto\" (\"native\" and \"torch\" "
+                "are torch-rnnpb's).")
         self._x64 = self.params.dtype == "float64"
         self._dtype = np.float64 if self._x64 else np.float32
 

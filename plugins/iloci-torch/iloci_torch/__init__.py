@@ -12,5 +12,6 @@ def iloci_register_perceptual_models(registry) -> None:
     registry.add("torch-rnnpb", "iloci_torch.rnnpb:TorchRNNPB", params=RNNPBParams,
                  requires=("torch",), install="pip install torch==2.13.0",
                  summary="RNNPB in PyTorch: hand-written batched closed-loop BPTT (float32 "
-                         "training in a native AVX-512 kernel where the CPU has it), "
-                         "multi-start recognition")
+                         "training in a native C kernel: AVX-512, AVX2 or portable), "
+                         "multi-start recognition",
+                 describe="iloci_torch.native:describe")

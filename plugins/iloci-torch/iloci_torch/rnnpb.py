@@ -1,6 +1,6 @@
 """The RNNPB in PyTorch: hand-written batched BPTT, no autograd.
 
-The model is defined in :mod:`iloci.rnnpb_common`. A training step runs
+The model is defined in :mod:`iloci.rnnpb`. A training step runs
 every sequence at once over padded, time-major tensors: per time step the
 forward pass is two ``addmm`` + ``tanh_`` and the backward pass two
 matrix products and two element-wise products, all written into buffers
@@ -13,9 +13,9 @@ gradient clipping are a handful of vector operations.
 Even so, at paper size (36 sequences x 50 steps) a step issues ~450 torch
 operations of a microsecond or two each, more than their arithmetic. Float32
 training therefore runs, where it can, in ``_native.c``: the same algorithm
-in C with register-blocked AVX-512 loops, every epoch in one call (measured
-on 2026-11-23 by benchmarks/rnnpb.py: 0.42 ms per step against 1.48 ms with
-torch operations).
+in C with register-blocked vector loops for AVX-512, AVX2 + FMA or portable
+C, chosen at run time (:mod:`iloci_torch.native`), every epoch in one call.
+Figures: ``benchmarks/results/rnnpb_speed.json`` (``step_ms_by_kernel``).
 Recognition, scoring, generation and float64 training use torch operations.
 
 The layers compute ``tanh`` directly: in torch 2.13 ``tanh_`` is faster than
@@ -26,49 +26,22 @@ zero (CHANGELOG.md has the measurements that decided it).
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 import ctypes
-from functools import lru_cache
 
 import numpy as np
 import torch
 
 from iloci.errors import IlociError
-from iloci.rnnpb_common import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
-                                 WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
+from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
+                         WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
+from iloci_torch.native import (ISAS, NATIVE_CODES, TrainArgs, kernel_info, native_lib,
+                                requested_isa)
 
-__all__ = ["TorchRNNPB", "native_kernel_available"]
+__all__ = ["TorchRNNPB"]
 
 _B1, _B2, _EPS = 0.9, 0.999, 1e-8
-
-
-@lru_cache(maxsize=1)
-def _native_train() -> Callable[..., int] | None:
-    """The native float32 training kernel (``_native.c``), or None.
-
-    None when the optional extension was not compiled at install time or
-    the CPU lacks AVX-512; training then uses torch operations.
-    """
-    try:
-        from iloci_torch import _native
-    except ImportError:
-        return None
-    lib = ctypes.CDLL(_native.__file__)
-    if not lib.iloci_rnnpb_native_supported():
-        return None
-    f32 = np.ctypeslib.ndpointer(np.float32, flags="C_CONTIGUOUS")
-    i, f, d = ctypes.c_int, ctypes.c_float, ctypes.c_double
-    fn = lib.iloci_rnnpb_train_f32
-    fn.restype = i
-    fn.argtypes = [i, i, i, i, i, i, i, f32, f32, f, f32, f32, f32, f32, f32,
-                   d, d, d, i, d, f, f32]
-    return fn
-
-
-def native_kernel_available() -> bool:
-    """Whether float32 training runs in the native kernel on this machine."""
-    return _native_train() is not None
 
 
 @contextmanager
@@ -218,20 +191,33 @@ class _Net:
         th = torch.tanh(u)
         ws = self.workspace(L, R)
         O = self.forward(th * bound, X, 1.0, ws)
-        Hs, Os = ws["H_t"], ws["O_t"]
         w_s, w_p, w_o = v["w_in"][:S], v["w_in"][S:], v["w_out"]
         swd = sw.unsqueeze(2)                                                 # (L, R, 1)
         r = (O[:, :, :d] - X[1:]).mul_(swd)
-        # d pre / d u_k = bound (1 - tanh(u_k)^2) w_p[k]: (P, R, H), the same every step
-        dpre = (bound * (1.0 - th * th)).T.unsqueeze(2) * w_p.unsqueeze(1)
+        # d tanh / d z = 1 - tanh^2, for all steps at once (one operation each)
+        torch.mul(ws["H"], ws["H"], out=ws["dtH"]).neg_().add_(1.0)
+        torch.mul(O, O, out=ws["dtO"]).neg_().add_(1.0)
+        dtH, dtO = ws["dtH_t"], ws["dtO_t"]
+        # d pre / d u_k = bound (1 - tanh(u_k)^2) w_p[k]: (P R, H), the same every step
+        dpre = ((bound * (1.0 - th * th)).T.unsqueeze(2) * w_p.unsqueeze(1)).reshape(P * R, -1)
         J = X.new_empty(L, P, R, d)
-        ds = None                                   # d s_0 / du = 0: s_0 is the data
+        Jf = J.view(L, P * R, d)
+        swp = swd.repeat(1, P, 1)                                             # (L, P R, 1)
+        # the P derivative copies of the batch stacked as P R rows: one matrix
+        # product per layer and step for all of them
+        dz = dpre.clone()                          # d s_0 / du = 0: s_0 is the data
+        dh = torch.empty_like(dpre)
+        do = dpre.new_empty(P * R, S)
+        # views made once: in the loop they cost as much as the arithmetic
+        dz3, dh3, do3, do_d = dz.view(P, R, -1), dh.view(P, R, -1), do.view(P, R, S), do[:, :d]
+        Jt, swt = Jf.unbind(0), swp.unbind(0)
         for t in range(L):
-            dz = dpre if ds is None else torch.matmul(ds, w_s).add_(dpre)
-            dh = dz * (1.0 - Hs[t] * Hs[t])
-            do = torch.matmul(dh, w_o).mul_(1.0 - Os[t] * Os[t])
-            torch.mul(do[:, :, :d], swd[t], out=J[t])
-            ds = do                                 # closed loop: s_{t+1} = o_t
+            if t:
+                torch.addmm(dpre, do, w_s, out=dz)  # closed loop: s_t = o_{t-1}
+            torch.mul(dz3, dtH[t], out=dh3)
+            torch.mm(dh, w_o, out=do)
+            do3.mul_(dtO[t])
+            torch.mul(do_d, swt[t], out=Jt[t])
         return r, J
 
     def loss_and_grads(self, pb: torch.Tensor, X: torch.Tensor, mask_w: torch.Tensor,
@@ -301,17 +287,26 @@ class TorchRNNPB(RNNPBBase):
 
     Implements :class:`iloci.interfaces.PerceptualModel`; the public
     methods and their contract are documented in
-    :class:`iloci.rnnpb_common.RNNPBBase`, the network in
-    :mod:`iloci.rnnpb_common`. Runs on the CPU, single-threaded (the
+    :class:`iloci.rnnpb.RNNPBBase`, the network in
+    :mod:`iloci.rnnpb`. Runs on the CPU, single-threaded (the
     caller's ``torch.set_num_threads`` is restored after each call).
 
     Training in float32 (the default ``dtype``) runs in a native kernel
-    (``_native.c``: AVX-512, register-blocked, all epochs in one call) when
-    the package was installed with a C compiler and the CPU has AVX-512
-    (:func:`native_kernel_available`); otherwise, and in float64, with torch
-    operations. Both follow the same algorithm and update order; their
-    float32 results differ in rounding only. Set :attr:`use_native` to
-    False to train with torch operations anyway.
+    (``_native.c``: register-blocked vector loops, all epochs in one call)
+    when the package was installed with a C compiler; it picks at run time
+    the widest instruction set the CPU has (AVX-512, AVX2 + FMA, or portable
+    C; ``ILOCI_RNNPB_ISA`` forces one) and :func:`kernel_info` says which.
+    Float64 training, ``kernel = "torch"``, and sizes beyond the kernel
+    (more than 256 hidden or state units) use torch operations. Both follow
+    the same algorithm and update order as the numpy reference
+    (:mod:`iloci.rnnpb.reference`); their float32 results differ in
+    rounding only.
+
+    Attributes
+    ----------
+    kernel_ : str
+        The kernel the last :meth:`train` ran: ``"native kernel (avx512)"``,
+        ``"native kernel (avx2)"``, ``"native kernel (portable)"`` or ``"torch operations"``.
 
     Parameters
     ----------
@@ -329,8 +324,6 @@ class TorchRNNPB(RNNPBBase):
     """
 
     backend = "torch"
-    #: Train float32 models with the native kernel where it is available.
-    use_native = True
 
     def _setup(self) -> None:
         self._dtype = torch.float64 if self.params.dtype == "float64" else torch.float32
@@ -353,7 +346,7 @@ class TorchRNNPB(RNNPBBase):
         return torch.from_numpy(np.ascontiguousarray(a)).to(dtype or self._dtype)
 
     def _train_kernel(self, X, mask, weight, u, epochs):
-        if self.use_native and self._dtype == torch.float32:
+        if self.params.kernel != "torch" and self._dtype == torch.float32:
             done = self._train_native(X, mask, weight, u, epochs)
             if done is not None:
                 return done
@@ -380,13 +373,22 @@ class TorchRNNPB(RNNPBBase):
             net.flat.copy_(backup)
             raise diverged_error()
         self._net64 = net if self._dtype == torch.float64 else None
+        self.kernel_ = "torch operations"
         return ut.numpy().astype(np.float64), float(loss)
 
     def _train_native(self, X, mask, weight, u, epochs):
-        """``_train_kernel`` in the native kernel; None where it cannot run."""
-        fn = _native_train()
-        if fn is None:
+        """``_train_kernel`` in the native kernel; None where it cannot run.
+
+        It cannot where the extension was not built or the sizes exceed its
+        widths; with ``kernel = "native"`` that is an error instead.
+        """
+        lib = native_lib()
+        if lib is None:
+            if self.params.kernel == "native":
+                raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
+                                 'install a C compiler and reinstall, or set kernel = "auto".')
             return None
+        isa = requested_isa()
         p, net = self.params, self._net
         d, h, c, pb = self._sizes
         # copies: the model changes only once the kernel has finished and succeeded
@@ -394,23 +396,35 @@ class TorchRNNPB(RNNPBBase):
              for k in WEIGHT_NAMES}
         f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
         Xf, mw, uf = f32(X), f32(mask * weight[None, :]), np.array(u, np.float32, order="C")
-        loss = np.zeros(1, np.float32)
-        code = fn(int(epochs), X.shape[0], X.shape[1], d, c, h, pb, Xf, mw,
-                  float(p.closed_loop), w["w_in"], w["b_hidden"], w["w_out"], w["b_out"], uf,
-                  float(p.learning_rate), float(p.pb_learning_rate),
-                  float(p.learning_rate_decay), int(p.warmup_epochs), float(p.grad_clip),
-                  float(p.pb_bound), loss)
+        history = np.zeros(max(int(epochs), 1), np.float32)
+        args = TrainArgs(
+            size=ctypes.sizeof(TrainArgs), isa=ISAS.get(isa, 0), epochs=int(epochs),
+            T=X.shape[0], R=X.shape[1], D=d, C=c, H=h, P=pb, warmup=int(p.warmup_epochs),
+            alpha=float(p.closed_loop), bound=float(p.pb_bound),
+            lr=float(p.learning_rate), pb_lr=float(p.pb_learning_rate),
+            decay=float(p.learning_rate_decay), clip=float(p.grad_clip),
+            X=Xf.ctypes.data, mw=mw.ctypes.data, w_in=w["w_in"].ctypes.data,
+            b_hidden=w["b_hidden"].ctypes.data, w_out=w["w_out"].ctypes.data,
+            b_out=w["b_out"].ctypes.data, u=uf.ctypes.data,
+            loss_history=history.ctypes.data)
+        code = lib.iloci_rnnpb_train(ctypes.byref(args))
         if code == 1:
             raise IlociError("not enough memory to train this batch; train fewer or shorter "
                              "sequences at once. The model was left unchanged.")
-        if code != 0:  # sizes beyond the kernel's registers, or no AVX-512
+        if code == 2 and p.kernel != "native":  # wider than the kernel's tiles
             return None
+        if code != 0:
+            raise IlociError(f"the native kernel refused to train (code {code}: "
+                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
+                             "to train with torch operations.")
         if not all(np.isfinite(a).all() for a in w.values()):
             raise diverged_error()
         for k in WEIGHT_NAMES:
             net.views[k].copy_(torch.from_numpy(w[k]))
         self._net64 = None
-        return uf.astype(np.float64), float(loss[0])
+        self._loss_history = history[:args.epochs_run].astype(np.float64)
+        self.kernel_ = "native kernel (" + {v: k for k, v in ISAS.items()}[args.isa_used] + ")"
+        return uf.astype(np.float64), float(args.loss)
 
     def _recognize_kernel(self, X, mask, weight, u):
         if self.params.recognition_method == "adam":
@@ -422,10 +436,12 @@ class TorchRNNPB(RNNPBBase):
         bound = p.pb_bound
         eye = torch.eye(p.pb, dtype=net.dtype)
         with torch.no_grad(), _one_thread():
-            e = net.sse(ut, bound, Xt, sw)
+            # each trial's residuals come with their Jacobian (one pass through
+            # the steps): an accepted trial's are the next step's
+            r, J = net.residuals_and_jacobian(ut, bound, Xt, sw)
+            e = r.square().sum(dim=(0, 2))
             lam = torch.full((len(ut),), p.recognition_damping, dtype=net.dtype)
             for _ in range(p.recognition_steps):
-                r, J = net.residuals_and_jacobian(ut, bound, Xt, sw)
                 A = torch.einsum("lprd,lqrd->rpq", J, J)                 # (R, P, P)
                 g = torch.einsum("lprd,lrd->rp", J, r)                   # (R, P)
                 damp = lam.unsqueeze(1) * (torch.diagonal(A, dim1=1, dim2=2) + LM_TINY)
@@ -433,9 +449,12 @@ class TorchRNNPB(RNNPBBase):
                 delta = torch.linalg.solve_ex(A + damp.unsqueeze(2) * eye,
                                               g.unsqueeze(2))[0].squeeze(2)
                 trial = (ut - delta).clamp_(-LM_U_MAX, LM_U_MAX)
-                e_new = net.sse(trial, bound, Xt, sw)
+                r_new, J_new = net.residuals_and_jacobian(trial, bound, Xt, sw)
+                e_new = r_new.square().sum(dim=(0, 2))
                 ok = e_new < e                 # False for NaN: a bad step is never kept
                 ut = torch.where(ok.unsqueeze(1), trial, ut)
+                r = torch.where(ok.view(1, -1, 1), r_new, r)
+                J = torch.where(ok.view(1, 1, -1, 1), J_new, J)
                 lam = torch.where(ok, lam * LM_DOWN, lam * LM_UP).clamp_(LM_MIN, LM_MAX)
                 e = torch.where(ok, e_new, e)
         return ut.numpy().astype(np.float64)

@@ -3,7 +3,8 @@
 Numpy only; the torch and JAX back ends (plugins ``iloci-torch`` and
 ``iloci-jax``) compute with their own libraries but agree on everything
 here, so a state saved by one loads into the other and both give the same
-``generate`` and ``prediction_error``.
+``generate`` and ``prediction_error``. What they compute is written out in
+plain numpy in :mod:`iloci.rnnpb.reference`.
 
 The network (a Jordan-type RNN with parametric bias, Tani's RNNPB at the
 paper's sizes ``D = 6`` inputs, ``C = 25`` context, ``P = 4`` PB, ``H = 60``
@@ -62,15 +63,13 @@ __all__ = [
     "read_state",
     "best_starts",
     "diverged_error",
+    "RNNPBBase",
     "LM_DOWN",
     "LM_UP",
     "LM_MIN",
     "LM_MAX",
     "LM_TINY",
     "LM_U_MAX",
-    "reference_outputs",
-    "reference_prediction_error",
-    "reference_generate",
 ]
 
 #: Value of ``state()["format"]``.
@@ -366,7 +365,8 @@ def read_state(state: Mapping[str, Any], params: RNNPBParams
     The sizes (``input_size``, ``hidden``, ``context``, ``pb``) of the state
     replace those of ``params``; so do the other stored hyper-parameters,
     so a loaded model trains and recognizes as the saved one did. ``dtype``
-    stays the loading model's (a float64 state runs in float32 and back).
+    and ``kernel`` stay the loading model's (a float64 state runs in float32
+    and back; a torch state loads into jax-rnnpb).
 
     Returns
     -------
@@ -400,7 +400,7 @@ def read_state(state: Mapping[str, Any], params: RNNPBParams
         values["recognition_method"] = "adam"
     for f in fields(RNNPBParams):
         key = f"param.{f.name}"
-        if key in state and f.name != "dtype":
+        if key in state and f.name not in ("dtype", "kernel"):
             v = np.asarray(state[key])
             values[f.name] = type(values[f.name])(v.item() if v.ndim == 0 else v)
     try:
@@ -456,62 +456,6 @@ def best_starts(errors: np.ndarray, n: int) -> np.ndarray:
     ndarray of int, shape (B, min(n, K))
     """
     return np.argsort(errors, axis=1, kind="stable")[:, :min(n, errors.shape[1])]
-
-
-# -- the reference forward pass (numpy, float64) --------------------------------
-
-def reference_outputs(weights: Mapping[str, np.ndarray], pbs: np.ndarray, X: np.ndarray,
-                      closed_loop: float = 1.0) -> np.ndarray:
-    """Predictions of the network, plain numpy: the model's definition in code.
-
-    Parameters
-    ----------
-    weights : dict of ndarray
-        As :func:`init_weights` returns.
-    pbs : ndarray, shape (B, P)
-    X : ndarray, shape (T, B, D)
-        Padded sequences (time-major).
-    closed_loop : float
-        ``a`` of the module docstring.
-
-    Returns
-    -------
-    ndarray, shape (T - 1, B, D)
-        ``y_t``, the prediction of ``X[t + 1]``.
-    """
-    d = X.shape[2]
-    w_in, w_out = weights["w_in"], weights["w_out"]
-    c = np.zeros((X.shape[1], w_out.shape[1] - d))
-    pre = pbs @ w_in[d + c.shape[1]:] + weights["b_hidden"]
-    x = X[0]
-    ys = []
-    for t in range(X.shape[0] - 1):
-        h = np.tanh(np.hstack([x, c]) @ w_in[:d + c.shape[1]] + pre)
-        o = np.tanh(h @ w_out + weights["b_out"])
-        y, c = o[:, :d], o[:, d:]
-        ys.append(y)
-        x = closed_loop * y + (1.0 - closed_loop) * X[t + 1]
-    return np.stack(ys)
-
-
-def reference_prediction_error(weights: Mapping[str, np.ndarray],
-                               sequences: Sequence[np.ndarray], pbs: np.ndarray) -> np.ndarray:
-    """Closed-loop prediction error per sequence (numpy reference), shape (B,)."""
-    X, mask = pad_sequences(sequences)
-    Y = reference_outputs(weights, pbs, X)
-    se = ((Y - X[1:]) ** 2).mean(axis=2) * mask
-    return se.sum(axis=0) / mask.sum(axis=0)
-
-
-def reference_generate(weights: Mapping[str, np.ndarray], pbs: np.ndarray,
-                       initial_inputs: np.ndarray, lengths: Sequence[int]) -> list[np.ndarray]:
-    """Closed-loop generation (numpy reference); list of (T_i, D) arrays."""
-    t_max = max(lengths)
-    X = np.zeros((t_max, len(pbs), initial_inputs.shape[1]))
-    X[0] = initial_inputs
-    Y = reference_outputs(weights, pbs, X)
-    full = np.concatenate([X[:1], Y], axis=0)
-    return [full[:n, i].copy() for i, n in enumerate(lengths)]
 
 
 # -- the shared front end of both back ends ------------------------------------

@@ -1,0 +1,158 @@
+"""Where evaluation folds run: worker processes on this machine, or a plugin's engine.
+
+An executor runs calls ``fn(*args, queue)`` in parallel and yields their
+results as they finish; what a call puts on ``queue`` (progress messages,
+plain dicts) reaches the caller's ``emit`` while the calls run. Errors raised
+in a call (iloci errors survive pickling) reach the caller as themselves.
+
+* ``local`` (:class:`LocalExecutor`, the default): joblib's loky process
+  pool on this machine.
+* Others come from plugins through the ``iloci_make_executor`` hook; the
+  ``iloci-ray`` plugin adds ``ray`` (a local Ray instance or a running
+  cluster).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+import concurrent.futures as cf
+import os
+import signal
+import sys
+from typing import Any, Protocol
+
+from iloci.errors import InvalidInputError, MissingBackendError
+
+__all__ = ["FoldExecutor", "LocalExecutor", "make_executor", "KNOWN_EXECUTORS"]
+
+#: Executors iloci knows of, and where each comes from (for error messages).
+KNOWN_EXECUTORS = {"local": "the kernel", "ray": "./plugins/iloci-ray"}
+
+
+class FoldExecutor(Protocol):
+    """Runs evaluation folds (or any picklable calls) in parallel."""
+
+    #: Short name, as ``iloci evaluate --executor`` takes it.
+    name: str
+
+    def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
+            emit: Callable[[dict], None]) -> Iterator[Any]:
+        """Call ``fn(*args, queue)`` for each ``args`` of ``calls``; yield results.
+
+        Results come in the order the calls finish. ``queue.put(msg)`` in a
+        call passes ``msg`` (a picklable dict) to ``emit`` in the caller.
+        An exception raised by a call is raised here, after the other calls
+        are cancelled; so is ``KeyboardInterrupt``.
+        """
+        ...
+
+
+def _worker_init() -> None:
+    """Initializer of the pool's workers and of the message queue's server."""
+    # The parent handles Ctrl-C and stops the workers.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        # A parent killed outright (SIGKILL) cannot stop its workers: ask the
+        # kernel to send them SIGTERM when it dies (prctl PR_SET_PDEATHSIG).
+        import ctypes
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no prctl
+            pass
+
+
+class LocalExecutor:
+    """Folds in worker processes on this machine: joblib's loky process pool.
+
+    Parameters
+    ----------
+    jobs : int
+        Worker processes (>= 1).
+
+    Notes
+    -----
+    loky starts workers as fresh interpreters (no fork: torch and JAX
+    threads do not survive it), with ``OMP_NUM_THREADS=1`` unless it is set,
+    and replaces a worker that crashed by raising
+    ``joblib.externals.loky.process_executor.TerminatedWorkerError``. The
+    pool is closed (its workers killed) when the calls end, by error or
+    ``KeyboardInterrupt`` too; on Linux a worker also dies with its parent.
+    """
+
+    name = "local"
+
+    def __init__(self, jobs: int) -> None:
+        if jobs < 1:
+            raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
+        self.jobs = jobs
+
+    def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
+            emit: Callable[[dict], None]) -> Iterator[Any]:
+        import multiprocessing as mp
+        from multiprocessing.managers import SyncManager
+
+        from joblib.externals.loky import get_reusable_executor
+
+        # the queue's server process dies with this one too (_worker_init)
+        manager = SyncManager(ctx=mp.get_context("spawn"))
+        manager.start(_worker_init)
+        queue = manager.Queue()
+        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
+        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, len(calls))),
+                                     initializer=_worker_init, env=env, reuse=False)
+        finished = False
+        try:
+            pending = {pool.submit(fn, *args, queue) for args in calls}
+            while pending:
+                done, pending = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_COMPLETED)
+                while not queue.empty():
+                    emit(queue.get())
+                for fut in done:
+                    yield fut.result()
+            finished = True
+        finally:
+            # workers are killed unless every call finished: an error, Ctrl-C,
+            # or a caller that stopped iterating
+            pool.shutdown(wait=finished, kill_workers=not finished)
+            manager.shutdown()
+
+
+def make_executor(name: str, jobs: int, *, address: str | None = None,
+                  plugin_manager: Any = None) -> FoldExecutor:
+    """The executor called ``name``, with ``jobs`` parallel folds.
+
+    Parameters
+    ----------
+    name : str
+        ``"local"`` or one a plugin provides (``iloci_make_executor``).
+    jobs : int
+        Folds run at once.
+    address : str, optional
+        Where the executor's engine runs (e.g. a Ray cluster's
+        ``HOST:PORT``); ``local`` takes none.
+    plugin_manager : pluggy.PluginManager, optional
+
+    Raises
+    ------
+    MissingBackendError
+        ``ray`` without the ``iloci-ray`` plugin.
+    InvalidInputError
+        An unknown name, or ``address`` for ``local``.
+    """
+    from iloci.plugins import get_plugin_manager
+
+    pm = plugin_manager or get_plugin_manager()
+    made = pm.hook.iloci_make_executor(name=name, jobs=jobs, address=address)
+    if made is not None:
+        return made
+    if name == "local":
+        if address is not None:
+            raise InvalidInputError("the local executor runs on this machine: --address "
+                                    "needs another executor (e.g. --executor ray).")
+        return LocalExecutor(jobs)
+    if name in KNOWN_EXECUTORS:
+        plugin = KNOWN_EXECUTORS[name].rsplit("/", 1)[-1]
+        raise MissingBackendError("executor", name, [plugin],
+                                  f"pip install {KNOWN_EXECUTORS[name]}")
+    raise InvalidInputError(f"unknown executor {name!r}; known: "
+                            f"{', '.join(sorted(KNOWN_EXECUTORS))}.")

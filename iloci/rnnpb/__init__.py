@@ -1,0 +1,18 @@
+"""The RNNPB that every back end computes: definition, checks, state, numpy reference.
+
+* :mod:`iloci.rnnpb.common`: the model's definition (its docstring), the
+  shared front end :class:`RNNPBBase`, input checks, padding, the PB
+  reparametrisation and the state format;
+* :mod:`iloci.rnnpb.reference`: the forward pass and the whole training
+  step (BPTT, clipping, schedule, Adam) in plain numpy, what the back ends'
+  kernels are tested against.
+
+Numpy only: back ends (``torch-rnnpb``, ``jax-rnnpb``) are plugins.
+"""
+
+from iloci.rnnpb.common import *  # noqa: F401,F403
+from iloci.rnnpb.common import __all__ as _common
+from iloci.rnnpb.reference import (reference_generate, reference_outputs,
+                                   reference_prediction_error)
+
+__all__ = [*_common, "reference_outputs", "reference_prediction_error", "reference_generate"]

@@ -1,0 +1,67 @@
+"""``iloci sweep SPEC.toml [--address ADDR] [--out DIR]``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sweep", help="grid or random search over config values x seeds x folds on Ray",
+        description="Run every fold of every seed of every setting a sweep spec names, "
+        "as Ray tasks; each finished run is stored at once, so a sweep started again "
+        "skips it. Writes results.csv, report.md and figures/ to --out. The spec's "
+        "format: `python -c 'import iloci_ray.sweep as s; print(s.__doc__)'`.")
+    p.add_argument("spec", metavar="SPEC.toml", help="the sweep spec")
+    p.add_argument("--address", metavar="ADDR",
+                   help="a running Ray cluster, HOST:PORT (`ray start --head` prints it); "
+                   "default: start Ray on this machine")
+    p.add_argument("--out", "-o", default=None,
+                   help="output directory (default: runs/sweep-<spec name>)")
+    p.add_argument("--jobs", "-j", type=int, default=None,
+                   help="runs at once (default: the cluster's CPUs)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from iloci.errors import InvalidInputError
+    from iloci.display import Bars
+    from iloci_ray.report import write_report
+    from iloci_ray.sweep import check_out, load_spec, plan_runs, run_sweep
+
+    if args.jobs is not None and args.jobs < 1:
+        raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}.")
+    spec = load_spec(args.spec)
+    out = check_out(args.out or f"runs/sweep-{Path(args.spec).stem}")
+    total = len(plan_runs(spec))
+    print(f"iloci sweep: {spec.source}, {total} runs, out {out}, Ray "
+          f"{args.address or 'on this machine'}", file=sys.stderr)
+    bars = Bars(unit="runs")
+    counts = {"finished": 0, "skipped": 0}
+
+    def on_event(kind, run, metrics) -> None:
+        if kind == "started":
+            return
+        counts[kind] += 1
+        if kind == "finished":
+            bars.log(f"run {run.key}: {run.setting}, seed {run.seed}, fold {run.fold}: "
+                     f"CCR {100 * metrics['ccr']:.1f} %, {metrics['wall_seconds']:.0f} s")
+        bars.update("sweep", counts["finished"] + counts["skipped"],
+                    f"{counts['skipped']} stored before")
+
+    if args.quiet:
+        records, info = run_sweep(spec, out, address=args.address, jobs=args.jobs)
+    else:
+        with bars:
+            bars.add("sweep", "sweep", total)
+            records, info = run_sweep(spec, out, address=args.address, jobs=args.jobs,
+                                      on_event=on_event)
+    report = write_report(out, spec, records, info)
+    print(f"{info['runs']} runs: {info['computed']} computed, {info['reused']} stored "
+          f"before (not recomputed); wall {info['wall_seconds']:.1f} s")
+    print(f"wrote {out}/results.csv, {report} and figures/")
+    return 0

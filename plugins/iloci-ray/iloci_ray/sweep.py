@@ -1,0 +1,377 @@
+"""``iloci sweep``: config values x seeds x folds on Ray, resumable.
+
+A sweep spec is a TOML file::
+
+    base = "my.toml"        # a config file (relative to the spec); default: the defaults
+    seeds = [0, 1]          # evaluation seeds (fold split, order, networks); default [0]
+    folds = [0, 1, 2]       # folds of each seed's split to run; default all
+    search = "grid"         # or "random"
+    samples = 8             # random: settings drawn
+    random_seed = 0         # random: seed of the draws
+
+    [config]                # fixed changes to the base config
+    perceptual_model = { name = "torch-rnnpb", epochs = 2000 }
+
+    [values]                # what is swept: "section.key" = ...
+    "learner.k_cutoff" = [0.25, 0.5, 1.0]          # grid: every value; random: one of them
+    "learner.num_threshold" = { low = 2, high = 6, integer = true }   # random only
+    "perceptual_model.learning_rate" = { low = 1e-3, high = 1e-1, log = true }
+
+A *run* is one fold of one seed of one setting (an assignment of every swept
+key). Its metrics are stored in ``OUT/runs/<key>.json`` as soon as it
+finishes, ``key`` being a SHA-256 of the resolved config (the base, the
+changes, the setting and the seed, every default filled in), the fold and the
+seed: a sweep started again with the same spec (or another that shares runs)
+skips every run whose file exists. ``OUT/results.csv`` has a row per run,
+``OUT/report.md`` the table of settings and figures (:mod:`iloci_ray.report`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+import hashlib
+import itertools
+import json
+from pathlib import Path
+import time
+import tomllib
+from typing import Any
+
+import numpy as np
+
+from iloci.errors import ConfigError, InvalidInputError
+
+__all__ = ["SweepSpec", "Run", "load_spec", "plan_runs", "run_key", "run_sweep",
+           "RUN_METRICS"]
+
+#: Metrics stored per run (from the fold's result; see iloci.evaluation.evaluate).
+RUN_METRICS = ("ccr", "feedbacks", "rewarded", "interactions_per_demo", "entries",
+               "concepts", "generation_error", "wall_seconds")
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A parsed sweep spec (see the module docstring for the file)."""
+
+    base: dict[str, Any]
+    values: dict[str, Any]
+    seeds: tuple[int, ...] = (0,)
+    folds: tuple[int, ...] | None = None
+    search: str = "grid"
+    samples: int = 0
+    random_seed: int = 0
+    source: str = "<spec>"
+
+
+@dataclass(frozen=True)
+class Run:
+    """One fold of one seed of one setting."""
+
+    setting: dict[str, Any]
+    seed: int
+    fold: int
+    config: dict[str, Any] = field(repr=False)
+    key: str = ""
+
+
+_SPEC_KEYS = {"base", "seeds", "folds", "search", "samples", "random_seed", "config", "values"}
+
+
+def _error(source: str, message: str) -> ConfigError:
+    return ConfigError(f"{source}: {message}")
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    """Read and check a sweep spec.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not TOML, or has unknown keys or bad values
+        (the message names the key and what is expected).
+    """
+    from iloci.config import load_config
+
+    path = Path(path)
+    source = str(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise _error(source, "no such sweep spec file.") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise _error(source, f"not a TOML file: {exc}") from None
+    unknown = set(raw) - _SPEC_KEYS
+    if unknown:
+        raise _error(source, f"unknown key(s) {sorted(unknown)}; a sweep spec has "
+                     f"{sorted(_SPEC_KEYS)}.")
+    base: dict[str, Any] = {}
+    if "base" in raw:
+        # what the base file says (checked by loading it), not its resolved
+        # values: a component changed by [config] or [values] then takes its
+        # own defaults for what the base leaves out
+        base_path = (path.parent / str(raw["base"])).resolve()
+        load_config(base_path)
+        base = tomllib.loads(base_path.read_text(encoding="utf-8"))
+    for sec, value in dict(raw.get("config", {})).items():
+        if not isinstance(value, dict):
+            raise _error(source, f"[config] {sec} must be a table of values.")
+        _update(base, sec, value)
+    values = raw.get("values")
+    if not isinstance(values, dict) or not values:
+        raise _error(source, "[values] must name at least one swept key, e.g. "
+                     '"learner.k_cutoff" = [0.25, 0.5, 1.0].')
+    search = raw.get("search", "grid")
+    if search not in ("grid", "random"):
+        raise _error(source, f"search must be 'grid' or 'random', got {search!r}.")
+    for key, v in values.items():
+        if key.count(".") != 1:
+            raise _error(source, f"swept key {key!r} must be 'section.key', e.g. "
+                         "'learner.k_cutoff'.")
+        if isinstance(v, list):
+            if not v:
+                raise _error(source, f"{key}: an empty list of values.")
+        elif isinstance(v, dict) and search == "random":
+            if set(v) - {"low", "high", "log", "integer"} or not {"low", "high"} <= set(v):
+                raise _error(source, f"{key}: a range is {{ low = .., high = .., log = "
+                             "false, integer = false }.")
+            if not v["low"] < v["high"] or (v.get("log") and v["low"] <= 0):
+                raise _error(source, f"{key}: need low < high (and low > 0 with log).")
+        else:
+            raise _error(source, f"{key}: give a list of values"
+                         + (" or a range { low, high }" if search == "random" else
+                            " (ranges need search = 'random')") + ".")
+    seeds = raw.get("seeds", [0])
+    if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) for s in seeds)):
+        raise _error(source, "seeds must be a non-empty list of integers.")
+    folds = raw.get("folds")
+    if folds is not None and not (isinstance(folds, list) and folds
+                                  and all(isinstance(k, int) and k >= 0 for k in folds)):
+        raise _error(source, "folds must be a non-empty list of fold indices (0-based).")
+    samples = raw.get("samples", 0)
+    if search == "random" and not (isinstance(samples, int) and samples >= 1):
+        raise _error(source, "search = 'random' needs samples = N (settings to draw, >= 1).")
+    spec = SweepSpec(base=base, values=dict(values), seeds=tuple(seeds),
+                     folds=None if folds is None else tuple(folds), search=search,
+                     samples=int(samples), random_seed=int(raw.get("random_seed", 0)),
+                     source=source)
+    # every swept value must make a valid config: checked now, not run by run
+    for setting in settings(spec):
+        _resolve(spec, setting, spec.seeds[0])
+    return spec
+
+
+def settings(spec: SweepSpec) -> list[dict[str, Any]]:
+    """The settings of a sweep: the grid's product, or ``samples`` seeded draws."""
+    keys = list(spec.values)
+    if spec.search == "grid":
+        return [dict(zip(keys, combo))
+                for combo in itertools.product(*(spec.values[k] for k in keys))]
+    rng = np.random.default_rng(spec.random_seed)
+    out = []
+    for _ in range(spec.samples):
+        s: dict[str, Any] = {}
+        for k in keys:
+            v = spec.values[k]
+            if isinstance(v, list):
+                s[k] = v[int(rng.integers(len(v)))]
+                continue
+            lo, hi = float(v["low"]), float(v["high"])
+            x = (float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) if v.get("log")
+                 else float(rng.uniform(lo, hi)))
+            s[k] = int(round(x)) if v.get("integer") else x
+        out.append(s)
+    return out
+
+
+def _resolve(spec: SweepSpec, setting: Mapping[str, Any], seed: int) -> dict[str, Any]:
+    """The resolved config (every default filled in) of one setting and seed."""
+    from iloci.config import load_config
+
+    data = json.loads(json.dumps(spec.base))
+    for dotted, value in setting.items():
+        sec, key = dotted.split(".")
+        _update(data, sec, {key: value})
+    data.setdefault("evaluation", {})["seed"] = seed
+    try:
+        return load_config(data).to_dict()
+    except ConfigError as exc:
+        raise _error(spec.source, f"setting {dict(setting)}: {exc}") from None
+
+
+def _update(data: dict[str, Any], sec: str, values: Mapping[str, Any]) -> None:
+    """Change section ``sec`` of a config mapping.
+
+    Naming another component than the section names starts the section
+    afresh, as :meth:`iloci.config.Config.replace` does: the parameters
+    belong to the component they were written for.
+    """
+    old = data.get(sec)
+    if ("name" in values and isinstance(old, dict) and "name" in old
+            and old["name"] != values["name"]):
+        data[sec] = dict(values)
+    else:
+        data.setdefault(sec, {}).update(values)
+
+
+def run_key(config: Mapping[str, Any], fold: int, seed: int) -> str:
+    """SHA-256 (hex, first 20 characters) of a resolved config, a fold and a seed."""
+    blob = json.dumps({"config": config, "fold": fold, "seed": seed}, sort_keys=True,
+                      separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+def plan_runs(spec: SweepSpec) -> list[Run]:
+    """Every run of the sweep, settings x seeds x folds, in that order.
+
+    Raises
+    ------
+    ConfigError
+        A fold in ``folds`` that the config's ``evaluation.folds`` does not have.
+    """
+    runs = []
+    for setting in settings(spec):
+        for seed in spec.seeds:
+            config = _resolve(spec, setting, seed)
+            n_folds = int(config["evaluation"]["folds"])
+            folds = spec.folds if spec.folds is not None else tuple(range(n_folds))
+            bad = [k for k in folds if k >= n_folds]
+            if bad:
+                raise _error(spec.source, f"fold(s) {bad} do not exist: the config has "
+                             f"{n_folds} folds (0..{n_folds - 1}).")
+            for k in folds:
+                runs.append(Run(dict(setting), seed, k, config, run_key(config, k, seed)))
+    return runs
+
+
+def fold_run(config: dict[str, Any], fold: int) -> dict[str, Any]:
+    """One run, in a Ray task: fold ``fold`` of the config's k-fold split; its metrics."""
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import fold_plan, run_fold
+
+    from iloci.config import load_config
+
+    cfg = load_config(config)
+    demos = load_lasa(list(cfg.data.shapes) or None)
+    learn, test = fold_plan(demos, cfg)[fold]
+    res = run_fold(cfg, fold, [demos[i] for i in learn], [demos[i] for i in test],
+                   baseline=False, details=False)
+    fb = res.feedbacks
+    return {"ccr": res.ccr, "feedbacks": len(fb),
+            "rewarded": sum(1 for f in fb if f == 1) / max(1, len(fb)),
+            "interactions_per_demo": res.interactions_per_demo, "entries": res.entries,
+            "concepts": res.concepts, "generation_error": res.generation_error,
+            "wall_seconds": res.wall_seconds}
+
+
+def _store(out: Path, run: Run, metrics: dict[str, Any]) -> None:
+    from iloci.data.files import write_atomic
+
+    record = {"key": run.key, "setting": run.setting, "seed": run.seed, "fold": run.fold,
+              "metrics": metrics, "config": run.config}
+    data = json.dumps(record, indent=1, sort_keys=True).encode()
+    write_atomic(out / "runs" / f"{run.key}.json", lambda fh: fh.write(data), mkdir=True)
+
+
+def load_done(out: Path) -> dict[str, dict[str, Any]]:
+    """Stored runs of ``out`` by key (a file that does not parse is ignored: rerun)."""
+    done = {}
+    for p in sorted((out / "runs").glob("*.json")):
+        try:
+            rec = json.loads(p.read_text())
+            if rec["key"] == p.stem and set(RUN_METRICS) <= set(rec["metrics"]):
+                done[p.stem] = rec
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return done
+
+
+def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
+              jobs: int | None = None,
+              on_event: Callable[[str, Run, dict[str, Any] | None], None] | None = None,
+              ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Run every run of ``spec`` not stored in ``out`` yet, on Ray; store each at once.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    out : path
+        Output directory; ``out/runs/`` holds one JSON file per finished run.
+    address : str, optional
+        A running Ray cluster (``HOST:PORT``); None starts Ray here.
+    jobs : int, optional
+        Runs in flight at once (default: the cluster's CPUs).
+    on_event : callable, optional
+        ``on_event(kind, run, metrics)`` with kind ``"skipped"`` (stored
+        before), ``"started"`` or ``"finished"``.
+
+    Returns
+    -------
+    records : list of dict
+        Every run of the sweep (stored and new), in plan order.
+    info : dict
+        ``runs``, ``reused`` (runs not recomputed), ``computed``,
+        ``wall_seconds``, ``jobs``, ``address``.
+
+    Raises
+    ------
+    IlociError
+        A run's own error (e.g. a back end missing on the cluster), after
+        the runs in flight are cancelled; finished runs stay stored.
+    """
+    from iloci_ray.executor import connect, unwrap
+
+    out = Path(out)
+    t0 = time.perf_counter()
+    runs = plan_runs(spec)
+    done = load_done(out)
+    emit = on_event or (lambda kind, run, metrics: None)
+    todo = []
+    for run in runs:
+        if run.key in done:
+            emit("skipped", run, done[run.key]["metrics"])
+        else:
+            todo.append(run)
+    # a setting repeated (e.g. random draws) is one run: compute it once
+    unique = list({r.key: r for r in todo}.values())
+    reused = len(runs) - len(todo)
+    n_jobs = jobs
+    if unique:
+        ray = connect(address, jobs)
+        n_jobs = jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        remote = ray.remote(num_cpus=1, max_retries=0)(fold_run)
+        waiting = list(unique)
+        running: dict[Any, Run] = {}
+        try:
+            while waiting or running:
+                while waiting and len(running) < n_jobs:
+                    run = waiting.pop(0)
+                    running[remote.remote(run.config, run.fold)] = run
+                    emit("started", run, None)
+                ready, _ = ray.wait(list(running), num_returns=1)
+                for ref in ready:
+                    run = running.pop(ref)
+                    try:
+                        metrics = ray.get(ref)
+                    except Exception as exc:
+                        raise unwrap(exc) from None
+                    _store(out, run, metrics)
+                    done[run.key] = {"metrics": metrics}
+                    emit("finished", run, metrics)
+        finally:
+            for ref in running:
+                ray.cancel(ref, force=True)
+    records = [{"key": r.key, "setting": r.setting, "seed": r.seed, "fold": r.fold,
+                **done[r.key]["metrics"]} for r in runs]
+    info = {"runs": len(runs), "reused": reused, "computed": len(unique),
+            "wall_seconds": time.perf_counter() - t0, "jobs": n_jobs, "address": address}
+    return records, info
+
+
+def check_out(out: str | Path) -> Path:
+    """``out`` as a directory to write to (created), or an InvalidInputError."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidInputError(f"--out {out} is a file; give a directory.")
+    out.mkdir(parents=True, exist_ok=True)
+    return out

@@ -1,0 +1,378 @@
+/*
+ * The training kernel of _native.c, written once over a vector width and
+ * compiled once per instruction set: _native.c includes this file with
+ *
+ *   VW      floats per vector register (16: AVX-512, 8: AVX2, 4: portable)
+ *   SUFFIX  appended to every name defined here (avx512, avx2, portable)
+ *   TARGET  the function attribute selecting the instruction set (empty for
+ *           the portable path: the compiler's default for the platform)
+ *   RECIP   how to take 1 / q of a vector (a reciprocal estimate refined by
+ *           one Newton step where the instruction set has one)
+ *   WIDE    1 where there are 32 vector registers (AVX-512): larger tiles
+ *   GEMM_NB_ROWS, TN_NB_ROWS  the register tiles (see _native.c)
+ *   VMIN, VMAX  the instruction set's element-wise min and max, where it has
+ *           them (otherwise a compare and a blend)
+ *
+ * The arithmetic is GNU C vector extensions (GCC, Clang): the compiler maps
+ * them to the target's registers, so the portable path is the same source
+ * as the AVX paths, vectorized for SSE2 on x86-64, NEON on aarch64, or
+ * split into scalars where there is no vector unit. The element-wise loops
+ * are plain C, vectorized by -O3.
+ */
+
+#define CAT_(a, b) a##_##b
+#define CAT(a, b) CAT_(a, b)
+#define F(name) CAT(name, SUFFIX)
+#define V F(vf)
+#define VU F(vfu)
+#define VI F(vi)
+#define INL TARGET static inline __attribute__((always_inline))
+#define FIRST_(a, b) a
+#define SECOND_(a, b) b
+#define FIRST(x) FIRST_(x)
+#define SECOND(x) SECOND_(x)
+#define GEMM_NB FIRST(GEMM_NB_ROWS)
+#define GEMM_ROWS SECOND(GEMM_NB_ROWS)
+#define TN_NB FIRST(TN_NB_ROWS)
+#define TN_ROWS SECOND(TN_NB_ROWS)
+
+typedef float V __attribute__((vector_size(VW * 4)));
+/* the same, for loads and stores at any float-aligned address */
+typedef float VU __attribute__((vector_size(VW * 4), aligned(4), may_alias));
+typedef int32_t VI __attribute__((vector_size(VW * 4)));
+
+#define LD(p) ((V)*(const VU *)(p))
+#define ST(p, x) (*(VU *)(p) = (x))
+
+INL V F(splat)(float a) { return (V){0} + a; }
+
+#ifdef VMIN
+INL V F(vmin)(V a, V b) { return (V)VMIN(a, b); }
+INL V F(vmax)(V a, V b) { return (V)VMAX(a, b); }
+#else
+INL V F(vmin)(V a, V b) { VI m = a < b; return (V)((m & (VI)a) | (~m & (VI)b)); }
+INL V F(vmax)(V a, V b) { VI m = a > b; return (V)((m & (VI)a) | (~m & (VI)b)); }
+#endif
+
+/* tanh in float32: a [13/6] rational approximation on [-7.9, 7.9] (the one
+ * Eigen and XLA use; beyond, tanh rounds to +-1). */
+INL V F(vtanh)(V x) {
+    const V c = F(splat)(7.90531110763549805f);
+    x = F(vmin)(F(vmax)(x, -c), c);
+    V x2 = x * x;
+    V p = x2 * -2.76076847742355e-16f + 2.00018790482477e-13f;
+    p = x2 * p + -8.60467152213735e-11f;
+    p = x2 * p + 5.12229709037114e-08f;
+    p = x2 * p + 1.48572235717979e-05f;
+    p = x2 * p + 6.37261928875436e-04f;
+    p = x2 * p + 4.89352455891786e-03f;
+    p = x * p;
+    V q = x2 * 1.19825839466702e-06f + 1.18534705686654e-04f;
+    q = x2 * q + 2.26843463243900e-03f;
+    q = x2 * q + 4.89352518554385e-03f;
+    return p * RECIP(q);
+}
+
+/* C[i, :NB VW] = epi(init_i + A[i, :K] @ B[:, :NB VW]) for the first
+ * M - M % ROWS rows; returns how many rows it did. B, C, E and init point
+ * at the column block's first column; ldn is their row stride (the full
+ * width). init_i: C's own row (acc), a row of `init` (row stride
+ * init_stride; 0 = the same row for every i) or zero. EPI_DTANH multiplies
+ * by 1 - E[i, :]^2 (the derivative of the tanh whose outputs E holds).
+ * ROWS x NB accumulators stay in registers. */
+INL int F(gemm_tile)(int M, int K, const int NB, const int ROWS, const float *A, int lda,
+                     const float *B, int ldn, const float *init, int init_stride, int acc,
+                     float *C, int epi, const float *E) {
+    int i = 0;
+    for (; i + ROWS <= M; i += ROWS) {
+        V c[8][4];
+        for (int q = 0; q < ROWS; q++)
+            for (int v = 0; v < NB; v++)
+                c[q][v] = acc ? LD(C + (i + q) * ldn + VW * v)
+                        : init ? LD(init + (i + q) * init_stride + VW * v)
+                        : F(splat)(0.0f);
+        for (int k = 0; k < K; k++) {
+            const float *b = B + k * ldn;
+            V bv[4];
+            for (int v = 0; v < NB; v++) bv[v] = LD(b + VW * v);
+            for (int q = 0; q < ROWS; q++) {
+                V a = F(splat)(A[(i + q) * lda + k]);
+                for (int v = 0; v < NB; v++) c[q][v] += a * bv[v];
+            }
+        }
+        for (int q = 0; q < ROWS; q++)
+            for (int v = 0; v < NB; v++) {
+                V y = c[q][v];
+                if (epi == EPI_TANH) y = F(vtanh)(y);
+                else if (epi == EPI_DTANH) {
+                    V e = LD(E + (i + q) * ldn + VW * v);
+                    y = y * (1.0f - e * e);
+                }
+                ST(C + (i + q) * ldn + VW * v, y);
+            }
+    }
+    return i;
+}
+
+/* One column block of gemm: the rows in tiles of ROWS, the rest one by one. */
+#define GEMM_TILE(NB, ROWS) do { \
+        int done = F(gemm_tile)(M, K, NB, ROWS, A, lda, B + col, N, \
+                                init ? init + col : NULL, init_stride, acc, C + col, epi, \
+                                E ? E + col : NULL); \
+        if (done < M) \
+            F(gemm_tile)(M - done, K, NB, 1, A + done * lda, lda, B + col, N, \
+                         init ? init + done * init_stride + col : NULL, init_stride, acc, \
+                         C + done * N + col, epi, E ? E + done * N + col : NULL); \
+        col += (NB) * VW; \
+    } while (0)
+
+/* C[M, N] = epi(init + A[M, :K] @ B[K, N]), N a multiple of VW: column
+ * blocks of 4, 2 or 1 vectors with 2, 4 or 4 rows per tile (twice the rows
+ * with 32 registers). */
+TARGET static void F(gemm)(int M, int K, int N, const float *A, int lda, const float *B,
+                           const float *init, int init_stride, int acc, float *C, int epi,
+                           const float *E) {
+    int col = 0;
+    while (N - col >= GEMM_NB * VW) GEMM_TILE(GEMM_NB, GEMM_ROWS);
+    if (N - col >= 2 * VW) GEMM_TILE(2, 4);
+    if (N - col >= VW) GEMM_TILE(1, 4);
+}
+
+/* W[i0 .., :NB VW] += A[M, i0 ..]^T @ B[M, :NB VW] (weight gradients: a
+ * sum over all steps and rows) for the first K - K % IB rows of W; returns
+ * how many. B and W point at the column block; ldn is their row stride. */
+INL int F(gemm_tn_tile)(int M, int K, const int NB, const int IB, const float *A, int lda,
+                        const float *B, int ldn, float *W) {
+    int i0 = 0;
+    for (; i0 + IB <= K; i0 += IB) {
+        V c[16][4];
+        for (int q = 0; q < IB; q++)
+            for (int v = 0; v < NB; v++) c[q][v] = LD(W + (i0 + q) * ldn + VW * v);
+        for (int r = 0; r < M; r++) {
+            V bv[4];
+            for (int v = 0; v < NB; v++) bv[v] = LD(B + r * ldn + VW * v);
+            const float *a = A + r * lda + i0;
+            for (int q = 0; q < IB; q++) {
+                V x = F(splat)(a[q]);
+                for (int v = 0; v < NB; v++) c[q][v] += x * bv[v];
+            }
+        }
+        for (int q = 0; q < IB; q++)
+            for (int v = 0; v < NB; v++) ST(W + (i0 + q) * ldn + VW * v, c[q][v]);
+    }
+    return i0;
+}
+
+#define GEMM_TN_TILE(NB, IB) do { \
+        int done = F(gemm_tn_tile)(M, K, NB, IB, A, lda, B + col, N, W + col); \
+        if (done < K) \
+            F(gemm_tn_tile)(M, K - done, NB, 1, A + done, lda, B + col, N, \
+                            W + done * N + col); \
+        col += (NB) * VW; \
+    } while (0)
+
+/* W[K, N] += A[M, :K]^T @ B[M, N], N a multiple of VW. */
+TARGET static void F(gemm_tn)(int M, int K, int N, const float *A, int lda, const float *B,
+                              float *W) {
+    int col = 0;
+    while (N - col >= TN_NB * VW) GEMM_TN_TILE(TN_NB, TN_ROWS);
+    if (N - col >= 2 * VW) GEMM_TN_TILE(2, 4 * (1 + WIDE));
+    if (N - col >= VW) GEMM_TN_TILE(1, 8 * (1 + WIDE));
+}
+
+/* Adam on n parameters, the gradient scaled by `scale` (the clipping). */
+TARGET static void F(adam)(float *restrict p, const float *restrict g, float *restrict m,
+                           float *restrict v, size_t n, double lr, int t, float scale) {
+    const float b1 = 0.9f, b2 = 0.999f;
+    const float step = (float)(lr * sqrt(1.0 - pow(0.999, t)) / (1.0 - pow(0.9, t)));
+    for (size_t i = 0; i < n; i++) {
+        float gi = g[i] * scale;
+        m[i] = b1 * m[i] + (1.0f - b1) * gi;
+        v[i] = b2 * v[i] + (1.0f - b2) * gi * gi;
+        p[i] -= step * m[i] / (sqrtf(v[i]) + 1e-8f);
+    }
+}
+
+/* The whole training, see iloci_rnnpb_train in _native.c for the arguments.
+ * Returns 0, or 1 when out of memory. */
+TARGET static int F(train)(iloci_rnnpb_train_args *a) {
+    const int D = a->D, H = a->H, P = a->P, R = a->R, S = a->D + a->C;
+    const int Sp = round16(S), Hp = round16(H), L = a->T - 1;
+    const float alpha = a->alpha, bound = a->bound;
+    const float *X = a->X, *mw = a->mw;
+    /* flat padded parameters: Ws (Sp, Hp) | Wp (P, Hp) | bh (Hp) | Wo (Hp, Sp) | bo (Sp) */
+    const size_t nWs = (size_t)Sp * Hp, nWp = (size_t)P * Hp, nWo = (size_t)Hp * Sp;
+    const size_t nW = nWs + nWp + Hp + nWo + Sp, nU = (size_t)R * P;
+    const size_t LR = (size_t)L * R;
+    size_t total = 4 * nW + 4 * nU          /* params, grads, Adam m, v; u's grad, m, v, pb */
+                   + LR * Hp * 2 + LR * Sp * 2   /* H, DZ, O, G */
+                   + (alpha != 1.0f ? LR * Sp : 0) /* IN when teacher-forced in part */
+                   + (size_t)R * Sp + (size_t)R * Hp * 2 + nWs + nWo + Sp;
+    float *mem = (float *)calloc(total, sizeof(float));
+    if (!mem) return 1;
+    float *w = mem, *g = w + nW, *m = g + nW, *v = m + nW;
+    float *gu = v + nW, *mu = gu + nU, *vu = mu + nU, *pb = vu + nU;
+    float *Hs = pb + nU, *DZ = Hs + LR * Hp, *Os = DZ + LR * Hp, *G = Os + LR * Sp;
+    float *IN = alpha != 1.0f ? G + LR * Sp : NULL;
+    float *s0 = (IN ? IN + LR * Sp : G + LR * Sp), *pre = s0 + (size_t)R * Sp;
+    float *sdz = pre + (size_t)R * Hp, *WoT = sdz + (size_t)R * Hp, *WsTm = WoT + nWo;
+    float *mix = WsTm + nWs;
+    float *Ws = w, *Wp = Ws + nWs, *bh = Wp + nWp, *Wo = bh + Hp, *bo = Wo + nWo;
+    float *gWs = g, *gWp = gWs + nWs, *gbh = gWp + nWp, *gWo = gbh + Hp, *gbo = gWo + nWo;
+    float *u = a->u;
+
+    for (int j = 0; j < S; j++) {
+        for (int h = 0; h < H; h++) Ws[j * Hp + h] = a->w_in[j * H + h];
+        bo[j] = a->b_out[j];
+        mix[j] = j < D ? alpha : 1.0f;
+    }
+    for (int k = 0; k < P; k++)
+        for (int h = 0; h < H; h++) Wp[k * Hp + h] = a->w_in[(S + k) * H + h];
+    for (int h = 0; h < H; h++) {
+        bh[h] = a->b_hidden[h];
+        for (int j = 0; j < S; j++) Wo[h * Sp + j] = a->w_out[h * S + j];
+    }
+    for (int r = 0; r < R; r++)
+        for (int j = 0; j < D; j++) s0[r * Sp + j] = X[r * D + j];
+
+    float loss = 0.0f;
+    int t = 1;
+    for (; t <= a->epochs; t++) {
+        /* PB = bound tanh(u); pre = PB @ Wp + bh: the same every step */
+        for (size_t i = 0; i < nU; i++) pb[i] = bound * tanhf(u[i]);
+        for (int r = 0; r < R; r++)
+            for (int h = 0; h < Hp; h++) {
+                float acc = bh[h];
+                for (int k = 0; k < P; k++) acc += pb[r * P + k] * Wp[k * Hp + h];
+                pre[r * Hp + h] = acc;
+            }
+        /* forward: s_0 = [x_0, 0]; s_t = o_{t-1} mix + (1 - alpha) [x_t, 0] */
+        for (int s = 0; s < L; s++) {
+            const float *in = s0;
+            if (s > 0 && IN) {
+                float *row = IN + (size_t)s * R * Sp;
+                const float *o = Os + (size_t)(s - 1) * R * Sp;
+                for (int r = 0; r < R; r++)
+                    for (int j = 0; j < Sp; j++)
+                        row[r * Sp + j] = o[r * Sp + j] * (j < S ? mix[j] : 0.0f)
+                            + (j < D ? (1.0f - alpha) * X[((size_t)s * R + r) * D + j] : 0.0f);
+                in = row;
+            } else if (s > 0) {
+                in = Os + (size_t)(s - 1) * R * Sp;
+            }
+            float *h = Hs + (size_t)s * R * Hp;
+            F(gemm)(R, Sp, Hp, in, Sp, Ws, pre, Hp, 0, h, EPI_TANH, NULL);
+            F(gemm)(R, Hp, Sp, h, Hp, Wo, bo, 0, 0, Os + (size_t)s * R * Sp, EPI_TANH, NULL);
+        }
+        /* loss = sum mw mean_D (y - x)^2; G = dL/do */
+        double lsum = 0.0;
+        memset(G, 0, LR * Sp * sizeof(float));
+        for (size_t i = 0; i < LR; i++) {
+            const float *o = Os + i * Sp, *x = X + (i + R) * D;
+            float wgt = mw[i], part = 0.0f;
+            for (int j = 0; j < D; j++) {
+                float d = o[j] - x[j];
+                part += d * d;
+                G[i * Sp + j] = d * wgt * (2.0f / D);
+            }
+            lsum += (double)(part * wgt);
+        }
+        loss = (float)(lsum / D);
+        if (a->loss_history) a->loss_history[t - 1] = loss;
+        /* backward: go_t = (G_t + carry) (1 - o_t^2); dz_t = (go_t Wo^T) (1 - h_t^2);
+           carry into G_{t-1} = dz_t (mix Ws)^T, since s_t holds o_{t-1} mix */
+        for (int h = 0; h < Hp; h++)
+            for (int j = 0; j < Sp; j++) {
+                WoT[j * Hp + h] = Wo[h * Sp + j];
+                WsTm[h * Sp + j] = Ws[j * Hp + h] * (j < S ? mix[j] : 0.0f);
+            }
+        for (int s = L - 1; s >= 0; s--) {
+            float *go = G + (size_t)s * R * Sp;
+            const float *o = Os + (size_t)s * R * Sp;
+            for (int i = 0; i < R * Sp; i++) go[i] *= 1.0f - o[i] * o[i];
+            float *dz = DZ + (size_t)s * R * Hp;
+            F(gemm)(R, Sp, Hp, go, Sp, WoT, NULL, 0, 0, dz, EPI_DTANH, Hs + (size_t)s * R * Hp);
+            if (s > 0) F(gemm)(R, Hp, Sp, dz, Hp, WsTm, NULL, 0, 1, go - (size_t)R * Sp,
+                               EPI_NONE, NULL);
+        }
+        /* weight gradients: sums over all steps and rows */
+        memset(g, 0, nW * sizeof(float));
+        memset(sdz, 0, (size_t)R * Hp * sizeof(float));
+        F(gemm_tn)((int)LR, Hp, Sp, Hs, Hp, G, gWo);
+        F(gemm_tn)(R, Sp, Hp, s0, Sp, DZ, gWs);
+        if (L > 1)
+            F(gemm_tn)((int)(LR - R), Sp, Hp, IN ? IN + (size_t)R * Sp : Os, Sp,
+                       DZ + (size_t)R * Hp, gWs);
+        for (size_t i = 0; i < LR; i++)
+            for (int j = 0; j < Sp; j++) gbo[j] += G[i * Sp + j];
+        for (size_t i = 0; i < LR; i++)
+            for (int h = 0; h < Hp; h++) sdz[(i % R) * Hp + h] += DZ[i * Hp + h];
+        for (int r = 0; r < R; r++)
+            for (int h = 0; h < Hp; h++) {
+                gbh[h] += sdz[r * Hp + h];
+                for (int k = 0; k < P; k++) gWp[k * Hp + h] += pb[r * P + k] * sdz[r * Hp + h];
+            }
+        /* dL/du = (sdz Wp^T) bound (1 - tanh(u)^2) */
+        for (int r = 0; r < R; r++)
+            for (int k = 0; k < P; k++) {
+                float acc = 0.0f;
+                for (int h = 0; h < Hp; h++) acc += sdz[r * Hp + h] * Wp[k * Hp + h];
+                float th = tanhf(u[r * P + k]);
+                gu[r * P + k] = acc * bound * (1.0f - th * th);
+            }
+        /* clip the weight gradient's global norm, then Adam */
+        double sq = 0.0;
+        for (size_t i = 0; i < nW; i++) sq += (double)g[i] * g[i];
+        double scale = a->clip / (sqrt(sq) + 1e-12);
+        if (scale > 1.0) scale = 1.0;
+        double f = schedule_decay(a, t);
+        double ramp = a->warmup > 0 ? (t < a->warmup ? (double)t / a->warmup : 1.0) : 1.0;
+        F(adam)(w, g, m, v, nW, a->lr * f * ramp, t, (float)scale);
+        F(adam)(u, gu, mu, vu, nU, a->pb_lr * f, t, 1.0f);
+    }
+    a->epochs_run = t - 1;
+
+    for (int j = 0; j < S; j++) {
+        for (int h = 0; h < H; h++) a->w_in[j * H + h] = Ws[j * Hp + h];
+        a->b_out[j] = bo[j];
+    }
+    for (int k = 0; k < P; k++)
+        for (int h = 0; h < H; h++) a->w_in[(S + k) * H + h] = Wp[k * Hp + h];
+    for (int h = 0; h < H; h++) {
+        a->b_hidden[h] = bh[h];
+        for (int j = 0; j < S; j++) a->w_out[h * S + j] = Wo[h * Sp + j];
+    }
+    a->loss = loss;
+    free(mem);
+    return 0;
+}
+
+#undef V
+#undef VU
+#undef VI
+#undef LD
+#undef ST
+#undef INL
+#undef GEMM_TILE
+#undef GEMM_TN_TILE
+#undef F
+#undef CAT
+#undef CAT_
+#undef FIRST_
+#undef SECOND_
+#undef FIRST
+#undef SECOND
+#undef GEMM_NB
+#undef GEMM_ROWS
+#undef TN_NB
+#undef TN_ROWS
+/* the parameters, so the next inclusion sets its own */
+#undef VW
+#undef SUFFIX
+#undef TARGET
+#undef RECIP
+#undef WIDE
+#undef VMIN
+#undef VMAX
+#undef GEMM_NB_ROWS
+#undef TN_NB_ROWS

@@ -1,0 +1,136 @@
+"""torch-rnnpb's native training kernel: finding it, choosing its instruction set.
+
+Light: ctypes only, no torch, so ``iloci plugins`` can say which kernel
+will run without importing torch. The kernel itself is ``_native.c`` (an
+optional C extension built at install); :mod:`iloci_torch.rnnpb` calls it.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from functools import lru_cache
+import os
+
+from iloci.errors import IlociError
+
+__all__ = ["ISAS", "ISA_ENV", "native_isas", "native_kernel_available", "kernel_info",
+           "describe"]
+
+#: Instruction sets of the native kernel, fastest first, by their names in
+#: ``ILOCI_RNNPB_ISA`` and :func:`kernel_info`; values as in ``_native.c``.
+ISAS = {"avx512": 3, "avx2": 2, "portable": 1}
+#: Environment variable forcing the native kernel's instruction set (for
+#: tests and benchmarks): ``avx512``, ``avx2``, ``portable``, or ``auto``
+#: (unset: the fastest this CPU has).
+ISA_ENV = "ILOCI_RNNPB_ISA"
+
+
+#: What a non-zero return of ``iloci_rnnpb_train`` means.
+NATIVE_CODES = {1: "out of memory", 2: "more than 256 hidden or state units",
+                 3: "instruction set not supported here", 4: "malformed arguments"}
+
+
+class TrainArgs(ctypes.Structure):
+    """``iloci_rnnpb_train_args`` of ``_native.c``: the arguments of one training, by name."""
+
+    _fields_ = [
+        ("size", ctypes.c_int32), ("isa", ctypes.c_int32),
+        ("epochs", ctypes.c_int32), ("T", ctypes.c_int32), ("R", ctypes.c_int32),
+        ("D", ctypes.c_int32), ("C", ctypes.c_int32), ("H", ctypes.c_int32),
+        ("P", ctypes.c_int32), ("warmup", ctypes.c_int32),
+        ("alpha", ctypes.c_float), ("bound", ctypes.c_float),
+        ("lr", ctypes.c_double), ("pb_lr", ctypes.c_double),
+        ("decay", ctypes.c_double), ("clip", ctypes.c_double),
+        ("X", ctypes.c_void_p), ("mw", ctypes.c_void_p),
+        ("w_in", ctypes.c_void_p), ("b_hidden", ctypes.c_void_p),
+        ("w_out", ctypes.c_void_p), ("b_out", ctypes.c_void_p), ("u", ctypes.c_void_p),
+        ("loss_history", ctypes.c_void_p),
+        ("loss", ctypes.c_float), ("epochs_run", ctypes.c_int32),
+        ("isa_used", ctypes.c_int32),
+    ]
+
+
+@lru_cache(maxsize=1)
+def native_lib() -> ctypes.CDLL | None:
+    """The native training kernel (``_native.c``), or None where it was not built."""
+    try:
+        from iloci_torch import _native
+    except ImportError:
+        return None
+    lib = ctypes.CDLL(_native.__file__)
+    if lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(TrainArgs):
+        # a stale build of another layout: never pass it a struct it misreads
+        return None
+    lib.iloci_rnnpb_train.argtypes = [ctypes.POINTER(TrainArgs)]
+    lib.iloci_rnnpb_train.restype = ctypes.c_int
+    lib.iloci_rnnpb_isa_supported.argtypes = [ctypes.c_int]
+    return lib
+
+
+def native_isas() -> tuple[str, ...]:
+    """Instruction sets the native kernel can run here, fastest first (empty: not built)."""
+    lib = native_lib()
+    if lib is None:
+        return ()
+    return tuple(name for name, code in ISAS.items() if lib.iloci_rnnpb_isa_supported(code))
+
+
+def native_kernel_available() -> bool:
+    """Whether the native kernel was built (it then runs on every CPU, portable at worst)."""
+    return native_lib() is not None
+
+
+def requested_isa() -> str:
+    """The instruction set ``ILOCI_RNNPB_ISA`` asks for, checked; ``"auto"`` when unset.
+
+    Raises
+    ------
+    IlociError
+        An unknown name, or one this CPU or build cannot run.
+    """
+    name = os.environ.get(ISA_ENV, "").strip().lower() or "auto"
+    if name == "auto":
+        return name
+    if name not in ISAS:
+        raise IlociError(f"{ISA_ENV}={name!r} is no instruction set of the native kernel; "
+                         f"use one of auto, {', '.join(ISAS)}.")
+    if name not in native_isas():
+        have = ", ".join(native_isas()) or "none: the native kernel was not built"
+        raise IlociError(f"{ISA_ENV}={name} asks for an instruction set this machine cannot "
+                         f"run (available: {have}); unset it to use the fastest available.")
+    return name
+
+
+def kernel_info(kernel: str = "auto", dtype: str = "float32") -> str:
+    """Which training kernel a model with these settings runs here, in words.
+
+    E.g. ``"native kernel (avx512)"``, ``"native kernel (portable; forced by
+    ILOCI_RNNPB_ISA)"``,
+    ``"torch operations (the native kernel was not built)"``. What ``iloci
+    plugins`` prints. Sizes beyond the native kernel (more than 256 hidden
+    or state units) also train with torch operations.
+
+    Raises
+    ------
+    IlociError
+        ``ILOCI_RNNPB_ISA`` names an instruction set that cannot run here.
+    """
+    if kernel == "torch":
+        return "torch operations (kernel = \"torch\")"
+    if dtype != "float32":
+        return f"torch operations ({dtype}: the native kernel is float32 only)"
+    if not native_kernel_available():
+        return ("torch operations (the native kernel was not built: reinstall iloci-torch "
+                "where a C compiler is available)")
+    isa = requested_isa()
+    if isa != "auto":
+        return f"native kernel ({isa}; forced by {ISA_ENV})"
+    return f"native kernel ({native_isas()[0]})"
+
+
+def describe() -> str:
+    """One line for ``iloci plugins``: what float32 training runs on here by default."""
+    try:
+        return "float32 training runs the " + kernel_info()
+    except IlociError as exc:
+        return str(exc)

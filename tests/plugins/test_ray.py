@@ -1,0 +1,178 @@
+"""The iloci-ray plugin: sweep specs, run keys, a resumable sweep and folds on real Ray."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("iloci_ray")
+pytest.importorskip("ray")
+
+from iloci.errors import ConfigError, InvalidInputError  # noqa: E402
+from iloci_ray.sweep import load_spec, plan_runs, run_key, run_sweep, settings  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = ROOT / "docs/examples/tiny.toml"
+
+# two shapes, 60 epochs: a run takes seconds (its CCR says nothing)
+SMALL = f'''
+base = "{TINY}"
+seeds = [0]
+folds = [0]
+[config]
+perceptual_model = {{ epochs = 60 }}
+learner = {{ rehearsal_epochs = 60 }}
+data = {{ shapes = ["GShape", "Sine"] }}
+'''
+
+
+def write(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("top, values, match", [
+    ("", "", r"\[values\] must name"),
+    ("", '"learner.k_cutoff" = []', "empty list"),
+    ("", '"k_cutoff" = [1.0]', "'section.key'"),
+    ("", '"learner.k_cutoff" = { low = 0.1, high = 1.0 }', "ranges need search"),
+    ('search = "random"', '"learner.k_cutoff" = [1.0]', "samples = N"),
+    ('search = "random"\nsamples = 2', '"learner.k_cutoff" = { low = 1.0, high = 0.1 }',
+     "low < high"),
+    ('search = "annealing"', '"learner.k_cutoff" = [1.0]', "'grid' or 'random'"),
+    ("epochs = 3", '"learner.k_cutoff" = [1.0]', "unknown key"),
+    ("", '"learner.k_cutoff" = [-1.0]', "k_cutoff must be >= 0"),
+    ("", '"learner.no_such_key" = [1]', "no_such_key"),
+])
+def test_a_bad_spec_is_one_config_error_naming_what_is_wrong(tmp_path, top, values, match):
+    text = top + "\n" + SMALL + ("[values]\n" + values + "\n" if values else "")
+    with pytest.raises(ConfigError, match=match):
+        load_spec(write(tmp_path, text))
+
+
+def test_bad_spec_on_the_command_line_exits_2_without_traceback(tmp_path, cli):
+    r = cli("sweep", str(write(tmp_path, "not = [toml")), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "not a TOML file" in r.stderr and "Traceback" not in r.stderr
+    r = cli("sweep", str(tmp_path / "missing.toml"))
+    assert r.returncode == 2 and "no such sweep spec" in r.stderr
+
+
+def test_grid_is_settings_x_seeds_x_folds_with_stable_distinct_keys(tmp_path):
+    spec = load_spec(write(tmp_path, SMALL.replace("seeds = [0]", "seeds = [0, 3]")
+                           .replace("folds = [0]", "") + '[values]\n"learner.k_cutoff" = '
+                           '[0.25, 0.5]\n"learner.num_threshold" = [2, 3, 4]\n'))
+    runs = plan_runs(spec)
+    assert len(runs) == 2 * 3 * 2 * 2  # settings x seeds x the config's 2 folds
+    assert len({r.key for r in runs}) == len(runs)
+    assert [r.key for r in plan_runs(spec)] == [r.key for r in runs]
+    r = runs[0]
+    assert r.config["learner"]["k_cutoff"] == 0.25 and r.config["evaluation"]["seed"] == 0
+    # the key is of the resolved config: any value that changes the run changes it
+    changed = json.loads(json.dumps(r.config))
+    changed["perceptual_model"]["epochs"] += 1
+    assert run_key(changed, r.fold, r.seed) != r.key
+    assert run_key(r.config, r.fold + 1, r.seed) != r.key
+
+
+def test_random_search_is_seeded_and_stays_in_range(tmp_path):
+    body = ('search = "random"\nsamples = 6\nrandom_seed = 4\n' + SMALL +
+            '[values]\n"learner.k_cutoff" = { low = 0.1, high = 2.0, log = true }\n'
+            '"learner.num_threshold" = { low = 2, high = 5, integer = true }\n')
+    a = settings(load_spec(write(tmp_path, body)))
+    b = settings(load_spec(write(tmp_path, body, "again.toml")))
+    assert a == b and len(a) == 6
+    assert all(0.1 <= s["learner.k_cutoff"] <= 2.0 for s in a)
+    assert all(isinstance(s["learner.num_threshold"], int) and 2 <= s["learner.num_threshold"]
+               <= 5 for s in a)
+    other = settings(load_spec(write(tmp_path, body.replace("random_seed = 4",
+                                                            "random_seed = 5"), "c.toml")))
+    assert other != a
+
+
+@pytest.fixture(scope="module")
+def ray_local():
+    import ray
+
+    from iloci_ray.executor import connect
+    connect(None, 2)
+    yield ray
+    ray.shutdown()
+
+
+@pytest.mark.slow
+def test_sweep_stores_each_run_and_resumes_without_recomputing(tmp_path, ray_local):
+    from iloci_ray.report import write_report
+
+    spec = load_spec(write(tmp_path, SMALL + '[values]\n"learner.k_cutoff" = [0.5, 1.0]\n'))
+    out = tmp_path / "out"
+    events = []
+    records, info = run_sweep(spec, out, jobs=2, on_event=lambda k, r, m: events.append(k))
+    assert info["computed"] == 2 and info["reused"] == 0
+    assert sorted(p.stem for p in (out / "runs").glob("*.json")) == sorted(
+        r["key"] for r in records)
+    assert all(0.0 <= r["ccr"] <= 1.0 and r["feedbacks"] >= 1 for r in records)
+    # started again: nothing recomputed, the same records
+    again, info2 = run_sweep(spec, out, jobs=2)
+    assert info2["computed"] == 0 and info2["reused"] == 2 and again == records
+    # a run lost (or never finished) is the only one computed; the result is the same
+    (out / "runs" / f"{records[1]['key']}.json").unlink()
+    third, info3 = run_sweep(spec, out, jobs=2)
+    assert info3["computed"] == 1 and info3["reused"] == 1
+    assert [r["ccr"] for r in third] == [r["ccr"] for r in records]
+    assert [r["feedbacks"] for r in third] == [r["feedbacks"] for r in records]
+    report = write_report(out, spec, third, info3)
+    text = report.read_text()
+    assert "Best setting" in text and "figures/learner-k_cutoff.png" in text
+    assert (out / "figures/learner-k_cutoff.png").stat().st_size > 1000
+    with open(out / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [float(r["learner.k_cutoff"]) for r in rows] == [0.5, 1.0]
+
+
+@pytest.mark.slow
+def test_evaluate_on_ray_gives_the_local_results(ray_local):
+    from iloci.config import load_config
+    from iloci.evaluation.evaluate import evaluate
+
+    cfg = load_config(TINY).replace(perceptual_model={"epochs": 60},
+                                    learner={"rehearsal_epochs": 60},
+                                    data={"shapes": ["GShape", "Sine"]})
+    seen = []
+    m_ray, r_ray = evaluate(cfg, jobs=2, executor="ray", baseline=False, progress=seen.append)
+    m_loc, r_loc = evaluate(cfg, jobs=1, baseline=False)
+    assert m_ray["ccr_folds"] == m_loc["ccr_folds"]
+    assert [r.predicted for r in r_ray] == [r.predicted for r in r_loc]
+    assert [r.feedbacks for r in r_ray] == [r.feedbacks for r in r_loc]
+    kinds = {m["kind"] for m in seen}
+    assert {"fold_queued", "fold_start", "interaction", "fold_done"} <= kinds
+
+
+def test_an_iloci_error_in_a_ray_task_reaches_the_caller_as_itself(ray_local):
+    from iloci.config import load_config
+    from iloci.evaluation.parallel import FoldTask, _run_fold_in_worker
+    from iloci_ray.executor import RayExecutor
+
+    # a fold whose data the worker cannot load: the worker raises the error
+    call = (load_config(TINY).to_dict(), FoldTask(0, [0], [1]), ["NoSuchShape"], False, None)
+    with pytest.raises(InvalidInputError, match="unknown LASA shape 'NoSuchShape'"):
+        list(RayExecutor(1).run(_run_fold_in_worker, [call], lambda m: None))
+
+
+def test_no_cluster_at_the_address_is_a_clear_error(tmp_path, cli):
+    spec = write(tmp_path, SMALL + '[values]\n"learner.k_cutoff" = [0.5]\n')
+    r = cli("sweep", str(spec), "--address", "127.0.0.1:1", "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "no Ray cluster at '127.0.0.1:1'" in r.stderr
+
+
+def test_a_swept_component_name_keeps_what_the_base_wrote_and_takes_its_defaults(tmp_path):
+    pytest.importorskip("iloci_sklearn")
+    spec = load_spec(write(tmp_path, SMALL + '[values]\n"clusterer.name" = ["scipy", '
+                           '"sklearn"]\n'))
+    runs = plan_runs(spec)
+    assert [r.config["clusterer"]["name"] for r in runs] == ["scipy", "sklearn"]
+    assert all(r.config["perceptual_model"]["epochs"] == 60 for r in runs)
+    assert runs[0].key != runs[1].key
