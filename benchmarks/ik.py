@@ -32,7 +32,7 @@ import numpy as np
 from iloci.config import SensorimotorConfig
 from iloci.data import load_lasa
 from iloci.errors import UnreachableTargetError
-from iloci.sensorimotor.preprocess import preprocess
+from iloci.sensorimotor.pipeline import preprocessed
 from iloci.sensorimotor.robots import get_robot
 
 RESULTS = Path(__file__).resolve().parent / "results" / "ik.json"
@@ -69,12 +69,12 @@ def main() -> dict:
     robot = get_robot()
     ik = PinocchioIK(robot)
     demos = load_lasa()
-    import scipy.signal  # noqa: F401  (import time is not preprocessing time)
+    import scipy.interpolate  # noqa: F401  (import time is not preprocessing time)
+    import scipy.ndimage  # noqa: F401
+    import scipy.signal  # noqa: F401
 
     t0 = time.perf_counter()
-    targets = [robot.plane.to_3d(preprocess(d, steps=cfg.steps, resample_by=cfg.resample,
-                                            smoothing_window=cfg.smoothing_window,
-                                            plane=robot.plane)) for d in demos]
+    targets = [robot.plane.to_3d(preprocessed(d, cfg, robot)) for d in demos]
     t_pre = time.perf_counter() - t0
 
     runs = []

@@ -141,6 +141,16 @@ def loads(path: Path) -> tuple[bool, str, int | None]:
     return True, f"{len(memory.entries)} entries", progress.get("items")
 
 
+def round_result(ref, mem, run, n_kills: int, rounds: list) -> dict:
+    """A finished round: the memory compared with the reference, the kills it took, how it ended."""
+    result = compare(ref, mem)
+    result["kills_in_round"] = n_kills - sum(r["kills_in_round"] for r in rounds)
+    result["last_run"] = ("resumed" if "resuming:" in run.output() else
+                          "nothing left" if "nothing to teach" in run.output() else
+                          "whole stream")
+    return result
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kills", type=int, default=20)
@@ -215,11 +225,7 @@ def main() -> int:
         if run.proc.returncode != 0:
             print(run.output(), run.errors())
             return 1
-        result = compare(ref, mem)
-        result["kills_in_round"] = len(kills) - sum(r["kills_in_round"] for r in rounds)
-        result["last_run"] = ("resumed" if "resuming:" in run.output() else
-                              "nothing left" if "nothing to teach" in run.output() else
-                              "whole stream")
+        result = round_result(ref, mem, run, len(kills), rounds)
         rounds.append(result)
         print(f"round {len(rounds)} finished: {result}", flush=True)
         mem.unlink()
@@ -228,12 +234,7 @@ def main() -> int:
     if last.wait() != 0:
         print(last.output(), last.errors())
         return 1
-    final = compare(ref, mem)
-    final["kills_in_round"] = len(kills) - sum(r["kills_in_round"] for r in rounds)
-    final["last_run"] = ("resumed" if "resuming:" in last.output() else
-                         "nothing left" if "nothing to teach" in last.output() else
-                         "whole stream")
-    rounds.append(final)
+    rounds.append(round_result(ref, mem, last, len(kills), rounds))
     runs += 1
     equal = all(r["entries_equal"] and r["network_equal"] and r["counters_equal"]
                 and r["encoder_equal"] and r["config_equal"] for r in rounds)

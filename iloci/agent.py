@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 import os
 from pathlib import Path
+import threading
 import time
 from typing import Any
 import warnings
@@ -109,6 +110,11 @@ class Agent:
             or get_robot()
         from iloci.concepts.memory import Memory
         self.memory = Memory()
+        #: Called with each RehearsalProgress (see Learner); None for none.
+        self.on_progress: Callable[[Any], None] | None = None
+        self._worker: Any = None
+        # one learning step at a time (threads, asyncio.to_thread)
+        self._lock = threading.RLock()
 
     def __repr__(self) -> str:
         from iloci.interfaces import COMPONENT_KINDS
@@ -136,7 +142,8 @@ class Agent:
         return Learner(self.memory, self.perceptual_model, self.clusterer, self.teacher,
                        self.config.learner, simulator=self.simulator,
                        hook=self.plugin_manager.hook,
-                       joint_limits=ik_joint_limits(self.ik_solver))
+                       joint_limits=ik_joint_limits(self.ik_solver),
+                       on_progress=self.on_progress, lock=self._lock)
 
     def motion(self, demo: Demonstration):
         """The demonstration as the robot performs it (preprocessing + IK).
@@ -172,12 +179,67 @@ class Agent:
         return self.memory.encoder.encode(motion)
 
     # -- learning phase ------------------------------------------------------------
-    def learn(self, demo: Demonstration):
-        """Learn from one demonstration with the teacher's feedback.
+    def observe(self, demo: Demonstration, motion: Any = None):
+        """Show the robot one demonstration: its first guess, step by step.
+
+        The step-wise learning phase, for callers that get feedback when a
+        person gives it (a web page, a GUI, a ROS node): nothing waits for
+        the person. :meth:`learn` and :meth:`teach` run on it with a
+        teacher object.
 
         Parameters
         ----------
         demo : Demonstration
+        motion : Motion, optional
+            ``self.motion(demo)`` when already computed (the IK runs once
+            per demonstration).
+
+        Returns
+        -------
+        Turn
+            ``turn.answer``: the guess (concept, confidence, attempt, the
+            drawing in the demonstration's frame, joint path, dt, start
+            posture) to judge with ``turn.feedback(+1 | -1)``; or, for the
+            first demonstration of an empty memory, ``turn.outcome`` at once
+            (a new concept, nothing asked).
+
+        Raises
+        ------
+        InvalidDemonstrationError, UnreachableTargetError
+            The demonstration cannot be preprocessed or reached; the memory
+            is untouched.
+        """
+        from iloci.sensorimotor.frames import TeacherFrame
+        if motion is None:
+            motion = self.motion(demo)
+        with self._lock:
+            if self.memory.encoder is None:
+                self.fit_encoder([motion])
+            seq, start = self._encode(motion)
+            frame = TeacherFrame.of(demo, motion.plane_points)
+            turn = self.learner.observe(demo, seq, start, motion.dt, frame)
+        return turn
+
+    async def aobserve(self, demo: Demonstration):
+        """:meth:`observe` from asyncio code: runs in a thread, the event loop stays free.
+
+        With :meth:`start_worker` the network's work runs in the worker
+        process, so the thread mostly waits and the loop keeps its timing.
+        """
+        import asyncio
+        return await asyncio.to_thread(self.observe, demo)
+
+    def learn(self, demo: Demonstration, motion: Any = None):
+        """Learn from one demonstration with the teacher's feedback.
+
+        :meth:`observe`, then the configured teacher's feedback on each
+        guess until the demonstration is placed.
+
+        Parameters
+        ----------
+        demo : Demonstration
+        motion : Motion, optional
+            ``self.motion(demo)`` when already computed.
 
         Returns
         -------
@@ -191,12 +253,16 @@ class Agent:
         FeedbackError
             The teacher answered something other than +1 or -1; the memory
             is untouched.
+        ObserverError
+            An observer hook raised after the demonstration was learned
+            (its ``outcome`` says how); do not teach it again.
         """
-        motion = self.motion(demo)
-        if self.memory.encoder is None:
-            self.fit_encoder([motion])
-        seq, start = self._encode(motion)
-        return self.learner.learn(demo, seq, start, motion.dt)
+        from iloci.interfaces import check_feedback
+        turn = self.observe(demo, motion)
+        while turn.answer is not None:
+            value = self.teacher.feedback(demo, turn.answer.response)
+            turn.feedback(check_feedback(value, self.teacher))
+        return turn.outcome
 
     def teach(self, demos: Iterable[Any], *,
               on_change: Callable[[Any], None] | None = None) -> TeachReport:
@@ -261,9 +327,8 @@ class Agent:
                 self.fit_encoder([m for _, m in stream])
         outcomes = []
         for demo, motion in stream:
-            seq, start = self._encode(motion)
             try:
-                outcome = self.learner.learn(demo, seq, start, motion.dt)
+                outcome = self.learn(demo, motion)
             except ObserverError as exc:  # learned, then an observer failed
                 if on_change is not None:
                     on_change(exc.outcome)
@@ -303,7 +368,8 @@ class Agent:
                                  "demonstration (Agent.learn / `iloci teach`) before "
                                  "recognizing.")
         seqs = [self._encode(self.motion(d))[0] for d in items]
-        out = self.learner.recognize(seqs, [d.key for d in items])
+        with self._lock:
+            out = self.learner.recognize(seqs, [d.key for d in items])
         return out[0] if single else out
 
     def respond(self, concept: str):
@@ -316,6 +382,57 @@ class Agent:
         return perform(self.memory, self.perceptual_model, self.memory.performer_of(concept),
                        joint_limits=ik_joint_limits(self.ik_solver), simulator=self.simulator)
 
+    def rename(self, concept: str, name: str) -> None:
+        """Name one of the robot's concepts (``"c3"`` -> ``"circle"``); see ``Memory.rename``.
+
+        Save the memory to keep the name: it is stored with the entries, so
+        every command, report and recognition uses it.
+        """
+        with self._lock:
+            self.memory.rename(concept, name)
+
+    # -- worker process ------------------------------------------------------------
+    def start_worker(self) -> Agent:
+        """Run the network's computations in a worker process from now on.
+
+        Recognition, generation and every rehearsal then run in one
+        process of their own (:class:`~iloci.worker.WorkerModel`): the
+        calling thread waits on a pipe without holding the GIL, so the rest
+        of the embedding program (a control loop, an asyncio server) keeps
+        its timing while the robot learns. Results are identical to
+        in-process ones (the worker holds the same network). Preprocessing
+        and IK stay in the caller. Idempotent; returns the agent.
+
+        The perceptual model must pickle (both first-party back ends do).
+        Stop it with :meth:`close` (or use the agent as a context manager);
+        the worker's network is copied back first.
+        """
+        from iloci.worker import WorkerModel
+        with self._lock:
+            if self._worker is None:
+                self._worker = WorkerModel(self.perceptual_model)
+                self._local_model = self.perceptual_model
+                self.perceptual_model = self._worker
+        return self
+
+    def close(self) -> None:
+        """Stop the worker process, if any, keeping its network (idempotent)."""
+        with self._lock:
+            worker, self._worker = self._worker, None
+            if worker is None:
+                return
+            try:
+                self._local_model.load_state(worker.state())
+            finally:
+                self.perceptual_model = self._local_model
+                worker.close()
+
+    def __enter__(self) -> Agent:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
     # -- persistence --------------------------------------------------------------------
     def save(self, path: str | os.PathLike[str], *,
              extra: dict[str, Any] | None = None) -> Path:
@@ -326,9 +443,10 @@ class Agent:
         a stream there). Returns the path.
         """
         from iloci.concepts.memory import save_memory
-        return save_memory(path, self.memory, self.perceptual_model.state(),
-                           extra={**dict(extra or {}), "config": self.config.to_dict(),
-                                  "robot": _robot_record(self.robot)})
+        with self._lock:
+            return save_memory(path, self.memory, self.perceptual_model.state(),
+                               extra={**dict(extra or {}), "config": self.config.to_dict(),
+                                      "robot": _robot_record(self.robot)})
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], config: Any = None, *,

@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "iloci.commands.recognize",
     "iloci.commands.evaluate",
     "iloci.commands.draw",
+    "iloci.commands.serve",
 )
 
 

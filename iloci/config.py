@@ -99,8 +99,38 @@ class LearnerConfig:
     #: let regenerated patterns drift further from what was demonstrated:
     #: on LASA fold 0, 500 epochs gave 90 % CCR where 1500 gave 99 %.
     rehearsal_epochs: int = 0
+    #: Recognition answers "unknown" when its familiarity (see
+    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration the
+    #: network reproduces well, 0.5 when it reproduces it as badly as one
+    #: known concept reproduces its neighbour) is below this; 0 never does
+    #: (the paper always names a concept).
+    unknown_below: float = 0.0
+    #: Novelty answer: when a demonstration's familiarity is below this, the
+    #: robot first imitates it back as something new; "yes" founds the new
+    #: concept in one interaction, "no" sends it back to guessing. 0 never
+    #: does (the paper tries every known concept before founding one).
+    novelty_below: float = 0.0
+    #: A reward that comes after a "no" for the same demonstration goes
+    #: against the robot's own ranking of its concepts; with this on, the
+    #: robot asks once more and keeps the reward only when the teacher
+    #: confirms it, so one slip of the teacher cannot merge two concepts.
+    #: Off: the paper's protocol (every reward is final).
+    confirm_rewards: bool = False
+    #: What ranks the robot's concepts for a demonstration, in recognition
+    #: and in the order of its guesses: ``"pb_distance"`` (the paper: the
+    #: concept of the PB_rec nearest to PB_obs) or ``"reproduction"`` (the
+    #: concept of the entry whose PB, generated closed-loop from the
+    #: demonstration's first step, reproduces it with the lowest prediction
+    #: error; the confidence margin is then taken on those errors).
+    decision: str = "pb_distance"
 
     def validate(self) -> None:
+        if self.decision not in ("pb_distance", "reproduction"):
+            raise ValueError("decision must be 'pb_distance' or 'reproduction', got "
+                             f"{self.decision!r}")
+        for name in ("unknown_below", "novelty_below"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         if self.k_cutoff < 0:
             raise ValueError(f"k_cutoff must be >= 0, got {self.k_cutoff}")
         if self.num_threshold < 1:
@@ -118,22 +148,49 @@ class SensorimotorConfig:
 
     #: Points each demonstration is resampled to before IK (sequence length).
     steps: int = 50
-    #: Resampling parameter: ``"time"`` (the demonstration's time stamps)
-    #: or ``"arc_length"`` (uniform along the path).
-    resample: str = "time"
-    #: Smoothing window in points of the raw trajectory (Savitzky-Golay,
-    #: cubic); 0 or 1 disables smoothing.
+    #: Resampling parameter: ``"arc_length"`` (evenly along the drawn path,
+    #: smoothed along it: independent of the teacher's pace, the sampling
+    #: rate and pauses of the pen) or ``"time"`` (evenly in the
+    #: demonstration's time stamps, the paper's reading). See the guide,
+    #: "How a drawing is read", for the figures behind the default.
+    resample: str = "arc_length"
+    #: Smoothing bandwidth as a fraction of the path's length (``resample =
+    #: "arc_length"``: Gaussian local linear regression along the path);
+    #: 0 interpolates the samples without smoothing.
+    smoothing: float = 0.02
+    #: Smoothing window in points of the raw trajectory for ``resample =
+    #: "time"`` (Savitzky-Golay, cubic); 0 or 1 disables smoothing.
     smoothing_window: int = 31
+    #: The pen rests at the start (end) while it stays within this fraction
+    #: of the drawing's size of its first (last) point; those samples are
+    #: dropped before resampling. 0 keeps every sample (the paper's reading).
+    rest_tolerance: float = 0.01
+    #: Direction of the teacher's y axis: ``"up"`` (a plot, LASA) or
+    #: ``"down"`` (screen and image coordinates: a browser, a tablet).
+    y_axis: str = "up"
+    #: Fewest samples a stroke may have once the pen's rests are trimmed;
+    #: fewer is an error (a tap or a click, not a drawing).
+    min_points: int = 5
 
     def validate(self) -> None:
         if self.steps < 3:
             raise ValueError(f"steps must be >= 3, got {self.steps}")
         if self.resample not in ("time", "arc_length"):
             raise ValueError(f"resample must be 'time' or 'arc_length', got {self.resample!r}")
+        if not 0 <= self.smoothing < 0.5:
+            raise ValueError(f"smoothing must be a fraction of the path in [0, 0.5), got "
+                             f"{self.smoothing}")
         if self.smoothing_window < 0 or (self.smoothing_window > 1
                                          and self.smoothing_window % 2 == 0):
             raise ValueError("smoothing_window must be 0, 1 or an odd number of points, "
                              f"got {self.smoothing_window}")
+        if not 0 <= self.rest_tolerance < 0.5:
+            raise ValueError(f"rest_tolerance must be a fraction of the drawing's size in "
+                             f"[0, 0.5), got {self.rest_tolerance}")
+        if self.y_axis not in ("up", "down"):
+            raise ValueError(f"y_axis must be 'up' or 'down', got {self.y_axis!r}")
+        if self.min_points < 3:
+            raise ValueError(f"min_points must be >= 3, got {self.min_points}")
 
 
 @dataclass(frozen=True)
@@ -263,8 +320,30 @@ class EvaluationConfig:
     #: Folds run in parallel processes; 0 (the default): one per CPU core
     #: this process may use (:func:`iloci.evaluation.evaluate.default_jobs`).
     jobs: int = 0
+    #: ``"folds"`` (the paper's: learn one partition, then recognize the
+    #: rest without feedback) or ``"stream"`` (test-then-learn: every
+    #: demonstration is first recognized and scored, then taught).
+    protocol: str = "folds"
+    #: Concepts left out of each fold's learning set (their learning
+    #: demonstrations join the test set), to measure whether recognition
+    #: says "unknown" for what it was never taught; 0 leaves none out.
+    #: Which ones rotates from fold to fold (seeded).
+    untaught: int = 0
+    #: Order of each fold's learning set: ``"shuffled"`` (seeded random) or
+    #: ``"blocked"`` (concept by concept, as a person teaching "circle,
+    #: circle, then square, square" would; concepts and demonstrations in
+    #: seeded random order).
+    order: str = "shuffled"
+    #: Also recognize every fold's test set under the perturbations of
+    #: :mod:`iloci.evaluation.perturb` (pace, sampling, rests, jitter,
+    #: rotation, stretch, scale), iloci beside DTW 1-NN.
+    robustness: bool = False
 
     def validate(self) -> None:
+        if self.protocol not in ("folds", "stream"):
+            raise ValueError(f"protocol must be 'folds' or 'stream', got {self.protocol!r}")
+        if self.untaught < 0:
+            raise ValueError(f"untaught must be >= 0, got {self.untaught}")
         if not 2 <= self.folds <= 7:
             # each LASA shape has 7 demonstrations, dealt into the folds
             raise ValueError(f"folds must be in 2..7 (LASA has 7 demonstrations of each "
@@ -275,6 +354,8 @@ class EvaluationConfig:
             raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
         if self.jobs < 0:
             raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
+        if self.order not in ("shuffled", "blocked"):
+            raise ValueError(f"order must be 'shuffled' or 'blocked', got {self.order!r}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {

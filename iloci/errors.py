@@ -26,6 +26,7 @@ __all__ = [
     "NotFittedError",
     "MemoryFileError",
     "MemoryConfigError",
+    "TimeUnitWarning",
 ]
 
 
@@ -232,3 +233,12 @@ class NotFittedError(IlociError, RuntimeError):
 
 class MemoryFileError(IlociError, OSError):
     """A saved memory file is missing, truncated, tampered with or too new."""
+
+
+class TimeUnitWarning(UserWarning):
+    """A demonstration's time stamps look like another unit than seconds (e.g. ms).
+
+    iloci reads time stamps in seconds; only the robot's drawing speed
+    depends on them (the default path reading, ``resample = "arc_length"``,
+    does not read them at all), so this is a warning, not an error.
+    """

@@ -31,7 +31,9 @@ class InteractionEvent:
         +1 or -1 (0 when no feedback was asked: a new concept was created).
     action : str
         What the learner did: ``"strengthen"``, ``"new_exemplar"``,
-        ``"next_guess"``, ``"new_concept"``.
+        ``"next_guess"``, ``"new_concept"``, or ``"confirm"`` (a reward
+        after a "no", asked once more with ``[learner] confirm_rewards``).
+        ``extra["novel"]`` is true for the novelty answer.
     distance : float
         PB distance between the demonstration and the answering entry.
     """

@@ -40,6 +40,27 @@ __all__ = [
     "unmet_members",
 ]
 
+#: Longest plausible duration of one drawn stroke (s): a person draws a
+#: shape in a few seconds (LASA's take 0.6 to 6 s); longer time stamps
+#: with steps of 1 or more are read as milliseconds.
+LONGEST_STROKE_S = 120.0
+
+
+def _check_time_unit(t: np.ndarray, label: str) -> None:
+    """Warn (TimeUnitWarning) when time stamps look like milliseconds, not seconds."""
+    duration = float(t[-1] - t[0])
+    step = float(np.median(np.diff(t)))
+    if duration > LONGEST_STROKE_S and step >= 1.0:
+        import warnings
+
+        from iloci.errors import TimeUnitWarning
+        warnings.warn(
+            f"time stamps of {label} span {duration:.6g} s in steps of {step:.3g} s; "
+            f"iloci reads seconds, and these look like milliseconds (the stroke would "
+            f"last {duration / 1000:.3g} s). Divide them by 1000 (or pass times=None for "
+            "sample numbers).", TimeUnitWarning, stacklevel=4)
+
+
 @dataclass(frozen=True, eq=False, init=False)
 class Demonstration:
     """One pen trajectory shown by the teacher, validated on creation.
@@ -140,6 +161,7 @@ class Demonstration:
                 raise InvalidDemonstrationError(
                     f"times of {label} must be finite and strictly increasing."
                 )
+            _check_time_unit(t, label)
         pos = pos.copy()
         t = t.copy()
         pos.flags.writeable = False
@@ -200,6 +222,26 @@ class Response:
         What the simulator executed, when one is configured.
     attempt : int
         1 for the first guess on this demonstration, 2 for the second, ...
+    novel : bool
+        The novelty answer: the robot finds the demonstration unlike every
+        concept it knows and imitates it back as something new (``motion``
+        is its reproduction of what it saw; ``concept`` the label the new
+        concept would get; ``source`` is ``None``; ``sources`` every
+        demonstration its memory stands for, i.e. what it claims the
+        demonstration is none of). +1 means "yes, that is new": the robot
+        founds the concept; -1 sends it back to guessing among what it
+        knows.
+    extra : mapping
+        Back-end details (the learner's: ``entry``, ``generation_error``,
+        ``clipped``).
+    dt : float, optional
+        Time between two rows of ``joint_path`` (s).
+    teacher_drawing : ndarray, shape (T, 2), optional
+        :attr:`drawing` in the frame of the demonstration answered: its
+        units and orientation, scaled and centred as that demonstration
+        was fitted into the drawing plane, so the two can be shown side by
+        side on equal axes. ``None`` when the response answers no
+        demonstration (e.g. ``Agent.respond``).
     """
 
     concept: str
@@ -210,6 +252,9 @@ class Response:
     execution: Execution | None = None
     attempt: int = 1
     extra: Mapping[str, Any] = field(default_factory=dict)
+    novel: bool = False
+    dt: float | None = None
+    teacher_drawing: np.ndarray | None = None
 
     @property
     def drawing(self) -> np.ndarray:
@@ -470,10 +515,14 @@ def check_feedback(value: object, teacher: object) -> int:
     ------
     FeedbackError
         ``value`` is anything else (a bool, a float, 0, ...); the message
-        names the teacher's class.
+        names the teacher's class, or ``teacher`` itself when it is a string
+        naming where the feedback came from (e.g. ``"Turn.feedback()"``).
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
             or int(value) not in (1, -1):
+        if isinstance(teacher, str):
+            raise FeedbackError(f"{teacher} got {value!r}; feedback must be +1 (reward) or "
+                                "-1 (punishment).")
         raise FeedbackError(
             f"teacher {type(teacher).__name__} returned {value!r}; feedback must be "
             "+1 (reward) or -1 (punishment). Fix the teacher plugin's feedback().")

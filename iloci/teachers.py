@@ -29,7 +29,7 @@ from iloci.errors import FeedbackError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration, Response
 
-__all__ = ["OracleTeacher", "NoisyTeacher", "ConsoleTeacher"]
+__all__ = ["OracleTeacher", "NoisyTeacher", "DrawingTeacher", "ConsoleTeacher"]
 
 
 class OracleTeacher:
@@ -65,7 +65,16 @@ class OracleTeacher:
         return c
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
+        """+1 iff the answer is right.
+
+        A concept answer is right when its source demonstration has the
+        demonstration's true concept; a novelty answer (``response.novel``)
+        when no demonstration the robot's memory stands for
+        (``response.sources``) has it.
+        """
         truth = self.true_concept(demo)
+        if response.novel:
+            return -1 if any(self.concept_of_key(k) == truth for k in response.sources) else 1
         if response.source is None:
             raise FeedbackError("oracle teacher needs Response.source (the demonstration "
                                 "the answering entry stands for).")
@@ -95,6 +104,81 @@ class NoisyTeacher(OracleTeacher):
         return -value if self._rng.random() < self.p else value
 
 
+class DrawingTeacher(OracleTeacher):
+    """Judges only what the robot drew, as a person looking at it would.
+
+    It knows the concept of the demonstration it showed (as the person who
+    drew it does) and what each concept looks like (reference
+    demonstrations), and never looks at which memory entry answered: +1
+    when the robot's drawing is nearest, by dynamic time warping, to a
+    reference demonstration of the shown demonstration's concept, else -1.
+    The oracle judges by labels; this teacher measures whether the answers
+    can be judged by eye (issue "Teach the robot in a browser", item 3).
+
+    Both paths are resampled to ``points`` equal time steps, centred on
+    their bounding box and scaled by its larger side (translation and
+    scale do not matter, orientation does), then compared with
+    ``dtaidistance``'s multi-dimensional DTW.
+
+    Parameters
+    ----------
+    references : sequence of Demonstration
+        Each with ``true_concept`` set (e.g. every LASA demonstration of the
+        shapes taught: ``iloci.data.load_lasa(shapes)``).
+    points : int
+        Resampling length (50, the robot's sequence length).
+    concepts : mapping of str to str, optional
+        Shape -> concept, for shown demonstrations outside LASA.
+
+    Raises
+    ------
+    MissingBackendError
+        ``dtaidistance`` is not installed (the ``report`` extra).
+    """
+
+    def __init__(self, references, points: int = 50,
+                 concepts: Mapping[str, str] | None = None) -> None:
+        super().__init__(concepts)
+        try:
+            from dtaidistance import dtw_ndim
+        except ImportError as exc:
+            from iloci.errors import MissingBackendError
+            raise MissingBackendError("teacher", "drawing", ["dtaidistance"],
+                                      "pip install 'iloci[report]'") from exc
+        self._dtw = dtw_ndim.distance_fast
+        refs = list(references)
+        if not refs or any(r.true_concept is None for r in refs):
+            raise FeedbackError("the drawing teacher needs reference demonstrations, each "
+                                "with its true concept set.")
+        self.points = int(points)
+        self.reference_concepts = [str(r.true_concept) for r in refs]
+        self._refs = [_normalized(_at_times(r.positions, r.times, self.points)) for r in refs]
+
+    def nearest_concept(self, drawing: np.ndarray) -> str:
+        """The concept of the reference DTW-nearest to ``drawing`` (T, 2), any frame."""
+        d = np.asarray(drawing, dtype=np.float64)
+        path = _normalized(_at_times(d, np.arange(len(d), dtype=np.float64), self.points))
+        dist = [self._dtw(path, r) for r in self._refs]
+        return self.reference_concepts[int(np.argmin(dist))]
+
+    def feedback(self, demo: Demonstration, response: Response) -> int:
+        truth = self.true_concept(demo)
+        drawing = (response.teacher_drawing if response.teacher_drawing is not None
+                   else response.drawing)
+        return 1 if self.nearest_concept(drawing) == truth else -1
+
+
+def _at_times(positions: np.ndarray, times: np.ndarray, points: int) -> np.ndarray:
+    grid = np.linspace(times[0], times[-1], points)
+    return np.column_stack([np.interp(grid, times, positions[:, k]) for k in range(2)])
+
+
+def _normalized(path: np.ndarray) -> np.ndarray:
+    lo, hi = path.min(axis=0), path.max(axis=0)
+    size = float(np.max(hi - lo)) or 1.0
+    return np.ascontiguousarray((path - (lo + hi) / 2) / size, dtype=np.double)
+
+
 class ConsoleTeacher:
     """Asks a person whether the robot's answer is right (y/n).
 
@@ -103,7 +187,8 @@ class ConsoleTeacher:
     picture_dir : str
         Directory for a PNG of each answer (demonstration beside the robot's
         drawing: :attr:`Response.drawing <iloci.interfaces.Response.drawing>`,
-        the executed pen path when a simulator is configured) when
+        the executed pen path when a simulator is configured, in the
+        demonstration's frame on the same equal axes) when
         matplotlib is installed; ``""`` disables pictures. The pictures are
         numbered ``answer-0001.png``, ... on from the highest number already
         in the directory, so a later session (or another teacher writing
@@ -130,19 +215,33 @@ class ConsoleTeacher:
         except ImportError:
             return None
         fig = Figure(figsize=(7, 3.5))
-        axes = fig.subplots(1, 2)
+        in_frame = response.teacher_drawing is not None
+        axes = fig.subplots(1, 2, sharex=in_frame, sharey=in_frame)
         axes[0].plot(demo.positions[:, 0], demo.positions[:, 1], "k-")
         axes[0].plot(*demo.positions[0], "go")
         axes[0].set_title(f"shown: {demo.key}")
-        # with a simulator, the teacher judges what the arm drew, not what
-        # the network meant to draw
-        drawing = response.drawing
+        # with a simulator, the teacher judges what the arm drew, not what the
+        # network meant to draw; shown in the demonstration's frame (its units,
+        # orientation, size and place) when the learner gave it
+        drawing = np.asarray(response.teacher_drawing if in_frame else response.drawing)
         axes[1].plot(drawing[:, 0], drawing[:, 1], "b-")
         axes[1].plot(*drawing[0], "go")
         drawn = "drew" if response.execution is not None else "generated"
-        axes[1].set_title(f"robot {drawn}: concept {response.concept}")
-        for ax in axes:
-            ax.set_aspect("equal", adjustable="datalim")
+        axes[1].set_title("robot: something new?" if response.novel
+                          else f"robot {drawn}: concept {response.concept}")
+        if not in_frame:  # metres in the drawing plane, not the demonstration's units
+            axes[1].set_xlabel("y (m, drawing plane)")
+            axes[1].set_ylabel("z (m)")
+            for ax in axes:
+                ax.set_aspect("equal", adjustable="datalim")
+        else:
+            both = np.vstack([demo.positions, drawing])
+            lo, hi = both.min(axis=0), both.max(axis=0)
+            pad = 0.05 * float(np.max(hi - lo))
+            for ax in axes:
+                ax.set_xlim(lo[0] - pad, hi[0] + pad)
+                ax.set_ylim(lo[1] - pad, hi[1] + pad)
+                ax.set_aspect("equal", adjustable="box")
         fig.tight_layout()
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=80)
@@ -162,11 +261,17 @@ class ConsoleTeacher:
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
         picture = self._picture(demo, response)
-        prompt = (f"\nDemonstration {demo.key}: the robot thinks it is concept "
-                  f"{response.concept!r} (attempt {response.attempt})")
+        if response.novel:
+            prompt = (f"\nDemonstration {demo.key}: the robot thinks it is something new, "
+                      f"none of the {len(set(response.sources))} demonstration(s) it has "
+                      "learned, and drew it back as it saw it")
+        else:
+            prompt = (f"\nDemonstration {demo.key}: the robot thinks it is concept "
+                      f"{response.concept!r} (attempt {response.attempt})")
         if picture:
             prompt += f"; its drawing is in {picture}"
-        prompt += ".\nIs that right? [y/n] "
+        prompt += (".\nIs it a new concept? [y/n] " if response.novel
+                   else ".\nIs that right? [y/n] ")
         while True:
             if self._ask is not None:
                 answer = self._ask(prompt)

@@ -44,7 +44,7 @@ def small_config(tmp_path_factory):
 def run_dir(small_config, tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "lasa"
     code = main(["evaluate", "--config", str(small_config), "--out", str(out), "--jobs", "1",
-                 "--quiet"])
+                 "--quiet", "--robustness"])
     assert code == 0
     return out
 
@@ -55,7 +55,8 @@ def test_every_output_file_exists_and_parses(run_dir):
     metrics = json.loads((run_dir / "metrics.json").read_text())
     for key in ("ccr_mean", "ccr_std", "ccr_folds", "wall_seconds", "interactions_per_demo",
                 "exemplars", "prototypes", "concepts", "generation_error", "config", "seed",
-                "versions", "baseline"):
+                "versions", "baseline", "ccr_matched", "ccr_source", "purity",
+                "named_concepts"):
         assert key in metrics, key
     assert len(metrics["ccr_folds"]) == 2
     assert all(0.0 <= c <= 1.0 for c in metrics["ccr_folds"])
@@ -70,24 +71,114 @@ def test_every_output_file_exists_and_parses(run_dir):
         assert f["entries"] >= f["concepts"] >= 1
         assert set(f) == {fl.name for fl in dataclasses.fields(FoldResult)}
         assert set(f["shapes"]) <= {"GShape", "Angle", "Sshape"}
+        # the robot's own labels are scored; an oracle keeps every robot concept pure
+        assert len(f["robot_predicted"]) == len(f["test"])
+        assert f["purity"] == 1.0 and f["ccr"] == f["ccr_source"] == f["ccr_matched"]
     report = (run_dir / "report.md").read_text()
     figures = sorted((run_dir / "figures").glob("*.png"))
     names = {p.name for p in figures}
     assert {"confusion.png", "confidence.png", "reinforcement.png", "first_guess.png",
-            "pb_space.png", "shapes.png", "baseline_confusion.png"} <= names
+            "pb_space.png", "shapes.png", "baseline_confusion.png", "robustness.png"} <= names
     for p in figures:
         assert f"figures/{p.name}" in report, f"{p.name} not linked from report.md"
         with Image.open(p) as im:
             im.verify()
             assert min(im.size) >= 200
-    assert "CCR" in report and "DTW" in report
+    assert "CCR" in report and "DTW" in report and "purity" in report
 
 
-def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir):
+def test_robustness_section(run_dir):
+    from iloci.evaluation.perturb import SUITE
+
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    folds = json.loads((run_dir / "folds.json").read_text())
+    rob = metrics["robustness"]
+    assert list(rob) == [p.name for p in SUITE]
+    for name, row in rob.items():
+        assert len(row["ccr_folds"]) == len(row["baseline"]["ccr_folds"]) == 2
+        for f, ccr in zip(folds, row["ccr_folds"]):
+            predicted = f["robustness"][name]["predicted"]
+            assert len(predicted) == len(f["test"])
+            true = f["true_concepts"]
+            assert ccr == sum(p == t for p, t in zip(predicted, true)) / len(true)
+    # the unperturbed suite entry is the fold's own recognition
+    assert rob["clean"]["ccr_folds"] == metrics["ccr_folds"]
+    assert rob["clean"]["baseline"]["ccr_folds"] == metrics["baseline"]["ccr_folds"]
+    # DTW 1-NN reads raw positions: a drawing at 1 % of the size defeats it; iloci
+    # scales every drawing into its plane, so it does not notice
+    assert rob["scale_0.01"]["ccr_folds"] == rob["clean"]["ccr_folds"]
+    report = (run_dir / "report.md").read_text()
+    assert "## Robustness" in report and "sampled at 25 points" in report
+
+
+def test_blocked_order_teaches_concept_by_concept():
+    from iloci.config import load_config
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import fold_plan
+
+    demos = load_lasa()
+    shuffled = fold_plan(demos, load_config(None))
+    blocked = fold_plan(demos, load_config({"evaluation": {"order": "blocked"}}))
+    for (ls, ts), (lb, tb) in zip(shuffled, blocked):
+        assert ts == tb and sorted(ls) == sorted(lb) and ls != lb
+        concepts = [demos[i].concept for i in lb]
+        runs = [c for k, c in enumerate(concepts) if k == 0 or c != concepts[k - 1]]
+        assert len(runs) == len(set(concepts))  # each concept in one block
+
+
+def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir, tmp_path):
+    import iloci
+
     serial = json.loads((run_dir / "folds.json").read_text())
-    _, parallel = evaluate(small_config, jobs=2, baseline=False)
+    _, parallel = evaluate(small_config, jobs=2, baseline=False, memory_dir=str(tmp_path))
     for a, b in zip(serial, parallel):
         _same_fold(b, a)
+        # each fold's learned robot was kept, and answers as it did in the fold
+        agent = iloci.Agent.load(tmp_path / f"fold-{b.fold}.npz")
+        assert len(agent.memory) == b.entries
+
+
+def test_untaught_concepts_leave_the_learning_set_for_the_test_set(small_config):
+    from iloci.config import load_config
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import fold_plan, untaught_concepts
+
+    data = tomllib.loads(SMALL)
+    data["evaluation"]["untaught"] = 1
+    config = load_config(data)
+    demos = load_lasa(["GShape", "Angle", "Sshape"])
+    plain = fold_plan(demos, load_config(tomllib.loads(SMALL)))
+    for k, (learn, test) in enumerate(fold_plan(demos, config)):
+        (left_out,) = untaught_concepts(demos, config, k)
+        assert all(demos[i].true_concept != left_out for i in learn)
+        assert sorted(learn + test) == list(range(len(demos)))
+        assert set(test) >= set(plain[k][1])  # the plain test set, plus the left-out ones
+    data["evaluation"]["untaught"] = 2
+    with pytest.raises(InvalidInputError, match="untaught = 2 leaves fewer than 2"):
+        untaught_concepts(demos, load_config(data), 0)
+
+
+def test_stream_protocol_scores_each_demonstration_before_teaching_it(small_config,
+                                                                       tmp_path):
+    out = tmp_path / "stream"
+    code = main(["evaluate", "--config", str(small_config), "--protocol", "stream",
+                 "--out", str(out), "--quiet"])
+    assert code == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    steps = json.loads((out / "stream.json").read_text())
+    assert metrics["protocol"] == "stream" and metrics["demonstrations"] == len(steps) == 21
+    # the first demonstration meets an empty memory; a concept's first one cannot be right
+    assert steps[0]["predicted"] == "none" and not steps[0]["correct"]
+    for s in steps:
+        if not s["seen_before"]:
+            assert not s["correct"]
+        else:
+            assert s["correct"] == (s["predicted"] == s["true"])
+    assert len(metrics["curve"]) == 21
+    assert metrics["feedbacks_per_demo"] == pytest.approx(
+        sum(len(s["feedbacks"]) for s in steps) / 21)
+    report = (out / "report.md").read_text()
+    assert "figures/stream.png" in report and (out / "figures" / "stream.png").is_file()
 
 
 def test_unknown_fold_is_a_clear_error(small_config):

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from iloci.evaluation.metrics import (backward_moving_average, confidence_matrix,
+from iloci.evaluation.metrics import (auroc, backward_moving_average, confidence_matrix,
                                       confusion_matrix, correct_classification_rate,
-                                      mean_std)
+                                      majority_names, matched_names, mean_std, purity)
 
 
 def test_backward_moving_average_window_7():
@@ -48,3 +48,40 @@ def test_figures_write_pngs(tmp_path):
     ]
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+#: A memory whose teacher erred: c1 merged Angle into GShape, Sine was split in two.
+MEMBERS = {"c1": ["GShape", "GShape", "Angle"], "c2": ["Sine", "Sine"], "c3": ["Sine"],
+           "c4": [None]}
+
+
+def test_majority_names_forgive_a_split_and_name_a_merge_by_its_majority():
+    assert majority_names(MEMBERS) == {"c1": "GShape", "c2": "Sine", "c3": "Sine", "c4": None}
+
+
+def test_matched_names_are_one_to_one():
+    names = matched_names(MEMBERS)
+    assert names["c1"] == "GShape" and names["c2"] == "Sine"
+    assert names["c3"] is None and names["c4"] is None  # Sine is taken; c4 knows nothing
+    assert matched_names({}) == {}
+
+
+def test_purity_counts_demonstrations_in_their_concepts_majority():
+    assert purity(MEMBERS) == pytest.approx(5 / 6)
+    assert purity({"c1": ["A", "A"], "c2": ["B"]}) == 1.0
+    assert np.isnan(purity({"c1": [None]}))
+
+
+def test_a_merged_concept_answers_wrong_for_its_minority():
+    # an Angle demonstration answered c1 (named GShape) is wrong under both namings
+    for names in (majority_names(MEMBERS), matched_names(MEMBERS)):
+        assert correct_classification_rate(["Angle", "GShape"],
+                                           [names["c1"], names["c1"]]) == 0.5
+
+
+def test_auroc_is_the_probability_a_positive_outranks_a_negative():
+    assert auroc([3, 4], [1, 2]) == 1.0
+    assert auroc([1, 2], [3, 4]) == 0.0
+    assert auroc([1, 1], [1, 1]) == 0.5
+    assert auroc([0.9, 0.2], [0.5]) == 0.5
+    assert np.isnan(auroc([], [1.0]))

@@ -341,7 +341,7 @@ def test_events_of_a_step_that_fails_are_not_sent():
 
 @pytest.mark.parametrize("change, conflict", [
     ({"sensorimotor": {"steps": 80}}, "sensorimotor.steps = 50 in the memory, 80 in the config"),
-    ({"sensorimotor": {"resample": "arc_length"}}, "sensorimotor.resample"),
+    ({"sensorimotor": {"resample": "time"}}, "sensorimotor.resample"),
     ({"sensorimotor": {"smoothing_window": 11}}, "sensorimotor.smoothing_window"),
 ])
 def test_memory_refuses_a_config_that_changes_its_meaning(tmp_path, change, conflict):

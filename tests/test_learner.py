@@ -279,9 +279,25 @@ def test_batched_recognition(lasa):
         assert a.pb_obs.shape == (4,)
     single = agent.recognize(lasa["Sine/5"])
     assert single.concept == answers[3].concept
-    # batch composition may change float32 rounding, not the answer
-    assert single.distance == pytest.approx(answers[3].distance, abs=1e-4)
+    # batch composition changes float32 rounding, which 30 LM steps amplify
+    # (measured: 7.1e-4 on this PB distance of 0.06), not the answer
+    assert single.distance == pytest.approx(answers[3].distance, abs=2e-3)
     assert entries_equal(agent.memory.entries, snapshot)    # inference changes nothing
+
+
+def test_batched_recognition_is_independent_of_the_batch_in_float64(lasa):
+    """In float64 a sequence's PB_obs does not depend on what else is in the batch."""
+    config = small_config()
+    config["perceptual_model"]["dtype"] = "float64"
+    try:
+        agent = iloci.build(config)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    batch = agent.recognize([lasa["GShape/4"], lasa["Sine/4"], lasa["Sine/5"]])
+    single = agent.recognize(lasa["Sine/5"])
+    np.testing.assert_allclose(single.pb_obs, batch[2].pb_obs, atol=1e-6)
+    assert single.distance == pytest.approx(batch[2].distance, abs=1e-6)
 
 
 # -- bad input ----------------------------------------------------------------------
@@ -372,3 +388,79 @@ def test_response_is_performed_in_the_simulator(lasa):
     assert np.all(response.joint_path >= lower) and np.all(response.joint_path <= upper)
     # the arm starts where the entry's pattern starts
     np.testing.assert_allclose(ex.joint_path[0], response.joint_path[0], atol=1e-6)
+
+
+# -- the novelty answer and "unknown" -------------------------------------------------
+
+def test_novelty_answer_founds_a_concept_in_one_interaction_or_goes_back_to_guessing(lasa):
+    rec = Recorder()
+    agent = make_agent(rec, novelty_below=1.0)  # every demonstration looks new
+    teacher = ScriptedTeacher([-1, 1, -1, 1])
+    agent.teacher = teacher
+    agent.learn(lasa["GShape/0"])
+    # one entry cannot calibrate "unlike": the robot guesses as the paper's does
+    second = agent.learn(lasa["Angle/0"])
+    assert second.feedbacks == (-1,) and not teacher.responses[0].novel
+    third = agent.learn(lasa["Sine/0"])
+    assert (third.action, third.feedbacks, third.concept) == ("new_concept", (1,), "c3")
+    novel = teacher.responses[1]
+    assert novel.novel and novel.source is None and novel.concept == "c3"
+    assert set(novel.sources) == {"GShape/0", "Angle/0"}
+    assert 0 < novel.extra["familiarity"] < 1
+    seq, start = agent.memory.encoder.encode(agent.motion(lasa["Sine/0"]))
+    # it imitated the demonstration back as it perceived it
+    np.testing.assert_allclose(novel.motion, agent.memory.encoder.decode(seq, start)[0])
+    fourth = agent.learn(lasa["GShape/1"])
+    assert fourth.feedbacks == (-1, 1) and fourth.action in ("strengthen", "new_exemplar")
+    assert teacher.responses[2].novel and not teacher.responses[3].novel
+    assert [e.extra.get("novel") for e in rec.interactions[-2:]] == [True, None]
+    assert fourth.first_guess_correct is False and third.first_guess_correct is True
+
+
+def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
+    agent = make_agent(unknown_below=0.999)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    recs = agent.recognize([lasa["GShape/1"], lasa["Sine/0"]])
+    for r in recs:
+        assert 0 < r.familiarity <= 1 and r.unknown == (r.familiarity < 0.999)
+        assert np.isfinite(r.error) and r.error >= 0
+    off = make_agent()
+    off.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert not any(r.unknown for r in off.recognize([lasa["Sine/0"]]))
+
+
+@pytest.mark.parametrize("confirmation", [-1, 1])
+def test_a_reward_after_a_no_is_kept_only_when_the_teacher_confirms_it(lasa, confirmation):
+    rec = Recorder()
+    agent = make_agent(rec, confirm_rewards=True)
+    agent.teacher = ScriptedTeacher([-1, -1, 1, confirmation])
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])  # -1: a second concept
+    outcome = agent.learn(lasa["Angle/1"])
+    assert outcome.feedbacks == (-1, 1, confirmation)
+    actions = [e.action for e in rec.interactions if e.demo == "Angle/1"]
+    assert actions[:2] == ["next_guess", "confirm"]
+    if confirmation == 1:
+        assert outcome.action in ("strengthen", "new_exemplar")
+        assert len(agent.memory.concepts()) == 2
+    else:  # the slip is caught: no merge, a concept of its own
+        assert outcome.action == "new_concept" and len(agent.memory.concepts()) == 3
+
+
+def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa):
+    agent = make_agent(decision="reproduction")
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    demos = [lasa["GShape/2"], lasa["Sine/3"]]
+    seqs = [agent._encode(agent.motion(d))[0] for d in demos]
+    errors = agent.learner.entry_errors(seqs)
+    assert errors.shape == (2, len(agent.memory))
+    # each pair's error is the model's own prediction error from that entry's PB
+    for b, seq in enumerate(seqs):
+        for m, e in enumerate(agent.memory.entries):
+            assert errors[b, m] == pytest.approx(
+                agent.perceptual_model.prediction_error([seq], e.pb[None])[0], rel=1e-5)
+    for r, row in zip(agent.recognize(demos), errors):
+        assert r.entry == int(np.argmin(row))
+        assert r.concept == agent.memory.entries[r.entry].concept
+    with pytest.raises(iloci.errors.ConfigError, match="decision must be"):
+        iloci.build(small_config(decision="nearest"))

@@ -183,8 +183,10 @@ def test_preprocess_demo(robot, demos):
     assert out.shape == (50, 2) and robot.plane.contains(out).all()
     again = preprocess(demos[0], steps=50, plane=robot.plane)
     assert np.array_equal(out, again)
-    arc = preprocess(demos[0], steps=50, resample_by="arc_length", plane=robot.plane)
-    assert not np.allclose(arc, out)
+    timed = preprocess(demos[0], steps=50, resample_by="time", plane=robot.plane)
+    assert not np.allclose(timed, out)
+    with pytest.raises(InvalidInputError, match="'time' or 'arc_length'"):
+        preprocess(demos[0], resample_by="speed", plane=robot.plane)
     with pytest.raises(InvalidInputError, match="expected a Demonstration"):
         preprocess(np.zeros((5, 2)), plane=robot.plane)
 

@@ -141,3 +141,50 @@ def test_pictures_follow_the_highest_number_and_never_replace_a_file(tmp_path, m
     assert (tmp_path / "answer-0002.png").read_bytes()[:4] == b"\x89PNG"
     assert (tmp_path / "answer-0007.png").read_bytes() == b"a person's picture"
     assert not list(tmp_path.glob(".*.tmp")), "no temporary file left behind"
+
+
+def _novel(sources: tuple[str, ...]) -> Response:
+    motion = np.zeros((20, 2))
+    return Response("c9", motion, np.zeros((20, 4)), None, sources, novel=True)
+
+
+def test_oracle_and_noisy_teachers_judge_the_novelty_answer():
+    from iloci.teachers import NoisyTeacher, OracleTeacher
+
+    g, angle = load_lasa("GShape")[0], load_lasa("Angle")[0]
+    oracle = OracleTeacher()
+    # new exactly when no demonstration the memory stands for has its concept
+    assert oracle.feedback(g, _novel(("Angle/0", "Sine/1"))) == 1
+    assert oracle.feedback(g, _novel(("Angle/0", "GShape/3"))) == -1
+    assert oracle.feedback(angle, _novel(())) == 1
+    assert NoisyTeacher(p=1.0).feedback(g, _novel(("Angle/0",))) == -1
+    assert NoisyTeacher(p=0.0).feedback(g, _novel(("Angle/0",))) == 1
+
+
+def test_console_teacher_asks_whether_a_novelty_answer_is_new():
+    out = io.StringIO()
+    teacher = ConsoleTeacher("", stdin=io.StringIO("y\n"), stdout=out)
+    assert teacher.feedback(load_lasa("GShape")[0], _novel(("Angle/0", "Sine/1"))) == 1
+    text = out.getvalue()
+    assert "something new" in text and "Is it a new concept?" in text
+
+
+def test_drawing_teacher_judges_only_the_drawing():
+    pytest.importorskip("dtaidistance")
+    from iloci.data import load_lasa
+    from iloci.teachers import DrawingTeacher
+
+    demos = load_lasa(["GShape", "Angle"])
+    refs = [d for d in demos if d.index < 6]
+    teacher = DrawingTeacher(refs)
+    g, angle = demos[6], demos[13]
+    assert (g.key, angle.key) == ("GShape/6", "Angle/6")
+    t = np.linspace(g.times[0], g.times[-1], 50)
+    drawn = np.column_stack([np.interp(t, g.times, g.positions[:, k]) for k in (0, 1)])
+    # a G drawn in metres somewhere in the plane: scale and place do not matter
+    response = Response("c1", drawn * 0.003 + [0.05, 0.2], np.zeros((50, 4)),
+                        source="Angle/0")                    # the label would say "Angle"
+    assert teacher.feedback(g, response) == 1
+    assert teacher.feedback(angle, response) == -1
+    with pytest.raises(FeedbackError, match="reference"):
+        DrawingTeacher([])

@@ -34,6 +34,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--folds", type=int, nargs="+", metavar="K",
                    help="run only these folds (0-based)")
     p.add_argument("--no-baseline", action="store_true", help="skip the DTW 1-NN baseline")
+    p.add_argument("--memories", metavar="DIR",
+                   help="also save each fold's learned robot as DIR/fold-K.npz")
+    p.add_argument("--protocol", choices=("folds", "stream"), default=None,
+                   help="folds: the paper's k-fold experiment; stream: test-then-learn over "
+                   "every demonstration (default: evaluation.protocol)")
+    p.add_argument("--robustness", action="store_true",
+                   help="also recognize every test set under the perturbations of "
+                   "iloci.evaluation.perturb (pace, sampling, rests, jitter, rotation, "
+                   "stretch, scale) beside DTW 1-NN (evaluation.robustness)")
+    p.add_argument("--order", choices=("shuffled", "blocked"), default=None,
+                   help="order of each learning set: seeded shuffle, or concept by "
+                   "concept (default: evaluation.order)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
@@ -65,9 +77,21 @@ def run(args: argparse.Namespace) -> int:
     from iloci.display import FoldProgress
 
     config = load_config(args.config)
+    changes = {}
+    if args.robustness:
+        changes["robustness"] = True
+    if args.order:
+        changes["order"] = args.order
+    if changes:
+        config = config.replace(evaluation=changes)
+    if args.protocol is not None and args.protocol != config.evaluation.protocol:
+        config = config.replace(evaluation={"protocol": args.protocol})
     # fail now, not after the first fold: the report's libraries, a writable --out
-    check_report_extras(baseline=not args.no_baseline)
+    check_report_extras(baseline=not args.no_baseline
+                        and config.evaluation.protocol != "stream")
     _check_out_dir(args.out)
+    if config.evaluation.protocol == "stream":
+        return _run_stream(args, config)
     print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
           f"{config.clusterer.name}, teacher {config.teacher.name}, "
@@ -78,16 +102,48 @@ def run(args: argparse.Namespace) -> int:
         if progress is None:
             metrics, results = evaluate(config, jobs=args.jobs, folds=args.folds,
                                         baseline=not args.no_baseline,
-                                        executor=args.executor, address=args.address)
+                                        executor=args.executor, address=args.address,
+                                        memory_dir=args.memories)
         else:
             with progress:
                 metrics, results = evaluate(config, jobs=args.jobs, progress=progress,
                                             folds=args.folds, baseline=not args.no_baseline,
-                                            executor=args.executor, address=args.address)
+                                            executor=args.executor, address=args.address,
+                                            memory_dir=args.memories)
     except KeyboardInterrupt:
         print("\ninterrupted: workers stopped, nothing written.", file=sys.stderr)
         return 130
     report = write_outputs(args.out, metrics, results)
     print(headline(metrics))
+    if metrics.get("robustness"):
+        from iloci.evaluation.report import robustness_table
+        print("\n" + "\n".join(robustness_table(metrics["robustness"])))
+    print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
+    return 0
+
+
+def _run_stream(args: argparse.Namespace, config) -> int:
+    from iloci.evaluation.report import stream_headline, write_stream_outputs
+    from iloci.evaluation.stream import run_stream
+
+    print(f"iloci evaluate: stream protocol (test-then-learn) over LASA, seed "
+          f"{config.seed}, perceptual model {config.perceptual_model.name}, teacher "
+          f"{config.teacher.name}", file=sys.stderr)
+    last = [-1]
+
+    def progress(msg: dict) -> None:
+        quarter = int(10 * (msg["step"] + 1) / msg["total"])
+        if not args.quiet and quarter != last[0]:
+            last[0] = quarter
+            print(f"stream {msg['step'] + 1}/{msg['total']} demos", file=sys.stderr,
+                  flush=True)
+
+    try:
+        metrics, steps = run_stream(config, progress=progress)
+    except KeyboardInterrupt:
+        print("\ninterrupted: nothing written.", file=sys.stderr)
+        return 130
+    report = write_stream_outputs(args.out, metrics, steps)
+    print(stream_headline(metrics))
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
     return 0

@@ -38,8 +38,11 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps({"demo": r.demo, "concept": r.concept,
                               "confidence": r.confidence, "distance": r.distance,
-                              "source": r.source, "sources": list(r.sources)}))
+                              "source": r.source, "sources": list(r.sources),
+                              "familiarity": r.familiarity, "unknown": r.unknown}))
         else:
-            print(f"{r.demo}: concept {r.concept} (confidence {r.confidence:.2f}, PB distance "
+            answer = (f"unknown (nearest concept {r.concept}, familiarity "
+                      f"{r.familiarity:.2f})" if r.unknown else f"concept {r.concept}")
+            print(f"{r.demo}: {answer} (confidence {r.confidence:.2f}, PB distance "
                   f"{r.distance:.3f}; nearest entry stands for {r.source})")
     return 0

@@ -50,9 +50,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _describe(outcome) -> str:
     steps = []
+    previous = None
     for ev in outcome.events:
-        if ev.guessed is not None:
-            steps.append(f"{ev.guessed} ({'+1' if ev.feedback == 1 else '-1'})")
+        if ev.extra.get("novel") and ev.feedback:
+            steps.append(f"something new ({'+1' if ev.feedback == 1 else '-1'})")
+        elif ev.guessed is not None:
+            # the event after a "confirm" is the teacher's answer when asked again
+            again = " again" if previous == "confirm" else ""
+            steps.append(f"{ev.guessed}{again} ({'+1' if ev.feedback == 1 else '-1'})")
+        previous = ev.action
     guesses = "guessed " + ", ".join(steps) if steps else "no concept to guess"
     what = {"strengthen": f"strengthened an entry of {outcome.concept}",
             "new_exemplar": f"new exemplar of {outcome.concept}",

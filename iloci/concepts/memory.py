@@ -145,12 +145,17 @@ class Memory:
     demonstrations_seen : int
         Demonstrations learned from so far (the index of the next one in the
         learning stream).
+    revision : int
+        Bumped by every change the learner or :meth:`rename` makes (not
+        saved): a :class:`~iloci.concepts.learner.Turn` refuses feedback
+        once the memory it was observed on has changed.
     """
 
     entries: list[Entry] = field(default_factory=list)
     encoder: SensorimotorEncoder | None = None
     concept_count: int = 0
     demonstrations_seen: int = 0
+    revision: int = field(default=0, repr=False)
 
     # -- views ------------------------------------------------------------------
     def __len__(self) -> int:
@@ -213,12 +218,55 @@ class Memory:
         return sum(e.num_samples for e in self.entries if e.concept == concept)
 
     def new_concept_label(self) -> str:
-        """Reserve and return the label of a new concept (``"c1"``, ``"c2"``, ...)."""
+        """Reserve and return the label of a new concept (``"c1"``, ``"c2"``, ...).
+
+        A label a concept was renamed to is skipped.
+        """
+        used = set(self.concepts())
         self.concept_count += 1
+        while f"c{self.concept_count}" in used:
+            self.concept_count += 1
         return f"c{self.concept_count}"
 
-    def label_concepts(self, concept_of_key: Any) -> dict[str, str | None]:
-        """Name each of the robot's concepts by its demonstrations' true concepts.
+    def rename(self, concept: str, name: str) -> None:
+        """Name a concept: every entry of ``concept`` is relabelled ``name``.
+
+        The label is what the memory file stores, so the name is what every
+        command, report and recognition shows from then on.
+
+        Parameters
+        ----------
+        concept : str
+            A concept of the memory (``"c3"``).
+        name : str
+            1 to :data:`MAX_NAME` printable characters, no ``/``, not used
+            by another concept; surrounding white space is dropped.
+
+        Raises
+        ------
+        InvalidInputError
+            Unknown concept, or an unusable or taken name; nothing changed.
+        """
+        if concept not in self.concepts():
+            raise InvalidInputError(f"the memory holds no concept {concept!r}; known: "
+                                    f"{', '.join(self.concepts()) or '(none)'}.")
+        if not isinstance(name, str):
+            raise InvalidInputError(f"a concept name must be a string, got "
+                                    f"{type(name).__name__}.")
+        new = name.strip()
+        if not new or len(new) > MAX_NAME or not new.isprintable() or "/" in new:
+            raise InvalidInputError(f"a concept name needs 1 to {MAX_NAME} printable "
+                                    f"characters without '/', got {name!r}.")
+        if new != concept and new in self.concepts():
+            raise InvalidInputError(f"another concept is already named {new!r}; choose "
+                                    "another name.")
+        for e in self.entries:
+            if e.concept == concept:
+                e.concept = new
+        self.revision += 1
+
+    def concept_members(self, concept_of_key: Any) -> dict[str, list[str | None]]:
+        """The true concept of every demonstration each of the robot's concepts stands for.
 
         Parameters
         ----------
@@ -229,19 +277,30 @@ class Memory:
         Returns
         -------
         dict
-            Robot label -> the most frequent true concept among the sources
-            of its entries (ties: the first seen), ``None`` if none is known.
+            Robot label -> one true concept (or ``None``) per source
+            demonstration of its entries, in entry order.
         """
-        out: dict[str, str | None] = {}
-        for label in self.concepts():
-            counts: dict[str, int] = {}
-            for i in self.indices_of(label):
-                for key in self.entries[i].sources:
-                    c = concept_of_key(key)
-                    if c is not None:
-                        counts[c] = counts.get(c, 0) + 1
-            out[label] = max(counts, key=counts.__getitem__) if counts else None
-        return out
+        return {label: [concept_of_key(key) for i in self.indices_of(label)
+                        for key in self.entries[i].sources]
+                for label in self.concepts()}
+
+    def label_concepts(self, concept_of_key: Any) -> dict[str, str | None]:
+        """Name each of the robot's concepts by its demonstrations' true concepts.
+
+        Parameters
+        ----------
+        concept_of_key : callable
+            As for :meth:`concept_members`.
+
+        Returns
+        -------
+        dict
+            Robot label -> the most frequent true concept among the sources
+            of its entries (ties: the first seen), ``None`` if none is known
+            (:func:`iloci.evaluation.metrics.majority_names`).
+        """
+        from iloci.evaluation.metrics import majority_names
+        return majority_names(self.concept_members(concept_of_key))
 
     def copy(self) -> Memory:
         enc = None
@@ -334,6 +393,10 @@ class Memory:
         except (KeyError, TypeError, ValueError, IndexError, InvalidInputError) as exc:
             raise MemoryFileError(f"memory file content is inconsistent ({exc}); it was not "
                                   "written by this version of iloci or was edited.") from None
+
+
+#: Longest concept name :meth:`Memory.rename` accepts (characters).
+MAX_NAME = 40
 
 
 def _stack(rows: list[np.ndarray], width: int | None = None) -> np.ndarray:

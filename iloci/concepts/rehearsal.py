@@ -20,7 +20,7 @@ The temporal memory is then released.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import time
 
@@ -29,7 +29,42 @@ import numpy as np
 from iloci.concepts.memory import Entry
 from iloci.interfaces import PerceptualModel
 
-__all__ = ["RehearsalResult", "regenerate", "rehearse", "apply"]
+__all__ = ["RehearsalProgress", "RehearsalResult", "regenerate", "rehearse", "apply"]
+
+#: The phases of a rehearsal, in order (:attr:`RehearsalProgress.phase`).
+PHASES = ("regenerate", "train", "recognize", "evaluate", "done")
+
+
+@dataclass(frozen=True)
+class RehearsalProgress:
+    """A rehearsal entering one of its phases (passed to a ``progress`` callback).
+
+    Attributes
+    ----------
+    reason : str
+        Why it rehearses: ``"new_exemplar"``, ``"new_concept"`` or
+        ``"clustering"``.
+    phase : str
+        One of :data:`PHASES`: regenerating the temporal memory, training
+        the network (nearly all the time), recognizing PB_rec, measuring
+        generationErrors, ``"done"``.
+    patterns : int
+        Patterns in the temporal memory.
+    epochs : int or None
+        Training epochs (``None``: the model's configured number).
+    elapsed : float
+        Seconds since the rehearsal started.
+    fraction : float
+        Of the phases done, in [0, 1] (the training phase counts for 0.9);
+        the back ends report no progress inside a phase.
+    """
+
+    reason: str
+    phase: str
+    patterns: int
+    epochs: int | None
+    elapsed: float
+    fraction: float
 
 
 @dataclass(frozen=True)
@@ -87,7 +122,8 @@ def regenerate(model: PerceptualModel, entries: Sequence[Entry]) -> list[np.ndar
 
 def rehearse(model: PerceptualModel, entries: Sequence[Entry],
              new_pattern: np.ndarray | None = None, new_pb: np.ndarray | None = None, *,
-             epochs: int | None = None) -> RehearsalResult:
+             epochs: int | None = None, reason: str = "",
+             progress: Callable[[RehearsalProgress], None] | None = None) -> RehearsalResult:
     """Rehearse the memory, optionally consolidating one new pattern.
 
     The model's weights change; ``entries`` are not modified (apply the
@@ -104,12 +140,26 @@ def rehearse(model: PerceptualModel, entries: Sequence[Entry],
         Starting PB of the new pattern (e.g. its PB_obs); zeros by default.
     epochs : int, optional
         Training epochs; the model's configured number when ``None``.
+    reason : str
+        Passed on in the progress reports.
+    progress : callable, optional
+        Called with a :class:`RehearsalProgress` as each phase starts and
+        when the rehearsal is done, in the calling thread.
 
     Returns
     -------
     RehearsalResult
     """
     t0 = time.perf_counter()
+    size = len(entries) + (new_pattern is not None)
+    done = {"regenerate": 0.0, "train": 0.02, "recognize": 0.92, "evaluate": 0.97, "done": 1.0}
+
+    def report(phase: str) -> None:
+        if progress is not None:
+            progress(RehearsalProgress(reason, phase, size, epochs,
+                                       time.perf_counter() - t0, done[phase]))
+
+    report("regenerate")
     patterns = regenerate(model, entries)
     pb_init = [np.asarray(e.pb, dtype=np.float64) for e in entries]
     if new_pattern is not None:
@@ -118,10 +168,13 @@ def rehearse(model: PerceptualModel, entries: Sequence[Entry],
                        else np.asarray(new_pb, dtype=np.float64))
     if not patterns:
         raise ValueError("rehearsal needs at least one entry or a new pattern")
+    report("train")
     pbs = np.asarray(model.train(patterns, np.array(pb_init), epochs), dtype=np.float64)
+    report("recognize")
     # recognition restarts from the learned PBs, so each pattern's PB_rec is
     # found in the basin its own PB lies in rather than from zero
     pbs_rec = np.asarray(model.recognize(patterns, candidate_pbs=pbs), dtype=np.float64)
+    report("evaluate")
     errors = np.asarray(model.prediction_error(patterns, pbs), dtype=np.float64)
     loss = float(getattr(model, "train_loss_", float("nan")))
     if not np.isfinite(loss):
@@ -129,8 +182,10 @@ def rehearse(model: PerceptualModel, entries: Sequence[Entry],
     if epochs is None:
         # report what the model actually ran when it says (RNNPB back ends do)
         epochs = getattr(getattr(model, "params", None), "epochs", None)
-    return RehearsalResult(patterns, pbs, pbs_rec, errors, loss, epochs,
-                           time.perf_counter() - t0)
+    result = RehearsalResult(patterns, pbs, pbs_rec, errors, loss, epochs,
+                             time.perf_counter() - t0)
+    report("done")
+    return result
 
 
 def apply(result: RehearsalResult, entries: Sequence[Entry]) -> None:

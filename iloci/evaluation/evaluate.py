@@ -30,11 +30,13 @@ import numpy as np
 from iloci.config import Config, load_config
 from iloci.data.concepts import concept_of
 from iloci.errors import InvalidInputError
-from iloci.evaluation.metrics import (correct_classification_rate, mean_std)
+from iloci.evaluation.metrics import (auroc, correct_classification_rate, majority_names,
+                                      matched_names, mean_std, purity)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan", "memory_counts", "run_fold",
-           "summarize", "versions"]
+__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan",
+           "memory_counts", "robustness_suite", "run_fold", "summarize",
+           "summarize_robustness", "untaught_concepts", "versions"]
 
 
 @dataclass
@@ -50,8 +52,10 @@ class FoldResult:
     true_concepts : list of str
         The true concept of each test demonstration.
     predicted : list of str
-        The true concept of the demonstration each test demonstration's
-        nearest memory entry stands for (what an oracle would reward).
+        The true concept naming each answer's robot concept (the true
+        concept of most of the demonstrations that robot concept stands
+        for: :func:`~iloci.evaluation.metrics.majority_names`); ``"unknown"``
+        when recognition answered "I don't know".
     confidence : list of float
         Recognition confidence of each test demonstration, in [0, 1].
     ccr : float
@@ -69,6 +73,32 @@ class FoldResult:
     rehearsal_seconds, wall_seconds : float
     skipped : list of [str, str]
         (demonstration, reason) of each learning demonstration skipped.
+    robot_predicted : list of str
+        The robot's own label of each answer.
+    matched_predicted : list of str
+        Each answer scored with one-to-one naming of robot concepts
+        (:func:`~iloci.evaluation.metrics.matched_names`).
+    ccr_matched : float
+    source_predicted : list of str
+        True concept of the answering entry's own source demonstration (the
+        scoring before robot labels were scored; equal to ``predicted`` when
+        every robot concept is pure).
+    ccr_source : float
+    purity : float
+        Concept purity of the memory (:func:`~iloci.evaluation.metrics.purity`).
+    named_concepts : int
+        Distinct true concepts among the memory's robot concepts.
+    taught : list of bool
+        Per test demonstration: was its true concept in the learning set.
+    distance, error : list of float
+        Per test demonstration: PB distance to the nearest PB_rec;
+        prediction error from PB_obs.
+    familiarity : list of float
+    unknown : list of bool
+        Recognition's familiarity and whether it answered "unknown".
+    memory_other_distance, memory_generation_error : list of float
+        Per memory entry: PB_rec distance to the nearest entry of another
+        concept; generation error (the memory's own scales).
     baseline_predicted : list of str
     baseline_ccr, baseline_seconds : float
         The DTW 1-NN baseline on the same fold (NaN when not run).
@@ -99,6 +129,20 @@ class FoldResult:
     rehearsal_seconds: float
     wall_seconds: float
     skipped: list[list[str]] = field(default_factory=list)
+    robot_predicted: list[str] = field(default_factory=list)
+    matched_predicted: list[str] = field(default_factory=list)
+    ccr_matched: float = float("nan")
+    source_predicted: list[str] = field(default_factory=list)
+    ccr_source: float = float("nan")
+    purity: float = float("nan")
+    named_concepts: int = 0
+    taught: list[bool] = field(default_factory=list)
+    distance: list[float] = field(default_factory=list)
+    error: list[float] = field(default_factory=list)
+    familiarity: list[float] = field(default_factory=list)
+    unknown: list[bool] = field(default_factory=list)
+    memory_other_distance: list[float] = field(default_factory=list)
+    memory_generation_error: list[float] = field(default_factory=list)
     baseline_predicted: list[str] = field(default_factory=list)
     baseline_ccr: float = float("nan")
     baseline_seconds: float = float("nan")
@@ -106,6 +150,9 @@ class FoldResult:
     pb_concepts: list[str] = field(default_factory=list)
     pb_kinds: list[str] = field(default_factory=list)
     shapes: dict[str, list[list[float]]] = field(default_factory=dict)
+    #: Robustness suite: perturbation name -> {"predicted", "ccr",
+    #: "baseline_predicted", "baseline_ccr", "seconds"} (empty unless asked).
+    robustness: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-able dict of every field."""
@@ -139,16 +186,61 @@ def memory_counts(memory: Any) -> dict[str, int]:
             "prototypes": memory.n_prototypes, "concepts": len(memory.concepts())}
 
 
+def untaught_concepts(demos: Sequence[Any], config: Config, fold: int) -> list[str]:
+    """The concepts left out of fold ``fold``'s learning set (``[evaluation] untaught``).
+
+    The sorted true concepts are shuffled once per seed and fold ``k``
+    leaves out the ``untaught`` concepts after the first ``k * untaught``
+    (cyclically), so 5 folds of 4 leave out 20 different concepts.
+
+    Raises
+    ------
+    InvalidInputError
+        ``untaught`` leaves fewer than two concepts to learn.
+    """
+    n = config.evaluation.untaught
+    if not n:
+        return []
+    concepts = sorted({d.true_concept or _true_concept(d.key, {}) for d in demos})
+    if n > len(concepts) - 2:
+        raise InvalidInputError(f"[evaluation] untaught = {n} leaves fewer than 2 of the "
+                                f"{len(concepts)} concepts to learn; use at most "
+                                f"{len(concepts) - 2}.")
+    order = list(np.random.default_rng([config.evaluation.seed, 2]).permutation(concepts))
+    return [str(order[(fold * n + i) % len(order)]) for i in range(n)]
+
+
 def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], list[int]]]:
-    """(learning indices in presentation order, test indices) per fold."""
+    """(learning indices in presentation order, test indices) per fold.
+
+    With ``[evaluation] untaught``, the learning demonstrations of each
+    fold's :func:`untaught_concepts` move to the end of its test set.
+    """
     from iloci.evaluation.folds import lasa_folds
     ev = config.evaluation
     plan = []
     for k, (learn, test) in enumerate(lasa_folds(demos, ev.folds, ev.seed)):
         # presentation order: seeded per fold, independent of the split's draws
         rng = np.random.default_rng([ev.seed, k, 1])
-        plan.append(([int(i) for i in rng.permutation(learn)], [int(i) for i in test]))
+        order = [int(i) for i in rng.permutation(learn)]
+        if ev.order == "blocked":
+            # concept by concept, in the order each concept first appears in
+            # the shuffled stream (so concepts and their members stay seeded)
+            concepts = list(dict.fromkeys(_concept(demos[i]) for i in order))
+            order = [i for c in concepts for i in order if _concept(demos[i]) == c]
+        test_idx = [int(i) for i in test]
+        left_out = set(untaught_concepts(demos, config, k))
+        if left_out:
+            out = [i for i in order
+                   if (demos[i].true_concept or _true_concept(demos[i].key, {})) in left_out]
+            order = [i for i in order if i not in set(out)]
+            test_idx += sorted(out)
+        plan.append((order, test_idx))
     return plan
+
+
+def _concept(demo: Any) -> str:
+    return demo.concept or demo.shape
 
 
 class _ProgressObserver:
@@ -178,7 +270,10 @@ def _true_concept(key: str, fallback: dict[str, str]) -> str:
 
 def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Sequence[Any], *,
              send: Callable[[dict], None] | None = None, baseline: bool = True,
-             details: bool = True, plugin_manager: Any = None) -> FoldResult:
+             details: bool = True, plugin_manager: Any = None,
+             memory_dir: str | None = None,
+             overrides: dict[str, Any] | None = None,
+             robustness: bool | None = None) -> FoldResult:
     """Teach a fresh agent ``learn`` (in order), recognize ``test``; one fold.
 
     Parameters
@@ -196,6 +291,17 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         Resolves the config's component names; its observers see this
         fold's learning events. Defaults to
         :func:`~iloci.plugins.get_plugin_manager`.
+    memory_dir : str, optional
+        Save the fold's learned agent there as ``fold-K.npz``
+        (:meth:`~iloci.agent.Agent.save`), e.g. to study recognition later
+        without learning again.
+    overrides : dict, optional
+        Component objects by section (``{"teacher": DrawingTeacher(...)}``),
+        as for :func:`iloci.build`.
+    robustness : bool, optional
+        Recognize ``test`` again under each perturbation of
+        :data:`iloci.evaluation.perturb.SUITE` (and run the baseline on it
+        when ``baseline``); default ``config.evaluation.robustness``.
     """
     from iloci.agent import learn_and_recognize
     from iloci.plugins import get_plugin_manager, get_registry
@@ -207,16 +313,27 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     if observer is not None:
         pm.register(observer)
     try:
-        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm)
+        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm,
+                                                  **(overrides or {}))
     finally:
         if observer is not None:
             pm.unregister(observer)
     wall = time.perf_counter() - t0
+    if memory_dir:
+        agent.save(os.path.join(memory_dir, f"fold-{fold}.npz"))
     known = {d.key: d.true_concept for d in list(learn) + list(test) if d.true_concept}
     true = [d.true_concept or _true_concept(d.key, known) for d in test]
-    predicted = [_true_concept(r.source, known) for r in recs]
     mem = agent.memory
     entries = mem.entries
+    members = mem.concept_members(lambda k: _true_concept(k, known))
+    majority, matched = majority_names(members), matched_names(members)
+    robot = [r.concept for r in recs]
+    # an answer whose robot concept has no true name keeps its robot label: never correct
+    predicted = ["unknown" if r.unknown else majority.get(r.concept) or r.concept
+                 for r in recs]
+    matched_pred = ["unknown" if r.unknown else matched.get(r.concept) or r.concept
+                    for r in recs]
+    source_pred = [_true_concept(r.source, known) for r in recs]
     counts = memory_counts(mem)
     res = FoldResult(
         fold=fold,
@@ -236,19 +353,33 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         rehearsal_seconds=float(sum(r.seconds for r in report.rehearsals)),
         wall_seconds=wall,
         skipped=[list(s) for s in report.skipped],
+        robot_predicted=robot,
+        matched_predicted=matched_pred,
+        ccr_matched=correct_classification_rate(true, matched_pred),
+        source_predicted=source_pred,
+        ccr_source=correct_classification_rate(true, source_pred),
+        purity=purity(members),
+        named_concepts=len({n for n in majority.values() if n is not None}),
+        taught=[t in {d.true_concept or _true_concept(d.key, known) for d in learn}
+                for t in true],
+        distance=[float(r.distance) for r in recs],
+        error=[float(r.error) for r in recs],
+        familiarity=[float(r.familiarity) for r in recs],
+        unknown=[bool(r.unknown) for r in recs],
+        memory_other_distance=_other_concept_distances(mem),
+        memory_generation_error=[float(e.generation_error) for e in entries],
     )
     if details:
-        names = mem.label_concepts(lambda k: _true_concept(k, known))
         for e in entries:
             res.pb_points.append([float(x) for x in e.pb_rec])
-            res.pb_concepts.append(names.get(e.concept) or e.concept)
+            res.pb_concepts.append(majority.get(e.concept) or e.concept)
             res.pb_kinds.append("prototype" if e.prototype else "exemplar")
         for r, c in zip(recs, true):
             res.pb_points.append([float(x) for x in r.pb_obs])
             res.pb_concepts.append(c)
             res.pb_kinds.append("test")
         for label in mem.concepts():
-            name = names.get(label) or label
+            name = majority.get(label) or label
             if name in res.shapes:
                 continue
             # what the robot drew: executed in the simulator when one is configured
@@ -260,7 +391,67 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         res.baseline_predicted = dtw_1nn(list(learn), list(test))
         res.baseline_seconds = time.perf_counter() - tb
         res.baseline_ccr = correct_classification_rate(true, res.baseline_predicted)
+    if config.evaluation.robustness if robustness is None else robustness:
+        res.robustness = robustness_suite(agent, list(learn), list(test), true, known,
+                                          seed=config.evaluation.seed * 1000 + fold,
+                                          baseline=baseline)
     return res
+
+
+def _other_concept_distances(mem: Any) -> list[float]:
+    """PB_rec distance of each entry to the nearest entry of another concept (inf: none)."""
+    if not len(mem):
+        return []
+    x = mem.pbs_rec
+    lab = np.asarray(mem.concept_labels)
+    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
+    d = np.where(lab[:, None] != lab[None, :], d, np.inf)
+    return [float(v) for v in d.min(axis=1)]
+
+
+def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[str],
+                     known: dict[str, str], *, seed: int = 0, baseline: bool = True,
+                     names: Sequence[str] | None = None) -> dict[str, dict[str, Any]]:
+    """Recognize ``test`` under each perturbation; iloci and DTW 1-NN.
+
+    Parameters
+    ----------
+    agent : Agent
+        Taught; its memory is not changed.
+    learn, test : lists of Demonstration
+        The fold's learning set (the baseline's references) and test set.
+    true : list of str
+        True concept of each test demonstration.
+    known : dict
+        Demonstration key -> concept, to name what the nearest entry stands for.
+    seed : int
+        Seeds the perturbations' random draws.
+    baseline : bool
+        Also the DTW 1-NN baseline.
+    names : sequence of str, optional
+        Perturbations to run (default: the whole suite).
+
+    Returns
+    -------
+    dict
+        Name -> ``{"predicted", "ccr", "baseline_predicted", "baseline_ccr",
+        "seconds"}``.
+    """
+    from iloci.evaluation.baseline import dtw_1nn
+    from iloci.evaluation.perturb import perturb, suite
+    out: dict[str, dict[str, Any]] = {}
+    for p in suite(names):
+        t0 = time.perf_counter()
+        shown = perturb(test, p, seed)
+        predicted = [_true_concept(r.source, known) for r in agent.recognize(shown)]
+        row: dict[str, Any] = {"predicted": predicted,
+                               "ccr": correct_classification_rate(true, predicted)}
+        if baseline:
+            row["baseline_predicted"] = dtw_1nn(learn, shown)
+            row["baseline_ccr"] = correct_classification_rate(true, row["baseline_predicted"])
+        row["seconds"] = time.perf_counter() - t0
+        out[p.name] = row
+    return out
 
 
 _NAME = re.compile(r"[A-Za-z0-9._-]+")
@@ -329,6 +520,10 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
         "ccr_folds": [r["ccr"] for r in results],
         "wall_seconds": wall_seconds,
         "jobs": jobs,
+        "ccr_matched": ms("ccr_matched"),
+        "ccr_source": ms("ccr_source"),
+        "purity": ms("purity"),
+        "named_concepts": ms("named_concepts"),
         "interactions_per_demo": ms("interactions_per_demo"),
         "exemplars": ms("exemplars"),
         "prototypes": ms("prototypes"),
@@ -336,7 +531,8 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
         "concepts": ms("concepts"),
         "generation_error": ms("generation_error"),
         "fold_wall_seconds": [r["wall_seconds"] for r in results],
-        "folds": [{k: r[k] for k in ("fold", "ccr", "interactions_per_demo", "exemplars",
+        "folds": [{k: r[k] for k in ("fold", "ccr", "ccr_matched", "ccr_source", "purity",
+                                       "named_concepts", "interactions_per_demo", "exemplars",
                                        "prototypes", "entries", "concepts",
                                        "generation_error", "rehearsals", "rehearsal_seconds",
                                        "wall_seconds", "baseline_ccr", "skipped")}
@@ -347,12 +543,61 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
         "versions": versions(plugin_manager),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
     }
+    taught = [t for r in results for t in r.get("taught", [])]
+    if taught and not all(taught):
+        fam = [x for r in results for x in r["familiarity"]]
+        unk = [u for r in results for u in r["unknown"]]
+        out["untaught"] = {
+            "concepts": config.evaluation.untaught,
+            "familiarity_auroc": auroc([f for f, t in zip(fam, taught) if t],
+                                       [f for f, t in zip(fam, taught) if not t]),
+            "margin_auroc": auroc(
+                [c for r in results for c, t in zip(r["confidence"], r["taught"]) if t],
+                [c for r in results for c, t in zip(r["confidence"], r["taught"]) if not t]),
+            "untaught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught)
+                                                        if not t])),
+            "taught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught) if t])),
+            "taught_demos": int(sum(taught)), "untaught_demos": int(len(taught) - sum(taught)),
+        }
+    if all(r.get("robustness") for r in results):
+        out["robustness"] = summarize_robustness(results)
     if all(r.get("baseline_predicted") for r in results):
         bm, bs = mean_std([r["baseline_ccr"] for r in results])
         out["baseline"] = {"method": "DTW 1-NN (dtaidistance), positions resampled to 50",
                            "ccr_mean": bm, "ccr_std": bs,
                            "ccr_folds": [r["baseline_ccr"] for r in results],
                            "seconds": [r["baseline_seconds"] for r in results]}
+    return out
+
+
+def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
+    """metrics.json's ``robustness``: per perturbation, CCR over folds, iloci and DTW.
+
+    Each perturbation maps to ``{"group", "label", "ccr_mean", "ccr_std",
+    "ccr_folds", "drop"}`` (``drop``: clean CCR minus this one, in CCR
+    units, mean over folds) and, when the baseline ran, the same under
+    ``"baseline"``.
+    """
+    from iloci.evaluation.perturb import suite
+    out: dict[str, Any] = {}
+    names = [p for p in suite() if all(p.name in r["robustness"] for r in results)]
+    for p in names:
+        rows = [r["robustness"][p.name] for r in results]
+        entry: dict[str, Any] = {"group": p.group, "label": p.label}
+        for key, into in (("ccr", entry), ("baseline_ccr", None)):
+            if not all(key in row for row in rows):
+                continue
+            vals = [row[key] for row in rows]
+            m, s = mean_std(vals)
+            part = {"ccr_mean": m, "ccr_std": s, "ccr_folds": vals}
+            if "clean" in results[0]["robustness"]:
+                clean = [r["robustness"]["clean"][key] for r in results]
+                part["drop"] = float(np.mean(np.subtract(clean, vals)))
+            if into is None:
+                entry["baseline"] = part
+            else:
+                entry.update(part)
+        out[p.name] = entry
     return out
 
 
@@ -376,7 +621,8 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
              progress: Callable[[dict], None] | None = None,
              folds: Sequence[int] | None = None, baseline: bool = True,
              plugin_manager: Any = None, executor: str = "local",
-             address: str | None = None) -> Evaluation:
+             address: str | None = None,
+             memory_dir: str | None = None) -> Evaluation:
     """Run the k-fold protocol; return the metrics and every fold's result.
 
     Parameters
@@ -404,6 +650,8 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         (the ``iloci-ray`` plugin).
     address : str, optional
         The executor's engine (e.g. a running Ray cluster, ``HOST:PORT``).
+    memory_dir : str, optional
+        Save each fold's learned agent there as ``fold-K.npz``.
 
     Returns
     -------
@@ -499,9 +747,10 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
             finished(run_fold(config, k, [demos[i] for i in learn_idx],
                               [demos[i] for i in test_idx], send=emit, baseline=baseline,
-                              plugin_manager=pm))
+                              plugin_manager=pm, memory_dir=memory_dir))
     else:
-        run_folds_in_processes(config.to_dict(), [FoldTask(k, *plan[k]) for k in wanted],
+        tasks = [FoldTask(k, *plan[k], memory_dir=memory_dir) for k in wanted]
+        run_folds_in_processes(config.to_dict(), tasks,
                                shapes, runner, baseline=baseline, specs=specs, emit=emit,
                                on_result=finished)
     wall = time.perf_counter() - t0

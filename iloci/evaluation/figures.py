@@ -19,6 +19,9 @@ __all__ = [
     "plot_first_guess",
     "plot_pb_space",
     "plot_shapes",
+    "plot_stream",
+    "plot_noisy",
+    "plot_robustness",
 ]
 
 
@@ -188,4 +191,97 @@ def plot_shapes(shapes: Mapping[str, np.ndarray], path: str | Path, *,
         ax.set_aspect("equal", adjustable="datalim")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.95))
+    return _save(fig, path)
+
+
+def plot_stream(correct: Sequence[bool], feedbacks: Sequence[int], path: str | Path, *,
+                first_scored: int = 46, window: int = 15) -> Path:
+    """The test-then-learn stream: first guess right and feedbacks per demonstration.
+
+    Parameters
+    ----------
+    correct : sequence of bool
+        Per demonstration, in stream order: answered right before it was taught.
+    feedbacks : sequence of int
+        Per demonstration: teacher feedbacks it took to teach it.
+    first_scored : int
+        1-based position from which the summary is taken (a vertical line).
+    window : int
+        Backward moving average window.
+    """
+    plt = _plt()
+    x = np.arange(1, len(correct) + 1)
+    fig, (ax, bx) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    c = np.asarray(correct, dtype=float)
+    ax.plot(x, 100 * backward_moving_average(c, window), color="C1", lw=1.5,
+            label=f"moving average (w={window})")
+    ax.plot(x, 100 * np.cumsum(c) / x, color="C0", lw=1.5, label="cumulative")
+    ax.axvline(first_scored, color="k", lw=0.6, ls="--")
+    ax.set_ylim(-2, 102)
+    ax.set_ylabel("first guess right, %")
+    ax.legend(loc="lower right", fontsize=8)
+    f = np.asarray(feedbacks, dtype=float)
+    bx.bar(x, f, color="0.75", width=1.0, label="per demonstration")
+    bx.plot(x, backward_moving_average(f, window), color="C3", lw=1.5,
+            label=f"moving average (w={window})")
+    bx.axvline(first_scored, color="k", lw=0.6, ls="--")
+    bx.set_xlabel("demonstration in the stream")
+    bx.set_ylabel("teacher feedbacks")
+    bx.legend(loc="upper right", fontsize=8)
+    return _save(fig, path)
+
+
+def plot_noisy(ps: Sequence[float], ccr: Sequence[Sequence[float]],
+               feedbacks: Sequence[Sequence[float]], path: str | Path) -> Path:
+    """CCR and feedbacks per learning demonstration against the teacher's error rate.
+
+    Parameters
+    ----------
+    ps : sequence of float
+        Error probabilities of the noisy teacher.
+    ccr, feedbacks : sequence of sequences of float
+        Per ``p``, one value per run (fold or seed); mean and spread are drawn.
+    """
+    plt = _plt()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(8, 3.2))
+    p = np.asarray(ps, dtype=float)
+    for axis, values, label, scale in ((ax, ccr, "CCR, %", 100.0),
+                                       (bx, feedbacks, "feedbacks per learning demo", 1.0)):
+        mean = np.array([np.mean(v) for v in values]) * scale
+        lo = np.array([np.min(v) for v in values]) * scale
+        hi = np.array([np.max(v) for v in values]) * scale
+        axis.fill_between(p, lo, hi, color="C0", alpha=0.2, lw=0)
+        axis.plot(p, mean, "o-", color="C0")
+        axis.set_xlabel("teacher error probability p")
+        axis.set_ylabel(label)
+    ax.set_title("accuracy (band: min-max)")
+    bx.set_title("teacher effort")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_robustness(rob: Mapping[str, Mapping], path: str | Path) -> Path:
+    """Horizontal bars: CCR per perturbation, iloci beside DTW 1-NN (mean ± std over folds).
+
+    ``rob`` is metrics.json's ``robustness`` (see
+    :func:`iloci.evaluation.evaluate.summarize_robustness`).
+    """
+    plt = _plt()
+    rows = list(rob.values())
+    n = len(rows)
+    y = np.arange(n)
+    fig, ax = plt.subplots(figsize=(7.5, 0.32 * n + 1.2))
+    ax.barh(y - 0.2, [100 * r["ccr_mean"] for r in rows], 0.38,
+            xerr=[100 * r["ccr_std"] for r in rows], label="iloci", color="tab:blue")
+    if all("baseline" in r for r in rows):
+        ax.barh(y + 0.2, [100 * r["baseline"]["ccr_mean"] for r in rows], 0.38,
+                xerr=[100 * r["baseline"]["ccr_std"] for r in rows], label="DTW 1-NN",
+                color="tab:gray")
+    ax.set_yticks(y, [r["label"] for r in rows], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlim(0, 100)
+    ax.set_xlabel("CCR (%)")
+    ax.set_title("recognition of perturbed test demonstrations")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
     return _save(fig, path)

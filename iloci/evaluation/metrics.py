@@ -6,7 +6,7 @@ concepts so folds can be averaged.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -16,6 +16,10 @@ __all__ = [
     "confidence_matrix",
     "backward_moving_average",
     "mean_std",
+    "majority_names",
+    "matched_names",
+    "purity",
+    "auroc",
 ]
 
 
@@ -75,3 +79,113 @@ def mean_std(values: Sequence[float]) -> tuple[float, float]:
     """Mean and population standard deviation (ddof=0, as over the 5 folds)."""
     a = np.asarray(values, dtype=np.float64)
     return float(np.mean(a)), float(np.std(a))
+
+
+def _counts(members: Mapping[str, Sequence[str | None]]) -> dict[str, dict[str, int]]:
+    out: dict[str, dict[str, int]] = {}
+    for robot, truths in members.items():
+        c: dict[str, int] = {}
+        for t in truths:
+            if t is not None:
+                c[t] = c.get(t, 0) + 1
+        out[robot] = c
+    return out
+
+
+def majority_names(members: Mapping[str, Sequence[str | None]]) -> dict[str, str | None]:
+    """Name each of the robot's concepts by the true concept of most of its demonstrations.
+
+    Parameters
+    ----------
+    members : mapping of str to sequence of str
+        Robot concept label -> the true concept of each demonstration its
+        memory entries stand for (``None`` for an unknown one).
+
+    Returns
+    -------
+    dict
+        Robot label -> most frequent true concept (ties: the first seen);
+        ``None`` when none is known. Two robot concepts may get the same
+        name (a concept the robot split in two).
+    """
+    return {robot: (max(c, key=c.__getitem__) if c else None)
+            for robot, c in _counts(members).items()}
+
+
+def matched_names(members: Mapping[str, Sequence[str | None]]) -> dict[str, str | None]:
+    """One-to-one names: a maximum matching of robot concepts to true concepts.
+
+    The assignment maximises the number of demonstrations whose robot
+    concept is named by their true concept (Hungarian algorithm,
+    :func:`scipy.optimize.linear_sum_assignment`), each true concept naming
+    at most one robot concept. Robot concepts left without a true concept
+    (more robot concepts than true ones, or none known) map to ``None``:
+    an answer with such a label is never correct. Stricter than
+    :func:`majority_names`, which forgives a split concept.
+
+    Parameters
+    ----------
+    members : mapping of str to sequence of str
+        As for :func:`majority_names`.
+
+    Returns
+    -------
+    dict
+        Robot label -> true concept or ``None``.
+    """
+    from scipy.optimize import linear_sum_assignment
+    counts = _counts(members)
+    robots = list(counts)
+    truths = list(dict.fromkeys(t for c in counts.values() for t in c))
+    out: dict[str, str | None] = dict.fromkeys(robots)
+    if not robots or not truths:
+        return out
+    gain = np.array([[counts[r].get(t, 0) for t in truths] for r in robots], dtype=float)
+    rows, cols = linear_sum_assignment(gain, maximize=True)
+    for i, j in zip(rows, cols):
+        if gain[i, j] > 0:
+            out[robots[i]] = truths[j]
+    return out
+
+
+def purity(members: Mapping[str, Sequence[str | None]]) -> float:
+    """Concept purity: the fraction of demonstrations in their concept's majority.
+
+    ``sum over robot concepts of (count of its most frequent true concept)
+    / number of demonstrations`` (Manning et al., *Introduction to
+    Information Retrieval*, 2008, sec. 16.3). 1 when no robot concept mixes
+    two true concepts; NaN when no true concept is known.
+
+    Parameters
+    ----------
+    members : mapping of str to sequence of str
+        As for :func:`majority_names`.
+    """
+    counts = _counts(members)
+    total = sum(sum(c.values()) for c in counts.values())
+    if not total:
+        return float("nan")
+    return float(sum(max(c.values(), default=0) for c in counts.values()) / total)
+
+
+def auroc(positive: Sequence[float], negative: Sequence[float]) -> float:
+    """Area under the ROC curve of a score separating two groups.
+
+    The probability that a random ``positive`` scores above a random
+    ``negative``, ties counting one half (the Mann-Whitney U statistic
+    divided by ``n_pos * n_neg``). NaN when a group is empty.
+
+    Parameters
+    ----------
+    positive, negative : sequence of float
+        Scores of the two groups (e.g. recognition confidence of taught and
+        of untaught concepts' demonstrations).
+    """
+    pos = np.asarray(positive, dtype=np.float64)
+    neg = np.asarray(negative, dtype=np.float64)
+    if not pos.size or not neg.size:
+        return float("nan")
+    from scipy.stats import rankdata
+    ranks = rankdata(np.concatenate([pos, neg]))
+    u = ranks[:pos.size].sum() - pos.size * (pos.size + 1) / 2
+    return float(u / (pos.size * neg.size))

@@ -31,11 +31,14 @@ class FoldTask:
     learn : list of int
         Indices into ``load_lasa(shapes)``, in presentation order.
     test : list of int
+    memory_dir : str, optional
+        Save the fold's learned agent there as ``fold-K.npz``.
     """
 
     fold: int
     learn: list[int]
     test: list[int]
+    memory_dir: str | None = None
 
 
 class ResolvedComponents:
@@ -135,7 +138,7 @@ def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], ba
     send({"kind": "fold_start", "fold": task.fold, "total": len(task.learn)})
     return run_fold(config_dict, task.fold, [demos[i] for i in task.learn],
                     [demos[i] for i in task.test], send=send, baseline=baseline,
-                    plugin_manager=pm)
+                    plugin_manager=pm, memory_dir=task.memory_dir)
 
 
 def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],

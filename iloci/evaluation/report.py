@@ -14,7 +14,8 @@ from iloci.errors import MissingBackendError
 from iloci.evaluation.evaluate import FoldResult
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
-__all__ = ["write_outputs", "write_json_atomic", "headline"]
+__all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
+           "robustness_table", "stream_headline"]
 
 
 #: Modules the report needs: figures (matplotlib), the PB-space figure
@@ -75,6 +76,25 @@ def headline(metrics: dict[str, Any]) -> str:
         rows.append(f"| DTW 1-NN baseline | {_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])} | "
                     + ", ".join(_pct(c) for c in b["ccr_folds"]) + " |")
     m = metrics
+    if "purity" in m:
+        rows += [
+            "",
+            f"robot's own labels scored: {m['concepts']['mean']:.1f} robot concepts naming "
+            f"{m['named_concepts']['mean']:.1f} true concepts, concept purity "
+            f"{_pct(m['purity']['mean'])} %, one-to-one CCR "
+            f"{_pct(m['ccr_matched']['mean'])} %, nearest entry's source CCR "
+            f"{_pct(m['ccr_source']['mean'])} %",
+        ]
+    u = m.get("untaught")
+    if u:
+        rows += [
+            "",
+            f"{u['concepts']} concept(s) left out of each fold's learning: familiarity AUROC "
+            f"taught vs untaught {u['familiarity_auroc']:.3f} (margin confidence "
+            f"{u['margin_auroc']:.3f}); answered unknown: untaught "
+            f"{_pct(u['untaught_answered_unknown'])} %, taught "
+            f"{_pct(u['taught_answered_unknown'])} %",
+        ]
     rows += [
         "",
         f"interactions per learning demo {m['interactions_per_demo']['mean']:.2f}; memory "
@@ -84,6 +104,18 @@ def headline(metrics: dict[str, Any]) -> str:
         f"{m['wall_seconds']:.1f} s ({m['jobs']} job(s))",
     ]
     return "\n".join(rows)
+
+
+def robustness_table(rob: dict[str, Any]) -> list[str]:
+    """Markdown rows: per perturbation, iloci and DTW 1-NN CCR (mean ± std, %)."""
+    rows = ["| the test demonstrations, drawn … | iloci CCR % | DTW 1-NN CCR % |",
+            "|---|---|---|"]
+    for row in rob.values():
+        b = row.get("baseline")
+        base = f"{_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])}" if b else "-"
+        rows.append(f"| {row['label']} | {_pct(row['ccr_mean'])} ± {_pct(row['ccr_std'])} | "
+                    f"{base} |")
+    return rows
 
 
 def _sparse_table(concepts: Sequence[str], conf: np.ndarray, cmat: np.ndarray) -> list[str]:
@@ -171,24 +203,30 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         "",
         "## Per fold",
         "",
-        "| fold | learn | test | CCR % | DTW 1-NN % | interactions/demo | exemplars | "
-        "prototypes | concepts | generation error | wall s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| fold | learn | test | CCR % | one-to-one CCR % | purity % | DTW 1-NN % | "
+        "interactions/demo | exemplars | prototypes | concepts | generation error | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for f in m["folds"]:
         lines.append(
             f"| {f['fold']} | {f['learn']} | {f['test']} | {_pct(f['ccr'])} | "
+            f"{_pct(f.get('ccr_matched', float('nan')))} | "
+            f"{_pct(f.get('purity', float('nan')))} | "
             f"{_pct(f['baseline_ccr']) if np.isfinite(f['baseline_ccr']) else '-'} | "
             f"{f['interactions_per_demo']:.2f} | {f['exemplars']} | {f['prototypes']} | "
             f"{f['concepts']} | {f['generation_error']:.4f} | {f['wall_seconds']:.1f} |")
     lines += [
         "",
-        "A test demonstration counts as correct when the memory entry nearest to its "
-        "PB_obs stands for a demonstration of the same true concept (what the oracle "
-        "teacher would reward). Confidence is the margin `1 - d_best / d_other` (see "
-        "docs/method.md, \"Inference phase\"). An exemplar is an entry learned from one "
-        "demonstration, a prototype the medoid that replaced a valid cluster "
-        "(docs/method.md, \"Words\").",
+        "The robot answers with its own concept label (the concept of the memory entry "
+        "nearest to the test demonstration's PB_obs). Each robot concept is named by the "
+        "true concept of most of the demonstrations its entries stand for; an answer is "
+        "correct when its name is the demonstration's true concept (CCR). One-to-one CCR "
+        "names robot concepts by a maximum matching instead, so a concept the teacher's "
+        "errors split in two counts only once; purity is the fraction of the memory's "
+        "demonstrations that belong to their robot concept's majority. Confidence is the "
+        "margin `1 - d_best / d_other` (see docs/method.md, \"Inference phase\"). An "
+        "exemplar is an entry learned from one demonstration, a prototype the medoid that "
+        "replaced a valid cluster (docs/method.md, \"Words\").",
         "",
         "## Confusion and confidence",
         "",
@@ -226,6 +264,71 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         lines += ["## Baseline", "", m["baseline"]["method"] + " on the same folds: "
                   f"{_pct(m['baseline']['ccr_mean'])} ± {_pct(m['baseline']['ccr_std'])} %."]
         lines += baseline_rows
+    if m.get("robustness"):
+        figures.plot_robustness(m["robustness"], fig_dir / "robustness.png")
+        lines += ["", "## Robustness", "",
+                  "Each fold's test set recognized again, transformed the way a person's "
+                  "drawing differs from LASA's recordings (`iloci.evaluation.perturb`); the "
+                  "learning phase is the one above. Mean ± std over the folds:", "",
+                  *robustness_table(m["robustness"]), "",
+                  "![robustness](figures/robustness.png)"]
+    report = out / "report.md"
+    write_text_atomic(report, "\n".join(lines) + "\n")
+    return report
+
+
+def stream_headline(metrics: dict[str, Any]) -> str:
+    """The stream protocol's summary (Markdown), also printed by ``iloci evaluate``."""
+    m = metrics
+    k = m["first_scored"]
+    return "\n".join([
+        "| measure | value |",
+        "|---|---|",
+        f"| first guess right, demonstrations {k}-{m['demonstrations']} | "
+        f"{_pct(m['first_guess'])} % |",
+        f"| ... of concepts already taught | {_pct(m['first_guess_seen'])} % "
+        f"({m['unseen_after_first_scored']} first-of-their-concept demonstrations after {k}) |",
+        f"| first guess right, all demonstrations | {_pct(m['first_guess_all'])} % |",
+        f"| teacher feedbacks per demonstration | {m['feedbacks_per_demo']:.2f} "
+        f"(from {k}: {m['feedbacks_per_demo_late']:.2f}) |",
+        f"| robot concepts at the end | {m['concepts']} (purity {_pct(m['purity'])} %) |",
+        f"| wall time | {m['wall_seconds']:.0f} s |",
+    ])
+
+
+def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
+                         steps: list[dict]) -> Path:
+    """Write the stream protocol's metrics.json, stream.json, figure and report.md."""
+    from iloci.evaluation import figures
+
+    out = Path(out_dir)
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "metrics.json", metrics)
+    write_json_atomic(out / "stream.json", steps)
+    figures.plot_stream([s["correct"] for s in steps], [len(s["feedbacks"]) for s in steps],
+                        fig_dir / "stream.png", first_scored=metrics["first_scored"])
+    backends = ", ".join(f"{k} = {v['name']}" for k, v in metrics["config"].items()
+                         if isinstance(v, dict) and "name" in v)
+    lines = [
+        "# iloci evaluation report: stream protocol",
+        "",
+        f"Test-then-learn over {metrics['demonstrations']} LASA demonstrations in a seeded "
+        f"order (seed {metrics['seed']}; back ends: {backends}). Each demonstration is first "
+        "recognized without feedback and scored, then taught with the teacher's feedback. "
+        "The robot's answer is its own concept label, named by the true concept of most of "
+        "the demonstrations that concept stands for at that moment; an \"unknown\" answer is "
+        "right exactly when the robot was never taught the demonstration's concept.",
+        "",
+        "## Headline",
+        "",
+        stream_headline(metrics),
+        "",
+        "## Along the stream",
+        "",
+        "![stream](figures/stream.png)",
+        "",
+    ]
     report = out / "report.md"
     write_text_atomic(report, "\n".join(lines) + "\n")
     return report

@@ -20,7 +20,7 @@ from iloci.interfaces import Demonstration, IKSolver
 from iloci.sensorimotor.preprocess import preprocess
 from iloci.sensorimotor.robots import Robot, get_robot
 
-__all__ = ["Motion", "to_motion", "to_motions"]
+__all__ = ["Motion", "preprocessed", "to_motion", "to_motions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,6 +82,32 @@ def _sensorimotor(config: SensorimotorConfig | Config | None) -> SensorimotorCon
                             f"{type(config).__name__}.")
 
 
+def preprocessed(demo: Demonstration,
+                 config: SensorimotorConfig | Config | None = None,
+                 robot: Robot | None = None) -> np.ndarray:
+    """:func:`~iloci.sensorimotor.preprocess.preprocess` with a config's settings.
+
+    Parameters
+    ----------
+    robot
+        The arm whose drawing plane the points are scaled to (default: the
+        shipped Nao V3.2 right arm; an agent passes ``agent.robot``).
+
+    Returns
+    -------
+    ndarray, shape (steps, 2)
+        Plane points ``(a, b)`` of the robot's
+        :class:`~iloci.sensorimotor.robots.DrawingPlane` (m; the Nao's plane:
+        ``(y, z)`` in its torso frame).
+    """
+    cfg = _sensorimotor(config)
+    plane = (robot if robot is not None else get_robot()).plane
+    return preprocess(demo, steps=cfg.steps, resample_by=cfg.resample,
+                      smoothing=cfg.smoothing, smoothing_window=cfg.smoothing_window,
+                      rest_tolerance=cfg.rest_tolerance, y_axis=cfg.y_axis,
+                      min_points=cfg.min_points, plane=plane)
+
+
 def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
               ik: IKSolver, robot: Robot | None = None) -> Motion:
     """Preprocess a demonstration and solve IK along it.
@@ -90,7 +116,7 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     ----------
     demo : Demonstration
     config : SensorimotorConfig or Config or None
-        Steps, resampling, smoothing and robot (``None``: defaults).
+        Steps, resampling and smoothing (``None``: defaults).
     ik : IKSolver
         Solves the path, warm-started from the robot's ``q_home``.
     robot : Robot, optional
@@ -108,8 +134,7 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     cfg = _sensorimotor(config)
     if robot is None:
         robot = getattr(ik, "robot", None) or get_robot()
-    plane_points = preprocess(demo, steps=cfg.steps, resample_by=cfg.resample,
-                              smoothing_window=cfg.smoothing_window, plane=robot.plane)
+    plane_points = preprocessed(demo, cfg, robot)
     targets = robot.plane.to_3d(plane_points)
     joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
     times = demo.times

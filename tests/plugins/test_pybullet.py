@@ -182,8 +182,15 @@ name = "pybullet"
         # the arm drew what its joints say, within the 2 mm of the tracking target
         planned = PinocchioIK().forward(response.joint_path)
         assert np.linalg.norm(ex.end_effector - planned, axis=1).max() < 0.002
-        # the picture is the executed drawing, in the plane's (y, z)
-        np.testing.assert_array_equal(picture_path, robot.plane.to_2d(ex.end_effector))
-        np.testing.assert_array_equal(response.drawing, picture_path)
+        # the picture is the executed drawing, shown in the demonstration's frame:
+        # the plane's (y, z) under one uniform scale and a shift
+        executed = robot.plane.to_2d(ex.end_effector)
+        np.testing.assert_array_equal(response.drawing, executed)
+        np.testing.assert_array_equal(picture_path, response.teacher_drawing)
+        A = np.column_stack([executed.ravel(), np.tile([1.0, 0.0], len(executed)),
+                             np.tile([0.0, 1.0], len(executed))])
+        coef, *_ = np.linalg.lstsq(A, picture_path.ravel(), rcond=None)
+        assert coef[0] > 0
+        np.testing.assert_allclose(A @ coef, picture_path.ravel(), atol=1e-9)
         assert not np.allclose(picture_path, response.motion, atol=1e-6), \
             "the network's pen path and the arm's coincide: the test cannot tell them apart"

@@ -1,0 +1,356 @@
+"""Learning-quality benchmark: accuracy, teacher effort, a teacher who errs, "unknown".
+
+Runs the evaluation protocols over several seeds (each seed: its own fold
+split, presentation order, network initialisation and noisy-teacher draws)
+and writes ``benchmarks/results/quality.json``::
+
+    ccr                 the k-fold CCR with the chosen settings: mean, std over
+                        every (seed, fold), per fold ``folds`` (seed -> 5
+                        values), per seed; the robot's own labels are scored
+    dtw_ccr             DTW 1-NN with true labels on the same folds
+    feedbacks_per_demo  teacher feedbacks per learning demonstration
+    stream              test-then-learn: first guess right over
+                        demonstrations 46-182, feedbacks per demonstration
+    noisy               teacher error p -> CCR, one-to-one CCR, purity,
+                        concepts, feedbacks
+    unknown_auroc       AUROC of recognition's familiarity between taught and
+                        untaught concepts (``[evaluation] untaught = 4``), and
+                        the unknown answers' confusion
+    ablation            one row per setting: what each change buys
+    targets             each target of the issue, the measured value, met or not
+
+Each (row, seed) run is cached in ``--cache`` (a JSON file per run) so an
+interrupted benchmark resumes; ``--fresh`` ignores the cache.
+
+Run: ``python benchmarks/quality.py [--seeds 0 1 2] [--jobs 2]
+[--rows default,paper,...] [--config base.toml]``. The base config defaults
+to ``torch-rnnpb`` (about 2.5 times faster than ``jax-rnnpb`` here); the
+back end is recorded in the output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results" / "quality.json"
+
+#: The settings this issue recommends (``[learner]`` keys), measured here as ``best``.
+BEST: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True,
+                                    "decision": "reproduction"}}
+
+#: The paper's learning phase: every setting of this issue off.
+PAPER: dict[str, Any] = {"learner": {"novelty_below": 0.0, "unknown_below": 0.0,
+                                     "confirm_rewards": False, "decision": "pb_distance"}}
+
+
+def _with(*parts: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for part in parts:
+        for sec, values in part.items():
+            out[sec] = {**out.get(sec, {}), **values}
+    return out
+
+
+#: row name -> changes on top of the base config.
+ROWS: dict[str, dict[str, Any]] = {
+    "best": BEST,
+    "paper": PAPER,
+    "novelty-only": _with(BEST, {"learner": {"confirm_rewards": False}}),
+    "pb-decision": _with(BEST, {"learner": {"decision": "pb_distance"}}),
+    "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
+    "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
+    "paper-untaught": _with(PAPER, {"evaluation": {"untaught": 4}}),
+    "noisy-0.05": _with(BEST, {"teacher": {"name": "noisy", "p": 0.05}}),
+    "noisy-0.1": _with(BEST, {"teacher": {"name": "noisy", "p": 0.1}}),
+    "noisy-0.2": _with(BEST, {"teacher": {"name": "noisy", "p": 0.2}}),
+    "paper-noisy-0.1": _with(PAPER, {"teacher": {"name": "noisy", "p": 0.1}}),
+    "stream": _with(BEST, {"evaluation": {"protocol": "stream"}}),
+    "paper-stream": _with(PAPER, {"evaluation": {"protocol": "stream"}}),
+}
+
+#: Rows run by default, in order (the cheap, decisive ones first).
+DEFAULT_ROWS = ("best", "paper", "pb-decision", "noisy-0.1", "untaught", "paper-noisy-0.1",
+                "noisy-0.05", "noisy-0.2", "reproduction-only", "novelty-only", "stream",
+                "paper-stream")
+
+
+def _merge(base: dict, changes: dict) -> dict:
+    out = json.loads(json.dumps(base))
+    for sec, values in changes.items():
+        if sec in out and isinstance(values, dict) and "name" in values \
+                and values["name"] != out[sec].get("name"):
+            out[sec] = dict(values)
+        else:
+            out.setdefault(sec, {}).update(values)
+    return out
+
+
+def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool,
+            cached_only: bool = False) -> dict | None:
+    """One (row, seed) run, from the cache when there (``None``: not cached, not run)."""
+    from iloci.config import load_config
+
+    data = _merge(base, ROWS[row])
+    data.setdefault("evaluation", {})["seed"] = seed
+    # the noisy teacher's draws are seeded by the config's seed
+    config = load_config(data)
+    key = cache / f"{row}-seed{seed}.json"
+    if key.is_file() and not fresh:
+        cached = json.loads(key.read_text())
+        if cached.get("config") == config.to_dict():
+            return cached
+    if cached_only:
+        return None
+    t0 = time.perf_counter()
+    if config.evaluation.protocol == "stream":
+        from iloci.evaluation.stream import run_stream
+        metrics, steps = run_stream(config)
+        out = {"row": row, "seed": seed, "protocol": "stream", "metrics": metrics,
+               "correct": [s["correct"] for s in steps],
+               "feedbacks": [len(s["feedbacks"]) for s in steps]}
+    else:
+        from iloci.evaluation.evaluate import evaluate
+        metrics, results = evaluate(config, jobs=jobs, baseline=row == "best",
+                                    memory_dir=str(cache / f"{row}-seed{seed}-memories"))
+        out = {"row": row, "seed": seed, "protocol": "folds", "metrics": {
+            k: v for k, v in metrics.items() if k not in ("versions", "machine")},
+            "folds": [{k: r[k] for k in (
+                "fold", "ccr", "ccr_matched", "ccr_source", "purity", "concepts",
+                "named_concepts", "interactions_per_demo", "baseline_ccr", "true_concepts",
+                "predicted", "robot_predicted", "taught", "confidence", "distance", "error",
+                "familiarity", "unknown", "first_guess") if k in r}
+                for r in (f.to_dict() for f in results)]}
+    out["config"] = config.to_dict()
+    out["seconds"] = time.perf_counter() - t0
+    cache.mkdir(parents=True, exist_ok=True)
+    key.write_text(json.dumps(out))
+    return out
+
+
+def _folds(runs: list[dict], key: str) -> list[float]:
+    return [f.get(key, float("nan")) for r in runs for f in r["folds"]]
+
+
+def _ms(values: list[float]) -> dict[str, float]:
+    a = np.asarray(values, dtype=float)
+    a = a[np.isfinite(a)]
+    if not a.size:
+        return {"mean": None, "std": None, "min": None, "n": 0}
+    return {"mean": float(a.mean()), "std": float(a.std()), "min": float(a.min()),
+            "n": int(a.size)}
+
+
+def summarize_folds(runs: list[dict]) -> dict[str, Any]:
+    return {
+        "ccr": _ms(_folds(runs, "ccr")) | {
+            "folds": {str(r["seed"]): [f["ccr"] for f in r["folds"]] for r in runs},
+            "seeds": {str(r["seed"]): r["metrics"]["ccr_mean"] for r in runs}},
+        "ccr_matched": _ms(_folds(runs, "ccr_matched")),
+        "purity": _ms(_folds(runs, "purity")),
+        "concepts": _ms(_folds(runs, "concepts")),
+        "feedbacks_per_demo": _ms(_folds(runs, "interactions_per_demo")),
+        "seeds": [r["seed"] for r in runs],
+        "seconds": sum(r["seconds"] for r in runs),
+    }
+
+
+def _unknown_score(f: dict) -> tuple[str, list[float]]:
+    """Familiarity when the run recorded it, else the negative prediction error."""
+    if f.get("familiarity") and all(np.isfinite(f["familiarity"])):
+        return "familiarity", list(f["familiarity"])
+    return "-prediction_error", [-e for e in f["error"]]
+
+
+def summarize_unknown(runs: list[dict]) -> dict[str, Any]:
+    from iloci.evaluation.metrics import auroc
+    taught, untaught, names, per_seed = [], [], set(), {}
+    for r in runs:
+        tt, uu = [], []
+        for f in r["folds"]:
+            name, score = _unknown_score(f)
+            names.add(name)
+            for t, x in zip(f["taught"], score):
+                (tt if t else uu).append(x)
+        per_seed[str(r["seed"])] = auroc(tt, uu)
+        taught += tt
+        untaught += uu
+    unknown_t = [u for r in runs for f in r["folds"] for t, u in zip(
+        f["taught"], f.get("unknown", [False] * len(f["taught"]))) if t]
+    unknown_u = [u for r in runs for f in r["folds"] for t, u in zip(
+        f["taught"], f.get("unknown", [False] * len(f["taught"]))) if not t]
+    return {"auroc": auroc(taught, untaught), "score": sorted(names),
+            "auroc_seeds": per_seed,
+            "auroc_pb_distance": auroc(
+                [-d for r in runs for f in r["folds"] for t, d in zip(f["taught"], f["distance"])
+                 if t],
+                [-d for r in runs for f in r["folds"] for t, d in zip(f["taught"], f["distance"])
+                 if not t]),
+            "auroc_margin_confidence": auroc(
+                [c for r in runs for f in r["folds"] for t, c in zip(f["taught"],
+                                                                     f["confidence"]) if t],
+                [c for r in runs for f in r["folds"] for t, c in zip(f["taught"],
+                                                                     f["confidence"]) if not t]),
+            "untaught_answered_unknown": float(np.mean(unknown_u)) if unknown_u else None,
+            "taught_answered_unknown": float(np.mean(unknown_t)) if unknown_t else None,
+            "taught_demos": len(taught), "untaught_demos": len(untaught),
+            "seeds": [r["seed"] for r in runs]}
+
+
+def summarize_stream(runs: list[dict]) -> dict[str, Any]:
+    return {
+        "first_guess": _ms([r["metrics"]["first_guess"] for r in runs]),
+        "first_guess_seen": _ms([r["metrics"]["first_guess_seen"] for r in runs]),
+        "feedbacks_per_demo": _ms([r["metrics"]["feedbacks_per_demo"] for r in runs]),
+        "feedbacks_per_demo_late": _ms([r["metrics"]["feedbacks_per_demo_late"]
+                                        for r in runs]),
+        "concepts": _ms([r["metrics"]["concepts"] for r in runs]),
+        "purity": _ms([r["metrics"]["purity"] for r in runs]),
+        "curves": {str(r["seed"]): r["metrics"]["curve"] for r in runs},
+        "seeds": [r["seed"] for r in runs],
+        "seconds": sum(r["seconds"] for r in runs),
+    }
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", "-c", help="base TOML config (default: torch-rnnpb, "
+                    "otherwise the defaults)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--jobs", "-j", type=int, default=2)
+    ap.add_argument("--rows", default=",".join(DEFAULT_ROWS),
+                    help=f"comma-separated rows of {', '.join(ROWS)}")
+    ap.add_argument("--cache", default="runs/quality-cache", help="per-run result cache")
+    ap.add_argument("--fresh", action="store_true", help="ignore cached runs")
+    ap.add_argument("--cached-only", action="store_true",
+                    help="summarise the cached runs only; run nothing")
+    ap.add_argument("--out", default=str(RESULTS))
+    args = ap.parse_args(argv)
+
+    from iloci.config import load_config
+    from iloci.evaluation import figures
+    from iloci.evaluation.report import write_json_atomic
+
+    base = (load_config(args.config) if args.config
+            else load_config({"perceptual_model": {"name": "torch-rnnpb"}})).to_dict()
+    rows = [r.strip() for r in args.rows.split(",") if r.strip()]
+    unknown = set(rows) - set(ROWS)
+    if unknown:
+        ap.error(f"unknown rows {sorted(unknown)}; known: {', '.join(ROWS)}")
+    cache = Path(args.cache)
+    load_before = os.getloadavg()
+    t0 = time.perf_counter()
+    runs: dict[str, list[dict]] = {}
+    for row in rows:
+        for seed in args.seeds:
+            print(f"[quality] {row} seed {seed} ...", file=sys.stderr, flush=True)
+            r = run_one(base, row, seed, args.jobs, cache, args.fresh, args.cached_only)
+            if r is None:
+                print(f"[quality] {row} seed {seed}: not cached, skipped", file=sys.stderr)
+                continue
+            runs.setdefault(row, []).append(r)
+            m = r["metrics"]
+            print(f"[quality] {row} seed {seed}: "
+                  + (f"CCR {100 * m['ccr_mean']:.2f} %" if r["protocol"] == "folds"
+                     else f"first guess {100 * m['first_guess']:.1f} %")
+                  + f" ({r['seconds']:.0f} s)", file=sys.stderr, flush=True)
+
+    out: dict[str, Any] = {
+        "command": "python benchmarks/quality.py " + " ".join(argv or sys.argv[1:]),
+        "back_ends": {k: base[k]["name"] for k in ("perceptual_model", "clusterer", "teacher",
+                                                    "ik", "simulator")},
+        "learner": base["learner"],
+        "sensorimotor": base["sensorimotor"],
+        "seeds": args.seeds,
+    }
+    rows = [r for r in rows if r in runs]
+    out["rows_run"] = {r: [x["seed"] for x in runs[r]] for r in rows}
+    if "best" in runs:
+        d = summarize_folds(runs["best"])
+        out["ccr"] = d["ccr"]
+        out["feedbacks_per_demo"] = d["feedbacks_per_demo"]
+        base_runs = [r for r in runs["best"] if all(
+            np.isfinite(f["baseline_ccr"]) for f in r["folds"])]
+        if base_runs:
+            out["dtw_ccr"] = _ms(_folds(base_runs, "baseline_ccr")) | {
+                "folds": {str(r["seed"]): [f["baseline_ccr"] for f in r["folds"]]
+                          for r in base_runs}}
+    noisy = {}
+    for row in rows:
+        if row.startswith("noisy-") or row == "best":
+            p = 0.0 if row == "best" else float(row.split("-", 1)[1])
+            s = summarize_folds(runs[row])
+            noisy[str(p)] = {k: s[k] for k in ("ccr", "ccr_matched", "purity", "concepts",
+                                                "feedbacks_per_demo")}
+    if len(noisy) > 1:
+        out["noisy"] = dict(sorted(noisy.items(), key=lambda kv: float(kv[0])))
+        ps = sorted(float(p) for p in noisy)
+        fig = Path(args.out).with_name("quality_noisy.png")
+        figures.plot_noisy(ps, [_folds(runs["best" if p == 0 else f"noisy-{p:g}"], "ccr")
+                                for p in ps],
+                           [_folds(runs["best" if p == 0 else f"noisy-{p:g}"],
+                                   "interactions_per_demo") for p in ps], fig)
+        out["noisy_figure"] = fig.name
+    for row in ("untaught", "paper-untaught"):
+        if row in runs:
+            out["unknown_auroc"] = summarize_unknown(runs[row]) | {"row": row}
+            break
+    if "stream" in runs:
+        out["stream"] = summarize_stream(runs["stream"])
+    out["ablation"] = {}
+    for row in rows:
+        if runs[row][0]["protocol"] == "stream":
+            out["ablation"][row] = {k: v for k, v in summarize_stream(runs[row]).items()
+                                    if k != "curves"}
+        else:
+            out["ablation"][row] = summarize_folds(runs[row])
+        out["ablation"][row]["changes"] = ROWS[row]
+
+    targets: dict[str, Any] = {}
+    if "ccr" in out:
+        targets["ccr_mean_ge_99.3"] = {"value": out["ccr"]["mean"],
+                                       "met": out["ccr"]["mean"] >= 0.993}
+        targets["every_fold_ge_97.5"] = {"value": out["ccr"]["min"],
+                                         "met": out["ccr"]["min"] >= 0.975}
+        if "dtw_ccr" in out:
+            targets["ccr_ge_dtw"] = {"value": [out["ccr"]["mean"], out["dtw_ccr"]["mean"]],
+                                     "met": out["ccr"]["mean"] >= out["dtw_ccr"]["mean"]}
+        targets["feedbacks_le_3"] = {"value": out["feedbacks_per_demo"]["mean"],
+                                     "met": out["feedbacks_per_demo"]["mean"] <= 3.0}
+        if "paper" in runs:
+            paper = summarize_folds(runs["paper"])["ccr"]["mean"]
+            targets["novelty_ccr_not_lower"] = {"value": [out["ccr"]["mean"], paper],
+                                                "met": out["ccr"]["mean"] >= paper}
+    if "stream" in out:
+        targets["stream_first_guess_ge_85"] = {
+            "value": out["stream"]["first_guess"]["mean"],
+            "met": out["stream"]["first_guess"]["mean"] >= 0.85}
+    if "noisy" in out and "0.1" in out["noisy"]:
+        v = out["noisy"]["0.1"]["ccr"]["mean"]
+        targets["noisy_0.1_ccr_ge_96"] = {"value": v, "met": v >= 0.96}
+    if "unknown_auroc" in out:
+        v = out["unknown_auroc"]["auroc"]
+        targets["untaught_auroc_ge_0.95"] = {"value": v, "met": v >= 0.95}
+    out["targets"] = targets
+    out["wall_seconds"] = time.perf_counter() - t0
+    out["machine"] = {"python": platform.python_version(), "platform": platform.platform(),
+                      "cpus": os.cpu_count(), "load_average_before": load_before,
+                      "load_average_after": os.getloadavg(),
+                      "note": "shared with other work; wall times are not comparable"}
+    write_json_atomic(args.out, out)
+    for name, t in targets.items():
+        print(f"{name}: {t['value']} -> {'met' if t['met'] else 'MISSED'}")
+    print(f"wrote {args.out}")
+    return out
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,81 @@
+"""``iloci serve``: teach the robot in a browser (a local web app).
+
+Draw on the page; the robot guesses and answers by drawing; say yes or no.
+The memory file is saved after every change, and a restarted server goes on
+from it. Needs the ``serve`` extra: ``pip install 'iloci[serve]'``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from iloci.commands.teach import DEFAULT_MEMORY
+from iloci.errors import InvalidInputError, MissingBackendError
+
+__all__ = ["register", "run", "build_classroom"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve", help="teach the robot in a browser: draw, watch it answer, say yes or no",
+        description="Start a local web app: draw a shape with the mouse, a pen or a finger; "
+                    "the robot guesses its concept and answers by drawing; answer yes or no "
+                    "and it learns. Name its concepts, recognize drawings. The memory file "
+                    "is saved after every change; with an existing --memory, teaching goes "
+                    "on from it.")
+    p.add_argument("--memory", metavar="FILE", default=DEFAULT_MEMORY,
+                   help=f"memory file to continue from and save to (default {DEFAULT_MEMORY})")
+    p.add_argument("--config", metavar="FILE",
+                   help="TOML config (default: the one saved in --memory, else the defaults)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1: this computer only)")
+    p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    p.set_defaults(func=run)
+
+
+def build_classroom(memory: str | Path, config: str | None = None, *, worker: bool = True):
+    """The :class:`~iloci.web.app.Classroom` of a memory file (new when it does not exist).
+
+    The agent's network runs in a worker process unless ``worker=False``.
+    """
+    from iloci.agent import Agent, build
+    from iloci.concepts.memory import load_memory
+    from iloci.config import load_config
+    from iloci.web.app import Classroom
+
+    path = Path(memory)
+    header = load_memory(path)[2] if path.exists() else None
+    if config:
+        cfg = load_config(config)
+    elif header is not None and isinstance(header.get("config"), dict):
+        cfg = load_config(header["config"])
+    else:
+        cfg = load_config(None)
+    # the person at the page is the teacher: no teacher object is asked
+    agent = Agent.load(path, cfg) if header is not None else build(cfg)
+    if worker:
+        agent.start_worker()
+    return Classroom(agent, path)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        import uvicorn
+
+        from iloci.web.app import create_app
+    except ImportError as exc:
+        raise MissingBackendError("command", "serve", ["starlette", "uvicorn"],
+                                  "pip install 'iloci[serve]'") from exc
+    if not 0 < args.port < 65536:
+        raise InvalidInputError(f"--port must be 1..65535, got {args.port}.")
+    classroom = build_classroom(args.memory, args.config)
+    app = create_app(classroom, on_shutdown=classroom.agent.close)
+    mem = classroom.agent.memory
+    print(f"memory {args.memory}: {mem.summary().splitlines()[0]}")
+    print(f"teach the robot at http://{args.host}:{args.port}/ (Ctrl-C to stop)", flush=True)
+    try:
+        uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+    finally:
+        classroom.agent.close()
+    return 0

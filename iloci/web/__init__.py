@@ -1,0 +1,1 @@
+"""iloci's web app (``iloci serve``): see :mod:`iloci.web.app`."""

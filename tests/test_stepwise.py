@@ -1,0 +1,208 @@
+"""The step-wise learning phase (Agent.observe / Turn.feedback), its worker process, rename.
+
+Real RNNPB (torch-rnnpb, few epochs), real IK, real LASA demonstrations.
+``Agent.learn`` with a teacher and the same feedback given step by step
+must do exactly the same thing: they are one code path.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import numpy as np
+import pytest
+from scipy.spatial.distance import cdist
+
+import iloci
+from iloci.concepts.learner import Answer, LearnOutcome
+from iloci.concepts.memory import entries_equal
+from iloci.concepts.rehearsal import PHASES
+from iloci.data import load_lasa
+from iloci.errors import FeedbackError, InvalidInputError, MissingBackendError
+from iloci.sensorimotor.frames import TeacherFrame
+
+pytest.importorskip("torch")
+pytest.importorskip("pinocchio")
+
+EPOCHS = 30
+
+
+def config() -> dict:
+    return {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+                                 "recognition_steps": EPOCHS},
+            "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
+
+
+def make_agent(**overrides) -> iloci.Agent:
+    try:
+        return iloci.build(config(), **overrides)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="module")
+def lasa():
+    return {d.key: d for d in load_lasa(["GShape", "Angle", "Sine"])}
+
+
+def state(agent) -> dict:
+    return {k: np.array(v, copy=True) for k, v in agent.perceptual_model.state().items()}
+
+
+def same_state(a: dict, b: dict) -> bool:
+    return set(a) == set(b) and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def test_step_by_step_is_the_same_as_learn_with_a_teacher(lasa):
+    stream = [lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1", "Sine/0")]
+    with_teacher = make_agent()
+    outcomes = [with_teacher.learn(d) for d in stream]  # oracle teacher
+    oracle = with_teacher.teacher
+    stepped = make_agent()
+    for demo, expected in zip(stream, outcomes):
+        turn = stepped.observe(demo)
+        answers, step = [], turn.outcome
+        while not turn.done:
+            answers.append(turn.answer)
+            step = turn.feedback(oracle.feedback(demo, turn.answer.response))
+            assert isinstance(step, (Answer, LearnOutcome))
+        assert turn.answer is None and step is turn.outcome
+        got = turn.outcome
+        assert (got.action, got.concept, got.feedbacks) == (expected.action, expected.concept,
+                                                            expected.feedbacks)
+        assert [a.attempt for a in answers] == list(range(1, len(answers) + 1))
+    assert entries_equal(stepped.memory.entries, with_teacher.memory.entries)
+    assert same_state(state(stepped), state(with_teacher))
+
+
+def test_an_answer_carries_what_a_person_and_a_controller_need(lasa):
+    agent = make_agent()
+    agent.learn(lasa["GShape/0"])
+    demo = lasa["GShape/1"]
+    turn = agent.observe(demo)
+    a = turn.answer
+    assert (a.demo, a.concept, a.attempt) == ("GShape/1", "c1", 1)
+    assert a.confidence == 1.0                      # the only concept
+    entry = agent.memory.entries[a.entry]
+    assert a.dt == entry.dt == a.response.dt > 0
+    assert a.joint_path.shape == (50, 4)
+    np.testing.assert_array_equal(a.start_posture, a.joint_path[0])
+    lower, upper = np.asarray(agent.ik_solver.lower), np.asarray(agent.ik_solver.upper)
+    assert np.all(a.joint_path >= lower) and np.all(a.joint_path <= upper)
+    # the drawing is in the demonstration's frame: LASA units, where the demonstration is
+    motion = agent.motion(demo)
+    frame = TeacherFrame.of(demo, motion.plane_points)
+    np.testing.assert_allclose(a.drawing, frame.to_teacher(a.response.drawing))
+    # every motion point, mapped back, lies on the drawn path (whatever the resampling)
+    back = frame.to_teacher(motion.plane_points)
+    assert cdist(back, demo.positions).min(axis=1).max() < 0.05 * np.ptp(demo.positions)
+    lo, hi = demo.positions.min(axis=0), demo.positions.max(axis=0)
+    span = hi - lo
+    assert np.all(a.drawing.min(axis=0) > lo - 0.6 * span)
+    assert np.all(a.drawing.max(axis=0) < hi + 0.6 * span)
+
+
+def test_a_bad_feedback_or_a_stale_turn_changes_nothing(lasa):
+    agent = make_agent()
+    agent.learn(lasa["GShape/0"])
+    turn = agent.observe(lasa["Angle/0"])
+    before, net = agent.memory.copy(), state(agent)
+    for bad in (0, 2, True, "yes", 1.0):
+        with pytest.raises(FeedbackError, match=r"must be \+1 \(reward\) or -1"):
+            turn.feedback(bad)
+    assert entries_equal(agent.memory.entries, before.entries) and same_state(net, state(agent))
+    other = agent.observe(lasa["GShape/1"])
+    other.feedback(1)                               # the memory changes under `turn`
+    with pytest.raises(InvalidInputError, match="memory changed since 'Angle/0'"):
+        turn.feedback(-1)
+    assert other.done
+    with pytest.raises(InvalidInputError, match="is over"):
+        other.feedback(1)
+
+
+def test_the_first_demonstration_ends_its_turn_at_once(lasa):
+    agent = make_agent()
+    phases = []
+    agent.on_progress = phases.append
+    turn = agent.observe(lasa["GShape/0"])
+    assert turn.done and turn.answer is None and turn.outcome.action == "new_concept"
+    assert [p.phase for p in phases] == list(PHASES)
+    assert [p.fraction for p in phases] == sorted(p.fraction for p in phases)
+    assert phases[-1].fraction == 1.0 and phases[-1].reason == "new_concept"
+    assert phases[-1].elapsed == pytest.approx(turn.outcome.rehearsals[0].seconds, abs=0.05)
+
+
+def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(lasa):
+    stream = [lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1")]
+    local = make_agent()
+    for d in stream:
+        local.learn(d)
+    agent = make_agent()
+    with agent.start_worker() as a:
+        assert a is agent and type(agent.perceptual_model).__name__ == "WorkerModel"
+        pid = agent.perceptual_model.pid
+        for d in stream:
+            agent.learn(d)
+        assert same_state(state(agent), state(local))   # state() read from the worker
+        recognized = agent.recognize(lasa["GShape/2"])
+    assert pid is not None and type(agent.perceptual_model).__name__ == "TorchRNNPB"
+    assert entries_equal(agent.memory.entries, local.memory.entries)
+    assert same_state(state(agent), state(local))
+    assert recognized.concept == local.recognize(lasa["GShape/2"]).concept
+
+
+def test_an_error_in_the_worker_reaches_the_caller_as_itself(lasa):
+    agent = make_agent()
+    with agent.start_worker():
+        with pytest.raises(InvalidInputError):
+            agent.perceptual_model.train([np.full((5, 6), np.nan)])
+        agent.learn(lasa["GShape/0"])                  # the worker still serves
+    assert len(agent.memory) == 1
+
+
+def test_asyncio_steps_leave_the_event_loop_free(lasa):
+    agent = make_agent()
+
+    async def main():
+        ticks = 0
+
+        async def ticker():
+            nonlocal ticks
+            while True:
+                await asyncio.sleep(0.01)
+                ticks += 1
+
+        task = asyncio.create_task(ticker())
+        t0 = time.perf_counter()
+        turn = await agent.aobserve(lasa["GShape/0"])   # a rehearsal, in a thread
+        seconds = time.perf_counter() - t0
+        turn = await agent.aobserve(lasa["Angle/0"])
+        outcome = await turn.afeedback(-1)
+        task.cancel()
+        return ticks, seconds, outcome
+
+    ticks, seconds, outcome = asyncio.run(main())
+    assert outcome.action == "new_concept" and outcome.concept == "c2"
+    assert ticks >= 3                                   # the loop ran meanwhile
+    assert seconds > 0
+
+
+def test_rename_is_kept_in_the_file_and_used_by_recognition(lasa, tmp_path):
+    agent = make_agent()
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    agent.rename("c1", "  my G ")
+    assert agent.memory.concepts() == ["my G", "c2"]
+    for bad, match in (("c2", "already named"), ("", "1 to 40"), ("a/b", "without '/'"),
+                       ("x" * 41, "1 to 40"), ("new\nline", "printable")):
+        with pytest.raises(InvalidInputError, match=match):
+            agent.rename("my G", bad)
+    with pytest.raises(InvalidInputError, match="no concept 'c9'"):
+        agent.rename("c9", "x")
+    agent.save(tmp_path / "m.npz")
+    loaded = iloci.Agent.load(tmp_path / "m.npz")
+    assert loaded.memory.concepts() == ["my G", "c2"]
+    assert loaded.recognize(lasa["GShape/1"]).concept == "my G"
+    loaded.rename("c2", "c3")                            # a name that looks like a label
+    outcome = loaded.learn(lasa["Sine/0"])
+    assert outcome.action == "new_concept" and outcome.concept == "c4"
