@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> dict:
         out["robots"][name] = rec
         write_json_atomic(RESULTS, {**old, **out})
     nao_ccr = out["robots"].get("nao-v32-right-arm", {}).get("evaluation", {}).get("ccr_mean")
-    for name, rec in out["robots"].items():
+    for rec in out["robots"].values():
         ccr = rec.get("evaluation", {}).get("ccr_mean")
         rec["targets"] = {
             "ik_max_error_lt_1_mm": rec["ik"]["max_error_mm"] < 1.0,

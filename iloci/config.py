@@ -595,8 +595,9 @@ def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
     with its settings: every ``[sensorimotor]`` setting (steps, resampling,
     smoothing), every ``[robot]`` setting (the arm and its drawing plane) and
     each component's ``MEMORY_KEYS`` (a class attribute of its parameter
-    schema: the RNNPB's sizes and PB range, the IK's null-space pull). Changing one would make the memory misread its own
-    demonstrations, so a config that does is refused; every other setting
+    schema: the RNNPB's sizes and PB range, the IK's null-space pull).
+    Changing one would make the memory misread its own demonstrations, so a
+    config that does is refused; every other setting
     (teacher, thresholds, epochs, recognition, simulator) may change.
 
     Parameters

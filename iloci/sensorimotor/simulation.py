@@ -45,7 +45,8 @@ __all__ = [
 #: robot, above and to the side of its right arm (m, torso frame), with a
 #: vertical field of view in degrees. Seen from the front, the drawing reads
 #: as the teacher drew it (see :mod:`iloci.sensorimotor.preprocess`).
-VIEW = {"eye": (0.45, -0.28, 0.25), "target": (0.11, -0.12, 0.11), "fov": 38.0}
+VIEW: dict[str, Any] = {"eye": (0.45, -0.28, 0.25), "target": (0.11, -0.12, 0.11),
+                        "fov": 38.0}
 
 #: Colour (RGBA, 0..1) and radius (m) of the pen path in an image.
 PEN_RGBA = (0.10, 0.20, 0.80, 1.0)

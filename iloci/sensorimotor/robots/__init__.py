@@ -195,6 +195,14 @@ def _as_points(a: np.ndarray, width: int, what: str) -> np.ndarray:
     return check_array(a, what, (None, width), finite_hint=" Pass finite coordinates.")
 
 
+def _vec3(v: Sequence[float] | np.ndarray) -> tuple[float, float, float]:
+    """Three floats (a direction or point; its length is checked by DrawingPlane)."""
+    a = [float(x) for x in v]
+    if len(a) != 3:
+        raise InvalidInputError(f"expected 3 numbers (x, y, z), got {a}.")
+    return a[0], a[1], a[2]
+
+
 def _frozen(a: Any) -> np.ndarray:
     out = np.array(a, dtype=np.float64)
     out.flags.writeable = False
@@ -403,11 +411,11 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
                                     f"{hi.round(4).tolist()}].")
         rest_given = q_rest
     fixed = dict(fixed_joints or {})
-    for j in tree.joints.values():
-        if j.type in MOVABLE and j.name not in names and j.name not in fixed:
-            fixed[j.name] = float(np.clip(0.0, j.lower, j.upper))
+    for uj in tree.joints.values():
+        if uj.type in MOVABLE and uj.name not in names and uj.name not in fixed:
+            fixed[uj.name] = float(np.clip(0.0, uj.lower, uj.upper))
     placeholder = plane is None
-    if placeholder:
+    if plane is None:
         plane = DrawingPlane(0.3, 0.0, 0.0, 0.01, 0.01)
     return Robot(
         name=name or tree.name, urdf_path=path, joint_names=names, lower=_frozen(lo),
@@ -643,8 +651,9 @@ def _read_cached_plane(key: str) -> tuple[DrawingPlane, np.ndarray, dict[str, An
     try:
         d = json.loads(f.read_text(encoding="utf-8"))
         p = d["plane"]
-        plane = DrawingPlane(*p["center"], p["width"], p["height"], normal=tuple(p["normal"]),
-                             up=tuple(p["up"]))
+        x, y, z = _vec3(p["center"])
+        plane = DrawingPlane(x, y, z, float(p["width"]), float(p["height"]),
+                             normal=_vec3(p["normal"]), up=_vec3(p["up"]))
         return plane, np.array(d["q_home"], dtype=np.float64), d["report"]
     except (OSError, ValueError, KeyError, TypeError, InvalidInputError):
         return None
@@ -666,4 +675,4 @@ def _write_cached_plane(key: str, found: tuple[DrawingPlane, np.ndarray, dict[st
 
 
 #: Planes found in this process, by robot and search settings.
-_PLANES: dict[tuple, tuple[DrawingPlane, np.ndarray, dict[str, Any]]] = {}
+_PLANES: dict[str, tuple[DrawingPlane, np.ndarray, dict[str, Any]]] = {}

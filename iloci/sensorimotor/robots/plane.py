@@ -164,12 +164,12 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
     NoReachablePlaneError
         No rectangle of at least 1 cm passes (says what to relax).
     """
-    from iloci.sensorimotor.robots import DrawingPlane
+    from iloci.sensorimotor.robots import DrawingPlane, _vec3
     t0 = time.perf_counter()
     if not (aspect > 0 and 0 <= edge_fraction < 1 and joint_margin >= 0 and min_singular >= 0):
         raise InvalidInputError("plane search needs aspect > 0, 0 <= edge_fraction < 1 and "
                                 "non-negative margins.")
-    probe = DrawingPlane(0.0, 0.0, 0.0, 1.0, 1.0, normal=tuple(normal), up=tuple(up))
+    probe = DrawingPlane(0.0, 0.0, 0.0, 1.0, 1.0, normal=_vec3(normal), up=_vec3(up))
     u, v, n = probe.axes
     lo, hi = np.asarray(ik.lower, float), np.asarray(ik.upper, float)
     rest = np.asarray(robot.rest if robot.rest is not None else robot.q_home, float)
@@ -194,8 +194,8 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
 
     def plane_at(d: float, a: float, b: float, h: float) -> DrawingPlane:
         c = d * n + a * u + b * v
-        return DrawingPlane(*c.tolist(), width=aspect * h, height=h, normal=tuple(n),
-                            up=tuple(v))
+        return DrawingPlane(float(c[0]), float(c[1]), float(c[2]), aspect * h, h,
+                            normal=_vec3(n), up=_vec3(v))
 
     tested = 0
 

@@ -146,6 +146,12 @@ def _floats(text: str | None, n: int, what: str, path: Path) -> np.ndarray:
     return v
 
 
+def _child_attr(el: ET.Element, tag: str, attr: str) -> str:
+    """Attribute ``attr`` of ``el``'s first ``<tag>`` child; "" when either is missing."""
+    child = el.find(tag)
+    return child.get(attr, "") if child is not None else ""
+
+
 def _origin(el: ET.Element | None, path: Path) -> np.ndarray:
     T = np.eye(4)
     if el is None:
@@ -187,8 +193,7 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
     joints: dict[str, UrdfJoint] = {}
     for el in root.findall("joint"):
         name, kind = el.get("name", ""), el.get("type", "")
-        parent = (el.find("parent").get("link", "") if el.find("parent") is not None else "")
-        child = (el.find("child").get("link", "") if el.find("child") is not None else "")
+        parent, child = (_child_attr(el, tag, "link") for tag in ("parent", "child"))
         for link in (parent, child):
             if link not in links:
                 raise InvalidInputError(f"{p}: joint {name!r} names link {link!r}, which the "
