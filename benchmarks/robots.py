@@ -34,6 +34,7 @@ Run: ``python benchmarks/robots.py [--robots nao-v32-right-arm panda ur5]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -52,6 +53,16 @@ ROBOTS = ("nao-v32-right-arm", "panda", "ur5")
 MUJOCO = {"nao-v32-right-arm": {},
           "panda": {"kp": 20000.0, "kv": 200.0, "gravity_compensation": True},
           "ur5": {"kp": 20000.0, "kv": 200.0, "gravity_compensation": True}}
+
+
+def _commit() -> str | None:
+    """The source tree's git commit (None outside a checkout)."""
+    import subprocess
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent,
+                              capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
 
 
 def ik_all(agent, demos) -> tuple[dict, list]:
@@ -151,7 +162,10 @@ def main(argv: list[str] | None = None) -> dict:
     for name in args.robots:
         print(f"== {name}", flush=True)
         agent = iloci.build({"robot": {"name": name}})
-        rec: dict = {"robot": agent.robot.describe()}
+        rec: dict = {"robot": agent.robot.describe(),
+                     # records of separate runs sit side by side: what each was read with
+                     "sensorimotor": dataclasses.asdict(agent.config.sensorimotor),
+                     "commit": _commit()}
         rec["ik"], motions = ik_all(agent, demos)
         print(f"IK: {rec['ik']}", flush=True)
         step = max(1, len(motions) // args.track_demos)
