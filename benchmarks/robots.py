@@ -139,6 +139,29 @@ def errors() -> dict:
     return out
 
 
+def set_targets(records: dict) -> None:
+    """Each record's ``targets``: the issue's thresholds, met or not.
+
+    The CCR is compared with the Nao's only when both records read the
+    demonstrations with the same ``sensorimotor`` settings (else ``None``:
+    records from separate runs on other defaults are not comparable).
+    """
+    nao = records.get("nao-v32-right-arm", {})
+    nao_ccr = nao.get("evaluation", {}).get("ccr_mean")
+    for rec in records.values():
+        ccr = rec.get("evaluation", {}).get("ccr_mean")
+        comparable = (ccr is not None and nao_ccr is not None
+                      and rec.get("sensorimotor") is not None
+                      and rec.get("sensorimotor") == nao.get("sensorimotor"))
+        rec["targets"] = {
+            "ik_max_error_lt_1_mm": rec["ik"]["max_error_mm"] < 1.0,
+            "ik_no_limit_violation": rec["ik"]["limit_violations"] == 0,
+            "pybullet_tracking_lt_2_mm": rec["tracking"]["pybullet"]["max_error_mm"] < 2.0,
+            "mujoco_tracking_lt_2_mm": rec["tracking"]["mujoco"]["max_error_mm"] < 2.0,
+            "ccr_within_1_point_of_nao": (abs(ccr - nao_ccr) <= 0.01 if comparable else None),
+        }
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", nargs="+", default=list(ROBOTS))
@@ -188,17 +211,7 @@ def main(argv: list[str] | None = None) -> dict:
             rec["evaluation"] = out["robots"][name]["evaluation"]
         out["robots"][name] = rec
         write_json_atomic(RESULTS, {**old, **out})
-    nao_ccr = out["robots"].get("nao-v32-right-arm", {}).get("evaluation", {}).get("ccr_mean")
-    for rec in out["robots"].values():
-        ccr = rec.get("evaluation", {}).get("ccr_mean")
-        rec["targets"] = {
-            "ik_max_error_lt_1_mm": rec["ik"]["max_error_mm"] < 1.0,
-            "ik_no_limit_violation": rec["ik"]["limit_violations"] == 0,
-            "pybullet_tracking_lt_2_mm": rec["tracking"]["pybullet"]["max_error_mm"] < 2.0,
-            "mujoco_tracking_lt_2_mm": rec["tracking"]["mujoco"]["max_error_mm"] < 2.0,
-            "ccr_within_1_point_of_nao": (None if ccr is None or nao_ccr is None
-                                          else abs(ccr - nao_ccr) <= 0.01),
-        }
+    set_targets(out["robots"])
     out["errors"] = errors()
     out["machine"] = {"python": platform.python_version(), "cpus": os.cpu_count(),
                       "load_average_before": load_before,

@@ -109,6 +109,11 @@ def check_plane(ik: Any, plane: Any, q_start: np.ndarray, *, edge: float = 0.0,
     return PlaneCheck(ok, True, margin, sv, qc)
 
 
+def _fmt(v) -> str:
+    """A direction for a message: ``(1, 0, 0)``."""
+    return "(" + ", ".join(f"{float(x):.3g}" for x in v) + ")"
+
+
 def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float] = (1, 0, 0),
                        up: tuple[float, float, float] = (0, 0, 1), aspect: float = 1.0,
                        joint_margin: float = math.radians(10.0), min_singular: float = 0.1,
@@ -188,7 +193,7 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
     if front.sum() < 20:
         raise NoReachablePlaneError(
             f"{robot.name!r} reaches almost nothing in front of it along normal "
-            f"{tuple(normal)} (base frame {robot.base_frame!r}); choose another plane_normal.")
+            f"{_fmt(normal)} (base frame {robot.base_frame!r}); choose another plane_normal.")
     reach = float(np.percentile(np.linalg.norm(x[front], axis=1), 95))
     h_cap = min(max_height, reach)
 
@@ -252,8 +257,7 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
     if not candidates:
         raise NoReachablePlaneError(
             f"no drawing plane found for {robot.name!r}: no square of "
-            f"{h0 * 100:.1f} cm, facing {tuple(np.round(n, 3))} with up "
-            f"{tuple(np.round(v, 3))}, is reachable with every joint "
+            f"{h0 * 100:.1f} cm, facing {_fmt(n)} with up {_fmt(v)}, is reachable with every joint "
             f"{math.degrees(joint_margin):.1f} deg inside its limits and the Jacobian's "
             f"smallest singular value >= {min_singular} of its best, its lowest edge "
             f">= {min_up} m above the base origin. Give the plane "
