@@ -127,7 +127,7 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
                 "fold", "ccr", "ccr_matched", "ccr_source", "purity", "concepts",
                 "named_concepts", "interactions_per_demo", "baseline_ccr", "true_concepts",
                 "predicted", "robot_predicted", "taught", "confidence", "distance", "error",
-                "familiarity", "unknown", "first_guess") if k in r}
+                "reproduction_error", "familiarity", "unknown", "first_guess") if k in r}
                 for r in (f.to_dict() for f in results)]}
     out["config"] = config.to_dict()
     out["seconds"] = time.perf_counter() - t0
@@ -187,8 +187,18 @@ def summarize_unknown(runs: list[dict]) -> dict[str, Any]:
         f["taught"], f.get("unknown", [False] * len(f["taught"]))) if t]
     unknown_u = [u for r in runs for f in r["folds"] for t, u in zip(
         f["taught"], f.get("unknown", [False] * len(f["taught"]))) if not t]
+    def by(key: str, sign: float) -> float:
+        """AUROC of ``sign * f[key]`` pooled over every fold (NaN when not recorded)."""
+        pairs = [(t, sign * x) for r in runs for f in r["folds"]
+                 for t, x in zip(f["taught"], f.get(key) or [float("nan")] * len(f["taught"]))]
+        if not pairs or not all(np.isfinite(x) for _, x in pairs):
+            return float("nan")
+        return auroc([x for t, x in pairs if t], [x for t, x in pairs if not t])
+
     return {"auroc": auroc(taught, untaught), "score": sorted(names),
             "auroc_seeds": per_seed,
+            "auroc_prediction_error": by("error", -1.0),
+            "auroc_reproduction_error": by("reproduction_error", -1.0),
             "auroc_pb_distance": auroc(
                 [-d for r in runs for f in r["folds"] for t, d in zip(f["taught"], f["distance"])
                  if t],
