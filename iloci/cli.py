@@ -71,13 +71,33 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     return parser
 
 
+_shown: set[str] = set()
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """A warning as one ``warning: ...`` line on stderr (no source line)."""
-    print(f"warning: {message}", file=sys.stderr, flush=True)
+    """A warning as one ``warning: ...`` line on stderr (no source line), once.
+
+    A command builds the plugin manager more than once (the parser, then the
+    command), and each build warns about the same faulty plugin again.
+    """
+    text = str(message)
+    if text in _shown:
+        return
+    _shown.add(text)
+    print(f"warning: {text}", file=sys.stderr, flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the exit code."""
+    # warnings (a plugin that failed to load, a time unit) as one line each,
+    # from parsing on; restored afterwards for in-process callers
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        _shown.clear()
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     try:
         parser = make_parser()
     except IlociError as exc:
@@ -89,9 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     show_tb = args.traceback or os.environ.get("ILOCI_TRACEBACK") == "1"
     try:
-        with warnings.catch_warnings():  # restores showwarning for in-process callers
-            warnings.showwarning = _show_warning
-            return int(args.func(args) or 0)
+        return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)
         return 130

@@ -296,6 +296,8 @@ def test_plugin_with_a_misnamed_hook_argument_is_skipped_and_listed(site, cli):
     assert out.returncode == 0, out.stderr
     assert "failed: plugin 'badarg' (iloci-badarg)" in out.stdout
     assert "warning: iloci plugin 'badarg'" in out.stderr and "Traceback" not in out.stderr
+    # once, although the parser and the command each build a plugin manager
+    assert out.stderr.count("iloci plugin 'badarg'") == 1, out.stderr
     if _defaults_installed():
         ok = site / "ok.toml"
         ok.write_text("[teacher]\nname = 'kind'\n")

@@ -121,7 +121,7 @@ def test_blocked_order_teaches_concept_by_concept():
     blocked = fold_plan(demos, load_config({"evaluation": {"order": "blocked"}}))
     for (ls, ts), (lb, tb) in zip(shuffled, blocked):
         assert ts == tb and sorted(ls) == sorted(lb) and ls != lb
-        concepts = [demos[i].concept for i in lb]
+        concepts = [demos[i].true_concept for i in lb]
         runs = [c for k, c in enumerate(concepts) if k == 0 or c != concepts[k - 1]]
         assert len(runs) == len(set(concepts))  # each concept in one block
 

@@ -243,7 +243,7 @@ def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], lis
 
 
 def _concept(demo: Any) -> str:
-    return demo.concept or demo.shape
+    return demo.true_concept or demo.shape
 
 
 class _ProgressObserver:
