@@ -131,9 +131,20 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
                 for r in (f.to_dict() for f in results)]}
     out["config"] = config.to_dict()
     out["seconds"] = time.perf_counter() - t0
+    out["commit"] = _git_head()
     cache.mkdir(parents=True, exist_ok=True)
     key.write_text(json.dumps(out))
     return out
+
+
+def _git_head() -> str | None:
+    """The checkout's commit (``None`` outside a git checkout)."""
+    import subprocess
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                              check=True, cwd=Path(__file__).parent).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
 
 
 def _folds(runs: list[dict], key: str) -> list[float]:
@@ -243,6 +254,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--cached-only", action="store_true",
                     help="summarise the cached runs only; run nothing")
     ap.add_argument("--out", default=str(RESULTS))
+    ap.add_argument("--note", help="free text recorded in the output (e.g. what shared the "
+                    "machine, which code the cached runs came from)")
     args = ap.parse_args(argv)
 
     from iloci.config import load_config
@@ -283,6 +296,9 @@ def main(argv: list[str] | None = None) -> dict:
     }
     rows = [r for r in rows if r in runs]
     out["rows_run"] = {r: [x["seed"] for x in runs[r]] for r in rows}
+    out["commits"] = {r: {str(x["seed"]): x.get("commit") for x in runs[r]} for r in rows}
+    if args.note:
+        out["note"] = args.note
     if "best" in runs:
         d = summarize_folds(runs["best"])
         out["ccr"] = d["ccr"]
