@@ -50,10 +50,16 @@ def build(dist: Path) -> None:
 def install(dist: Path) -> None:
     wheels = sorted(str(p) for p in dist.glob("*.whl"))
     kernel = next(w for w in wheels if Path(w).name.startswith("iloci-0"))
+    # example-robot-data (130 MB of meshes) only where the presets are used
+    # (tox -e robots): iloci-robots' wheel goes in without its dependencies
+    robots = [w for w in wheels if Path(w).name.startswith("iloci_robots-")]
     # the kernel's extras that the plugins' tests and the smoke test use
-    args = [f"iloci[report] @ file://{kernel}"] + [w for w in wheels if w != kernel]
+    args = [f"iloci[report] @ file://{kernel}"] + [w for w in wheels
+                                                   if w != kernel and w not in robots]
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", *args,
                     "torch==2.13.0"], check=True)
+    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", *robots],
+                   check=True)
 
 
 def smoke() -> None:
@@ -61,7 +67,8 @@ def smoke() -> None:
 
     names = [md.distribution(n) for n in ("iloci", "iloci-torch", "iloci-jax", "iloci-scipy",
                                           "iloci-sklearn", "iloci-pinocchio",
-                                          "iloci-pybullet", "iloci-mujoco", "iloci-ray")]
+                                          "iloci-pybullet", "iloci-mujoco", "iloci-ray",
+                                          "iloci-robots")]
     for d in names:
         direct = d.read_text("direct_url.json")
         if direct and json.loads(direct).get("dir_info", {}).get("editable"):
@@ -76,6 +83,13 @@ def smoke() -> None:
         # a plugin's command is on the command line
         subprocess.run(["iloci", "sweep", "--help"], cwd=tmp, check=True,
                        stdout=subprocess.DEVNULL)
+        # a plugin's robot presets are listed (their meshes need example-robot-data)
+        listed = subprocess.run(["iloci", "robots", "--json"], cwd=tmp, check=True,
+                                capture_output=True, text=True).stdout
+        robot_names = {r["name"] for r in json.loads(listed)}
+        if not {"nao-v32-right-arm", "panda", "ur5"} <= robot_names:
+            sys.exit(f"iloci robots lists {sorted(robot_names)}: the iloci-robots presets "
+                     "are missing")
         subprocess.run(["iloci", "evaluate", "--config", str(ROOT / "docs/examples/tiny.toml"),
                         "--folds", "0", "--jobs", "1", "--no-baseline", "--quiet",
                         "--out", str(Path(tmp) / "run")], cwd=tmp, check=True)

@@ -66,7 +66,7 @@ def main() -> dict:
     from iloci_pinocchio.ik import PinocchioIK
 
     cfg = SensorimotorConfig()
-    robot = get_robot(cfg.robot)
+    robot = get_robot()
     ik = PinocchioIK(robot)
     demos = load_lasa()
     import scipy.interpolate  # noqa: F401  (import time is not preprocessing time)
@@ -74,7 +74,7 @@ def main() -> dict:
     import scipy.signal  # noqa: F401
 
     t0 = time.perf_counter()
-    targets = [robot.plane.to_3d(preprocessed(d, cfg)) for d in demos]
+    targets = [robot.plane.to_3d(preprocessed(d, cfg, robot)) for d in demos]
     t_pre = time.perf_counter() - t0
 
     runs = []

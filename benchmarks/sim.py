@@ -70,7 +70,7 @@ def main() -> dict:
     from iloci_pybullet.sim import PyBulletSimulator
 
     cfg = SensorimotorConfig()
-    ik = PinocchioIK(cfg.robot)
+    ik = PinocchioIK()
     demos = load_lasa()
     motions = to_motions(demos, cfg, ik)
     planned = [ik.forward(m.joint_path) for m in motions]
@@ -82,7 +82,7 @@ def main() -> dict:
                                                  "max": float(dts.max())}}
     paths = {}
     for name, make in (("pybullet", PyBulletSimulator), ("mujoco", MuJoCoSimulator)):
-        with make(cfg.robot) as sim:
+        with make("nao-v32-right-arm") as sim:
             result[name], paths[name] = run(sim, motions, planned)
     result["agreement_max_m"] = float(max(
         np.linalg.norm(a - b, axis=1).max() for a, b in zip(paths["pybullet"], paths["mujoco"])))

@@ -104,6 +104,10 @@ class Agent:
         self.teacher = components["teacher"]
         self.ik_solver = components["ik"]
         self.simulator = components.get("simulator")
+        from iloci.sensorimotor.robots import get_robot
+        #: The arm (:class:`~iloci.sensorimotor.robots.Robot`): joints, frames, plane.
+        self.robot = components.get("robot") or getattr(self.ik_solver, "robot", None) \
+            or get_robot()
         from iloci.concepts.memory import Memory
         self.memory = Memory()
         #: Called with each RehearsalProgress (see Learner); None for none.
@@ -152,7 +156,7 @@ class Agent:
         if not isinstance(demo, Demonstration):
             raise InvalidInputError(f"expected a Demonstration, got {type(demo).__name__}; "
                                     "wrap an (N, 2) array with iloci.Demonstration(positions).")
-        return to_motion(demo, self.config.sensorimotor, self.ik_solver)
+        return to_motion(demo, self.config.sensorimotor, self.ik_solver, robot=self.robot)
 
     def fit_encoder(self, motions: Iterable[Any]) -> None:
         """Fit the sensorimotor encoding scales on learning data (once, before learning).
@@ -441,7 +445,8 @@ class Agent:
         from iloci.concepts.memory import save_memory
         with self._lock:
             return save_memory(path, self.memory, self.perceptual_model.state(),
-                               extra={**dict(extra or {}), "config": self.config.to_dict()})
+                               extra={**dict(extra or {}), "config": self.config.to_dict(),
+                                      "robot": _robot_record(self.robot)})
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], config: Any = None, *,
@@ -476,7 +481,13 @@ class Agent:
             config = saved
             if not isinstance(config, dict):
                 raise MemoryFileError(f"{path} holds no config; pass config= to load it.")
+            config = _upgrade_config(config)
         agent = build(config, plugin_manager=plugin_manager, **overrides)
+        saved_robot = header.get("robot") or {
+            "name": "nao-v32-right-arm",
+            "joints": list(agent.robot.joint_names) if agent.robot.name == "nao-v32-right-arm"
+            else []}
+        _check_same_robot(path, saved_robot, agent.robot, memory)
         if isinstance(saved, dict) and config is not saved:
             from iloci.config import memory_conflicts
             from iloci.errors import MemoryConfigError
@@ -538,17 +549,98 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config, registry=registry, supplied=overrides)
+    from iloci.sensorimotor.robots import place_robot, robot_from_config
+    robot, mode = robot_from_config(cfg.robot, pm)
+    cfg = _size_network(cfg, robot, overrides)
     components: dict[str, Any] = {}
+
+    def make(sec: str, robot: Any) -> Any:
+        cc = getattr(cfg, sec)
+        if cc.name == "none":
+            return None
+        # the robot goes to the components that draw with it
+        extra = {"robot": robot} if sec in ("ik", "simulator") else {}
+        return registry.build(sec, cc.name, cc.params, seed=cfg.seed,
+                              **extra)
+
+    ik = overrides["ik"] if "ik" in overrides else make("ik", robot)
+    placed = place_robot(robot, mode, ik, cfg.robot)
+    if placed is not robot and "ik" not in overrides:
+        ik = make("ik", placed)  # with its start posture at the placed plane
+    robot = placed
     for sec in COMPONENT_KINDS:
         if sec in overrides:
             components[sec] = overrides[sec]
-            continue
-        cc = getattr(cfg, sec)
-        if cc.name == "none":
-            components[sec] = None
-            continue
-        components[sec] = registry.build(sec, cc.name, cc.params, seed=cfg.seed)
+        elif sec == "ik":
+            components[sec] = ik
+        else:
+            components[sec] = make(sec, robot)
+    components["robot"] = robot
     return Agent(cfg, components, pm, registry)
+
+
+def _size_network(cfg: Config, robot: Any, overrides: dict[str, Any]) -> Config:
+    """The config with the perceptual model's ``input_size`` set to the robot's 2 + J."""
+    import dataclasses
+    from iloci.errors import ConfigError
+    width = 2 + len(robot.joint_names)
+    if "perceptual_model" in overrides:
+        got = getattr(overrides["perceptual_model"], "input_size", width)
+        if got != width:
+            raise InvalidInputError(
+                f"the perceptual model given to build() takes {got} inputs; robot "
+                f"{robot.name!r} needs 2 + {len(robot.joint_names)} = {width}.")
+        return cfg
+    params = cfg.perceptual_model.params
+    if params is None or not hasattr(params, "input_size") or params.input_size == width:
+        return cfg
+    default = next((f.default for f in dataclasses.fields(params)
+                    if f.name == "input_size"), None)
+    if params.input_size != default:
+        raise ConfigError(
+            f"[perceptual_model] input_size = {params.input_size} does not fit robot "
+            f"{robot.name!r}: its input is 2 + J = 2 + {len(robot.joint_names)} = {width} "
+            "(leave input_size out; it is set from the robot).", source=cfg.source,
+            key="perceptual_model.input_size")
+    sized = dataclasses.replace(params, input_size=width)
+    return dataclasses.replace(
+        cfg, perceptual_model=dataclasses.replace(cfg.perceptual_model, params=sized))
+
+
+def _robot_record(robot: Any) -> dict[str, Any]:
+    """What a memory file records of its robot (JSON)."""
+    return {"name": robot.name, "joints": list(robot.joint_names),
+            "tip_frame": robot.end_effector_frame, "base_frame": robot.base_frame,
+            "urdf": str(robot.urdf_path)}
+
+
+def _upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
+    """A saved config from before the ``[robot]`` section: its robot moves there."""
+    sm = config.get("sensorimotor")
+    if isinstance(sm, dict) and "robot" in sm:
+        config = {**config, "sensorimotor": {k: v for k, v in sm.items() if k != "robot"}}
+        config.setdefault("robot", {"name": sm["robot"]})
+        for sec in ("ik", "simulator"):
+            if isinstance(config.get(sec), dict) and "robot" in config[sec]:
+                config[sec] = {k: v for k, v in config[sec].items() if k != "robot"}
+    return config
+
+
+def _check_same_robot(path: Any, saved: dict[str, Any], robot: Any, memory: Any) -> None:
+    """Refuse a memory learned by another robot (its patterns hold that robot's joints)."""
+    joints = list(saved.get("joints") or [])
+    width = 2 + len(robot.joint_names)
+    enc = memory.encoder
+    enc_width = None if enc is None or enc.scale_ is None else len(enc.scale_)
+    if (joints and joints != list(robot.joint_names)) or \
+            (enc_width is not None and enc_width != width):
+        n_saved = len(joints) if joints else (enc_width or 2) - 2
+        raise MemoryFileError(
+            f"{path} was learned by robot {saved.get('name')!r} with {n_saved} joints "
+            f"({', '.join(joints) or 'unnamed'}); the configured robot {robot.name!r} has "
+            f"{len(robot.joint_names)} ({', '.join(robot.joint_names)}). A memory's patterns "
+            "are that robot's joint motions: load it with its own robot (leave out config= "
+            "or use the [robot] it was saved with), or teach the new robot afresh.")
 
 
 def _check_overrides(overrides: dict[str, Any]) -> None:

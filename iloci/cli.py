@@ -26,6 +26,7 @@ __all__ = ["main"]
 #: Subcommand modules, in the order ``iloci --help`` lists them.
 COMMAND_MODULES = (
     "iloci.commands.plugins",
+    "iloci.commands.robots",
     "iloci.commands.config",
     "iloci.commands.show",
     "iloci.commands.teach",

@@ -36,6 +36,7 @@ __all__ = [
     "ComponentConfig",
     "LearnerConfig",
     "SensorimotorConfig",
+    "RobotConfig",
     "DataConfig",
     "EvaluationConfig",
     "check_installed",
@@ -171,8 +172,6 @@ class SensorimotorConfig:
     #: Fewest samples a stroke may have once the pen's rests are trimmed;
     #: fewer is an error (a tap or a click, not a drawing).
     min_points: int = 5
-    #: Robot and drawing plane (a name of :mod:`iloci.sensorimotor.robots`).
-    robot: str = "nao-v32-right-arm"
 
     def validate(self) -> None:
         if self.steps < 3:
@@ -193,11 +192,92 @@ class SensorimotorConfig:
             raise ValueError(f"y_axis must be 'up' or 'down', got {self.y_axis!r}")
         if self.min_points < 3:
             raise ValueError(f"min_points must be >= 3, got {self.min_points}")
-        from iloci.sensorimotor.robots import ROBOTS
-        if self.robot not in ROBOTS:
-            from iloci.errors import did_you_mean
-            raise ValueError(f"robot must be one of {', '.join(map(repr, ROBOTS))}, got "
-                             f"{self.robot!r}.{did_you_mean(self.robot, ROBOTS)}")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """The arm that draws (section ``[robot]``): a preset, or any arm from its URDF.
+
+    A preset by name (``iloci robots`` lists them)::
+
+        [robot]
+        name = "panda"
+
+    or a URDF::
+
+        [robot]
+        name = "my-arm"
+        urdf = "robots/my_arm.urdf"          # or "package://my_pkg/urdf/arm.urdf"
+        tip_frame = "pen_tip"
+        base_frame = "base_link"             # default: the URDF's root link
+        joints = ["j1", "j2", "j3", "j4"]    # default: movable joints base -> tip
+        rest = [0.0, -0.5, 0.0, 1.2]         # default: none (no null-space pull)
+        plane = "auto"                       # or [x, y, z, width, height] (m, base frame)
+
+    See :mod:`iloci.sensorimotor.robots` for the description this builds
+    and :mod:`iloci.sensorimotor.robots.plane` for the automatic plane.
+    """
+
+    #: A preset's name; with ``urdf``, the name recorded for your robot
+    #: (default: the URDF's ``<robot name>``).
+    name: str = "nao-v32-right-arm"
+    #: URDF file path, or ``package://PACKAGE/path`` (an installed package's file).
+    urdf: str = ""
+    #: Link the targets and the plane are expressed in (default: the root link).
+    base_frame: str = ""
+    #: Link whose origin is the pen tip (required with ``urdf``).
+    tip_frame: str = ""
+    #: Joints used, in column order (default: movable joints from base to tip).
+    joints: tuple[str, ...] = ()
+    #: Rest posture (rad), one value per joint: redundant arms are pulled
+    #: towards it (see ``[ik] posture_gain``).
+    rest: tuple[float, ...] = ()
+    #: Directories holding the packages of ``package://`` names.
+    package_dirs: tuple[str, ...] = ()
+    #: ``"auto"`` (the largest drawable rectangle; a preset's own plane when
+    #: it ships one), or ``[x, y, z, width, height]`` (m, base frame).
+    plane: str | tuple[float, ...] = "auto"
+    #: Plane orientation, base frame: the normal points away from the robot
+    #: (default: vertical plane facing +x) ...
+    plane_normal: tuple[float, ...] = (1.0, 0.0, 0.0)
+    #: ... and ``up`` is the rectangle's height direction.
+    plane_up: tuple[float, ...] = (0.0, 0.0, 1.0)
+    #: Automatic plane: width / height.
+    plane_aspect: float = 1.0
+    #: Automatic plane: every joint at least this far inside its limits (deg).
+    plane_joint_margin: float = 10.0
+    #: Automatic plane: smallest singular value of the position Jacobian, at
+    #: least this fraction of its best over the workspace.
+    plane_min_singular: float = 0.1
+    #: Automatic plane: largest height sought (m); bigger drawings only make
+    #: the arm move faster.
+    plane_max_height: float = 0.3
+    #: Automatic plane: its lowest edge (with the checked margin) at least
+    #: this high above the base origin along ``plane_up`` (m): not under
+    #: the table an arm stands on.
+    plane_min_up: float = 0.0
+    #: Automatic plane: sampling seed.
+    plane_seed: int = 0
+
+    def validate(self) -> None:
+        if isinstance(self.plane, str):
+            if self.plane != "auto":
+                raise ValueError(f"plane must be 'auto' or [x, y, z, width, height], got "
+                                 f"{self.plane!r}")
+        elif len(self.plane) != 5 or self.plane[3] <= 0 or self.plane[4] <= 0:
+            raise ValueError("plane must be [x, y, z, width, height] (m, base frame, width and "
+                             f"height > 0), got {list(self.plane)}")
+        for key in ("plane_normal", "plane_up"):
+            if len(getattr(self, key)) != 3:
+                raise ValueError(f"{key} must be 3 numbers, got {list(getattr(self, key))}")
+        if self.urdf and not self.tip_frame:
+            raise ValueError("urdf needs tip_frame: the URDF link whose origin is the pen tip")
+        if not self.urdf and not self.name:
+            raise ValueError("name a preset (`iloci robots` lists them) or give a urdf")
+        if self.plane_aspect <= 0 or self.plane_joint_margin < 0 or self.plane_min_singular < 0:
+            raise ValueError("plane_aspect must be > 0 and the plane margins >= 0")
+        if not self.plane_max_height > 0:
+            raise ValueError(f"plane_max_height must be > 0, got {self.plane_max_height}")
 
 
 @dataclass(frozen=True)
@@ -282,6 +362,7 @@ class EvaluationConfig:
 _PLAIN_SECTIONS: dict[str, type] = {
     "learner": LearnerConfig,
     "sensorimotor": SensorimotorConfig,
+    "robot": RobotConfig,
     "data": DataConfig,
     "evaluation": EvaluationConfig,
 }
@@ -302,6 +383,7 @@ class Config:
         default_factory=lambda: ComponentConfig(DEFAULT_NAMES["simulator"]))
     learner: LearnerConfig = field(default_factory=LearnerConfig)
     sensorimotor: SensorimotorConfig = field(default_factory=SensorimotorConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
     data: DataConfig = field(default_factory=DataConfig)
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
     #: Where the config came from (a path or ``"<dict>"``).
@@ -482,22 +564,29 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
-    from iloci.sensorimotor.encoding import FEATURES
     pm_params = getattr(kwargs.get("perceptual_model"), "params", None)
     size = getattr(pm_params, "input_size", None)
-    if isinstance(size, int) and size != len(FEATURES):
-        raise ConfigError(
-            f"perceptual_model.input_size is {size}, but every encoded demonstration has "
-            f"{len(FEATURES)} features per step ({', '.join(FEATURES)}): set it to "
-            f"{len(FEATURES)} or leave it out.", source=origin,
-            key="perceptual_model.input_size")
+    default = getattr(type(pm_params), "input_size", None) if pm_params is not None else None
+    if isinstance(size, int) and size != default:
+        # the network's input is the robot's 2 + J features per step; the
+        # default is sized from the robot by iloci.build
+        from iloci.sensorimotor.encoding import feature_names
+        from iloci.sensorimotor.robots import robot_from_config
+        robot, _ = robot_from_config(kwargs["robot"])
+        names = feature_names(robot.dof)
+        if size != len(names):
+            raise ConfigError(
+                f"perceptual_model.input_size is {size}, but robot {robot.name!r} gives "
+                f"every encoded demonstration {len(names)} features per step "
+                f"({', '.join(names)}): set it to {len(names)} or leave it out (it is sized "
+                "from the robot).", source=origin, key="perceptual_model.input_size")
     if missing is not None:
         raise missing
     return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))
 
 
 #: Sections every setting of which a saved memory's entries depend on.
-MEMORY_SECTIONS = ("sensorimotor",)
+MEMORY_SECTIONS = ("sensorimotor", "robot")
 
 
 def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
@@ -505,10 +594,11 @@ def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
 
     A memory's entries are PB vectors of its network for sequences encoded
     with its settings: every ``[sensorimotor]`` setting (steps, resampling,
-    smoothing, robot) and each component's ``MEMORY_KEYS`` (a class
-    attribute of its parameter schema: the RNNPB's sizes and PB range, the
-    IK solver's robot). Changing one would make the memory misread its own
-    demonstrations, so a config that does is refused; every other setting
+    smoothing), every ``[robot]`` setting (the arm and its drawing plane) and
+    each component's ``MEMORY_KEYS`` (a class attribute of its parameter
+    schema: the RNNPB's sizes and PB range, the IK's null-space pull).
+    Changing one would make the memory misread its own demonstrations, so a
+    config that does is refused; every other setting
     (teacher, thresholds, epochs, recognition, simulator) may change.
 
     Parameters

@@ -28,7 +28,7 @@ __all__ = ["PAPER", "config_reference", "field_docs", "first_party"]
 #: "Results and Discussion" and the Mem table). Keys the paper does not
 #: specify are absent; the reference marks them with a dash.
 PAPER: dict[str, str] = {
-    "perceptual_model.input_size": "6 input/output nodes",
+    "perceptual_model.input_size": "6 input/output nodes (Nao: 2 + 4 joints)",
     "perceptual_model.hidden": "60 hidden neurons",
     "perceptual_model.context": "25 context neurons",
     "perceptual_model.pb": "4 PB neurons",
@@ -37,9 +37,8 @@ PAPER: dict[str, str] = {
     "learner.similarity_threshold": "Similarity_threshold = 0.1",
     "sensorimotor.steps": "numSteps + 1 (no value given)",
     "sensorimotor.smoothing_window": "smoothing (no method given)",
-    "sensorimotor.robot": "Nao V3.2 right arm, y-z plane",
-    "ik.robot": "Nao V3.2 right arm",
-    "simulator.robot": "Nao V3.2 right arm",
+    "robot.name": "Nao V3.2 right arm",
+    "robot.plane": "y-z plane in front of the Nao",
     "data.dataset": "LASA",
     "data.shapes": "all 26 shapes, 22 concepts",
     "evaluation.folds": "5-fold cross-validation",

@@ -130,7 +130,8 @@ def draw(memory: Any, perceptual_model: PerceptualModel, ik_solver: IKSolver,
         The memory's IK solver: its joint limits clip the generated path,
         its forward kinematics measure the tracking error.
     sensorimotor : SensorimotorConfig
-        The memory's ``[sensorimotor]`` settings (which robot and plane).
+        The memory's ``[sensorimotor]`` settings. The robot and its plane are
+        the IK solver's ``robot`` (the Nao preset when it has none).
     concept : str
         A robot concept label or a true concept (see :func:`resolve_concept`).
     simulator : Simulator
@@ -151,7 +152,7 @@ def draw(memory: Any, perceptual_model: PerceptualModel, ik_solver: IKSolver,
     response = perform(memory, perceptual_model, memory.performer_of(label),
                        joint_limits=ik_joint_limits(ik_solver))
     entry = memory.entries[response.extra["entry"]]
-    robot = get_robot(sensorimotor.robot)
+    robot = getattr(ik_solver, "robot", None) or get_robot()
     q = np.asarray(response.joint_path, dtype=np.float64)
     # the network may generate a little past a joint limit; the arm stops there
     q_safe = np.clip(q, robot.lower, robot.upper)
@@ -324,9 +325,11 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     MemoryFileError
         The file holds no config, or its network does not fit the model.
     """
+    from iloci.agent import _upgrade_config
     from iloci.concepts.memory import load_memory
-    from iloci.config import EvaluationConfig, SensorimotorConfig
+    from iloci.config import EvaluationConfig, RobotConfig, SensorimotorConfig
     from iloci.registry import validate_dataclass
+    from iloci.sensorimotor.robots import place_robot, robot_from_config
 
     source = str(memory_path)
     if registry is None:
@@ -337,6 +340,10 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     if not isinstance(saved, dict):
         raise MemoryFileError(f"{source} holds no config: it names no perceptual model to "
                               "regenerate its concepts with.")
+    saved = _upgrade_config(saved)
+    robot_cfg = validate_dataclass(RobotConfig, dict(saved.get("robot") or {}),
+                                   section="robot", source=source)
+    robot, mode = robot_from_config(robot_cfg)
 
     def why(section: str, name: object) -> str:
         return f"{source} {_NEEDED[section].format(name)}, so drawing needs it: "
@@ -354,9 +361,17 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     components = {}
     for section, (spec, params) in specs.items():
         try:
-            components[section] = registry.build(spec.kind, spec.name, params, seed=seed)
+            # the IK solver draws with the memory's robot
+            extra = {"robot": robot} if section == "ik" else {}
+            components[section] = registry.build(spec.kind, spec.name, params, seed=seed,
+                                                 **extra)
         except MissingBackendError as exc:  # registered, but its library is missing
             raise exc.with_context(why(section, spec.name)) from None
+    placed = place_robot(robot, mode, components["ik"], robot_cfg)
+    if placed is not robot:  # its start posture at the placed plane
+        spec, params = specs["ik"]
+        components["ik"] = registry.build(spec.kind, spec.name, params, seed=seed,
+                                          robot=placed)
     model = components["perceptual_model"]
     if net_state:
         try:

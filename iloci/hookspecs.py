@@ -89,6 +89,18 @@ def iloci_register_simulators(registry: KindRegistry) -> None:
     """
 
 
+@hookspec
+def iloci_register_robots(robots: dict) -> None:
+    """Register robot presets (config ``[robot] name``).
+
+    ``robots`` maps names to :class:`iloci.sensorimotor.robots.RobotPreset`;
+    add yours: ``robots["my-arm"] = RobotPreset("my-arm", make, summary, joints)``.
+    ``make()`` returns a :class:`iloci.sensorimotor.robots.Robot` (see
+    :func:`iloci.sensorimotor.robots.describe_robot`). ``iloci robots``
+    lists them.
+    """
+
+
 # -- observers --------------------------------------------------------------
 
 @hookspec

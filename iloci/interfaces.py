@@ -447,7 +447,10 @@ class Simulator(Protocol):
     def execute(self, joint_path: np.ndarray, dt: float) -> Execution:
         """Track a joint path under position control.
 
-        The arm starts at rest in the path's first posture; the servos'
+        A simulator starts the arm at rest in the path's first posture; a
+        real arm, which is wherever it was left, first moves from its
+        current posture to the path's first one (see
+        :class:`iloci.sensorimotor.hardware.ArmExecutor`). Then the servos'
         set-points move linearly from one row to the next over ``dt``.
 
         Parameters
@@ -475,7 +478,7 @@ class Simulator(Protocol):
 
     def render(self, execution: Execution, width: int = 480,
                height: int = 360) -> np.ndarray:
-        """Image of the arm in its last posture and the path its pen drew.
+        """Image of the arm in its last posture and the path its pen drew (optional).
 
         Parameters
         ----------
@@ -568,6 +571,12 @@ COMPONENT_KINDS: Mapping[str, ComponentKind] = MappingProxyType({k.name: k for k
 KINDS: tuple[str, ...] = tuple(COMPONENT_KINDS)
 
 
+#: Protocol name -> members an implementation may leave out: an executor
+#: driving a real arm renders nothing (``iloci draw`` then cannot picture it).
+#: :func:`unmet_members` does not require them.
+OPTIONAL_MEMBERS: Mapping[str, tuple[str, ...]] = MappingProxyType({"Simulator": ("render",)})
+
+
 def unmet_members(obj: Any, protocol: type) -> list[str]:
     """Members of ``protocol`` that ``obj`` lacks, or has but cannot call, sorted.
 
@@ -576,9 +585,10 @@ def unmet_members(obj: Any, protocol: type) -> list[str]:
     empty list means ``obj`` satisfies the protocol's shape (not that it
     behaves: see :mod:`iloci.testing` for that).
     """
-    attributes = set(vars(protocol).get("__annotations__", {}))
+    optional = set(OPTIONAL_MEMBERS.get(protocol.__name__, ()))
+    attributes = set(vars(protocol).get("__annotations__", {})) - optional
     methods = {n for n, v in vars(protocol).items()
-               if callable(v) and not n.startswith("_")}
+               if callable(v) and not n.startswith("_")} - optional
     out = [n for n in attributes - methods if not hasattr(obj, n)]
     out += [n for n in methods if not callable(getattr(obj, n, None))]
     return sorted(out)

@@ -30,7 +30,9 @@ class RNNPBParams:
     MEMORY_KEYS: ClassVar[tuple[str, ...]] = ("input_size", "hidden", "context", "pb",
                                               "pb_bound")
 
-    #: Features per step (paper: 6 = 2 sensory + 4 motor).
+    #: Features per step: 2 sensory + J motor, set from the robot by
+    #: :func:`iloci.build` (paper: 6, the Nao arm's 4 joints); a value that
+    #: fits neither the default nor the robot is an error.
     input_size: int = 6
     #: Hidden units (paper: 60).
     hidden: int = 60

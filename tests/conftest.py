@@ -34,3 +34,12 @@ def run_cli(*args: str, env: dict | None = None, input: str | None = None,
 @pytest.fixture
 def cli():
     return run_cli
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _plane_cache(tmp_path_factory):
+    """Drawing planes found by the tests are cached apart from the user's (ILOCI_CACHE_DIR)."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("ILOCI_CACHE_DIR", str(tmp_path_factory.mktemp("iloci-cache")))
+    yield
+    mp.undo()

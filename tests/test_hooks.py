@@ -145,6 +145,10 @@ class Recorder:
         registry.add("echo", EchoSimulator, summary="test stand-in")
 
     @hookimpl
+    def iloci_register_robots(self, robots):
+        self.calls["iloci_register_robots"].append(sorted(robots))
+
+    @hookimpl
     def iloci_on_interaction(self, event):
         self.calls["iloci_on_interaction"].append(event)
 

@@ -91,7 +91,14 @@ def run(args: argparse.Namespace) -> int:
         sim_params = saved_section(saved, "simulator", registry, str(args.memory))[1]
     resolve_concept(loaded[0], args.concept)
     parts = load_drawing_parts(args.memory, registry=registry, loaded=loaded)
-    simulator = registry.build("simulator", spec.name, sim_params)
+    # the memory's arm, as its IK solver was built with it (placed plane, start posture)
+    robot = getattr(parts.ik_solver, "robot", None)
+    simulator = registry.build("simulator", spec.name, sim_params,
+                               **({"robot": robot} if robot is not None else {}))
+    if not callable(getattr(simulator, "render", None)):
+        simulator.close()
+        raise InvalidInputError(f"simulator {spec.name!r} renders no images (an executor of a "
+                                "real arm); choose one that does with --simulator.")
     try:
         result = draw(*parts, args.concept, simulator)
         ex = result.execution

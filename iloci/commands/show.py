@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -62,15 +63,25 @@ def _load_demo(token: str, demo: int | None):
 
 
 def _components(config_file: str | None):
-    from iloci.config import SensorimotorConfig, load_config
-    from iloci.plugins import get_registry
+    """The configured IK solver, sensorimotor settings and robot (plane placed)."""
+    from iloci.config import load_config
+    from iloci.plugins import get_plugin_manager, get_registry
+    from iloci.sensorimotor.robots import place_robot, robot_from_config
 
-    registry = get_registry()
-    if config_file is None:
-        return registry.build("ik", "pinocchio"), SensorimotorConfig()
+    pm = get_plugin_manager()
+    registry = get_registry(pm)
     cfg = load_config(config_file, registry=registry)
-    return (registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed),
-            cfg.sensorimotor)
+    robot, mode = robot_from_config(cfg.robot, pm)
+
+    def make(robot):
+        return registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed,
+                              robot=robot)
+
+    ik = make(robot)
+    placed = place_robot(robot, mode, ik, cfg.robot)
+    if placed is not robot:
+        ik = make(placed)
+    return ik, cfg.sensorimotor, placed
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,12 +91,12 @@ def run(args: argparse.Namespace) -> int:
         return _show_memory(args)
 
     demo = _load_demo(args.shape, args.demo)
-    ik, sm = _components(args.config)
-    motion = to_motion(demo, sm, ik)
+    ik, sm, robot = _components(args.config)
+    motion = to_motion(demo, sm, ik, robot)
     out = Path(args.out) if args.out else Path(f"{demo.shape}-{demo.index}.png")
     reached = np.asarray(ik.forward(motion.joint_path))
     err = np.linalg.norm(reached - motion.targets, axis=1)
-    plot_motion(demo, motion, reached, sm.robot, out)
+    plot_motion(demo, motion, reached, robot, out)
     q = motion.joint_path
     inside = bool(np.all((q >= ik.lower) & (q <= ik.upper)))
     print(f"{demo.key}: {len(demo)} pen points -> {len(motion)} steps, dt {motion.dt:.3f} s; "
@@ -111,7 +122,7 @@ def _show_memory(args: argparse.Namespace) -> int:
     return 0
 
 
-def plot_motion(demo, motion, reached: np.ndarray, robot_name: str, out: str | Path) -> Path:
+def plot_motion(demo, motion, reached: np.ndarray, robot: Any, out: str | Path) -> Path:
     """Draw the three panels of ``iloci show`` and write them atomically to ``out``.
 
     Parameters
@@ -120,7 +131,9 @@ def plot_motion(demo, motion, reached: np.ndarray, robot_name: str, out: str | P
     motion : Motion
     reached : ndarray, shape (T, 3)
         Forward kinematics of ``motion.joint_path``.
-    robot_name : str
+    robot : Robot or str
+        The robot (or a preset's name); its drawing plane is drawn, with the
+        automatic search's margins when it placed the plane.
     out : path
         Image file; the format follows its suffix (``.png`` by default).
 
@@ -139,7 +152,8 @@ def plot_motion(demo, motion, reached: np.ndarray, robot_name: str, out: str | P
 
     from iloci.sensorimotor.robots import get_robot
 
-    robot = get_robot(robot_name)
+    if isinstance(robot, str):
+        robot = get_robot(robot)
     plane = robot.plane
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.3))
 
@@ -157,18 +171,28 @@ def plot_motion(demo, motion, reached: np.ndarray, robot_name: str, out: str | P
     ax = axes[1]
     mm = 1000.0
     y0, z0 = plane.corners[0]
+    report = robot.plane_report
+    label = "drawing plane"
+    if report.get("method") == "auto":
+        label += (f" (auto: joints >= {report['min_joint_margin_deg']:.0f}° from limits, "
+                  f"σmin {report['min_singular_relative']:.2f} of best)")
+        grown = plane.grown(report["edge_m"])
+        g0 = grown.corners[0]
+        ax.add_patch(Rectangle((g0[0] * mm, g0[1] * mm), grown.width * mm, grown.height * mm,
+                               fill=False, ls=":", color="0.75", label="checked margin"))
     ax.add_patch(Rectangle((y0 * mm, z0 * mm), plane.width * mm, plane.height * mm,
-                           fill=False, ls="--", color="0.6", label="drawing plane"))
+                           fill=False, ls="--", color="0.6", label=label))
     pp = motion.plane_points * mm
     fk = plane.to_2d(reached) * mm
     ax.plot(pp[:, 0], pp[:, 1], "-", color="tab:blue", lw=1.5, label="fitted path (targets)")
     ax.plot(fk[:, 0], fk[:, 1], "x", color="tab:orange", ms=5, label="FK of IK solution")
     ax.plot(*pp[0], "o", color="tab:green")
     err = np.linalg.norm(reached - motion.targets, axis=1).max()
-    ax.set_title(f"robot plane x = {plane.x * mm:.0f} mm (max FK error {err * 1e6:.2f} µm)",
-                 fontsize=10)
-    ax.set_xlabel("y (mm, torso frame)")
-    ax.set_ylabel("z (mm, torso frame)")
+    ax.set_title(f"{robot.name}: plane {plane.distance * mm:.0f} mm ahead, "
+                 f"{plane.width * mm:.0f} x {plane.height * mm:.0f} mm "
+                 f"(max FK error {err * 1e6:.2f} µm)", fontsize=10)
+    ax.set_xlabel(f"u (mm, {robot.base_frame} frame)")
+    ax.set_ylabel(f"up (mm, {robot.base_frame} frame)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3)
 

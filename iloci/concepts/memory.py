@@ -82,8 +82,8 @@ class Entry:
     initial_input : ndarray, shape (D,)
         First row of the encoded sequence: the network's initial input when
         the pattern is regenerated (initialInfo, part 1).
-    start : ndarray, shape (6,)
-        Absolute first sample ``[y, z, q1..q4]`` (m, rad) that decoding a
+    start : ndarray, shape (D,)
+        Absolute first sample ``[y, z, q1..qJ]`` (m, rad) that decoding a
         regenerated sequence starts from (initialInfo, part 2).
     dt : float
         Time step (s) of the motion when it is performed.
@@ -343,7 +343,9 @@ class Memory:
             "mem/num_samples": np.array([e.num_samples for e in self.entries], np.int64),
             "mem/num_steps": np.array([e.num_steps for e in self.entries], np.int64),
             "mem/initial_input": _stack([e.initial_input for e in self.entries], d),
-            "mem/start": _stack([e.start for e in self.entries], 6),
+            "mem/start": _stack([e.start for e in self.entries],
+                                self.encoder.width if self.encoder is not None
+                                and self.encoder.width else 6),
             "mem/dt": np.array([e.dt for e in self.entries], np.float64),
             "mem/generation_error": np.array([e.generation_error for e in self.entries],
                                              np.float64),

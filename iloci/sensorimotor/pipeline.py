@@ -3,8 +3,8 @@
 ::
 
     Demonstration (N x 2)  -- preprocess -->  plane points (T x 2, y-z in m)
-                           -- plane.to_3d -->  pen-tip targets (T x 3, torso frame)
-                           -- IKSolver.solve (from the robot's q_home) --> joints (T x 4)
+                           -- plane.to_3d -->  pen-tip targets (T x 3, base frame)
+                           -- IKSolver.solve (from the robot's q_home) --> joints (T x J)
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from iloci.config import Config, SensorimotorConfig
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration, IKSolver
 from iloci.sensorimotor.preprocess import preprocess
-from iloci.sensorimotor.robots import get_robot
+from iloci.sensorimotor.robots import Robot, get_robot
 
 __all__ = ["Motion", "preprocessed", "to_motion", "to_motions"]
 
@@ -36,7 +36,8 @@ class Motion:
     targets : ndarray, shape (T, 3)
         The same path in 3-D, the IK targets (m, torso frame).
     joint_path : ndarray, shape (T, J)
-        Joint angles reaching the targets (rad), ``J = 4``.
+        Joint angles reaching the targets (rad), one column per joint of
+        the robot (``J = 4`` for the Nao arm).
     dt : float
         Time between two steps (s): the demonstration's duration over
         ``T - 1``.
@@ -82,32 +83,45 @@ def _sensorimotor(config: SensorimotorConfig | Config | None) -> SensorimotorCon
 
 
 def preprocessed(demo: Demonstration,
-                 config: SensorimotorConfig | Config | None = None) -> np.ndarray:
+                 config: SensorimotorConfig | Config | None = None,
+                 robot: Robot | None = None) -> np.ndarray:
     """:func:`~iloci.sensorimotor.preprocess.preprocess` with a config's settings.
+
+    Parameters
+    ----------
+    robot
+        The arm whose drawing plane the points are scaled to (default: the
+        shipped Nao V3.2 right arm; an agent passes ``agent.robot``).
 
     Returns
     -------
     ndarray, shape (steps, 2)
-        Plane points ``(y, z)`` (m, torso frame) of the configured robot.
+        Plane points ``(a, b)`` of the robot's
+        :class:`~iloci.sensorimotor.robots.DrawingPlane` (m; the Nao's plane:
+        ``(y, z)`` in its torso frame).
     """
     cfg = _sensorimotor(config)
+    plane = (robot if robot is not None else get_robot()).plane
     return preprocess(demo, steps=cfg.steps, resample_by=cfg.resample,
                       smoothing=cfg.smoothing, smoothing_window=cfg.smoothing_window,
                       rest_tolerance=cfg.rest_tolerance, y_axis=cfg.y_axis,
-                      min_points=cfg.min_points, plane=get_robot(cfg.robot).plane)
+                      min_points=cfg.min_points, plane=plane)
 
 
 def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
-              ik: IKSolver) -> Motion:
+              ik: IKSolver, robot: Robot | None = None) -> Motion:
     """Preprocess a demonstration and solve IK along it.
 
     Parameters
     ----------
     demo : Demonstration
     config : SensorimotorConfig or Config or None
-        Steps, resampling, smoothing and robot (``None``: defaults).
+        Steps, resampling and smoothing (``None``: defaults).
     ik : IKSolver
         Solves the path, warm-started from the robot's ``q_home``.
+    robot : Robot, optional
+        Its plane and start posture; default: the IK solver's ``robot``
+        attribute, else the Nao preset.
 
     Returns
     -------
@@ -118,8 +132,9 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     InvalidDemonstrationError, UnreachableTargetError
     """
     cfg = _sensorimotor(config)
-    robot = get_robot(cfg.robot)
-    plane_points = preprocessed(demo, cfg)
+    if robot is None:
+        robot = getattr(ik, "robot", None) or get_robot()
+    plane_points = preprocessed(demo, cfg, robot)
     targets = robot.plane.to_3d(plane_points)
     joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
     times = demo.times
@@ -129,6 +144,6 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
 
 
 def to_motions(demos: Iterable[Demonstration], config: SensorimotorConfig | Config | None,
-               ik: IKSolver) -> list[Motion]:
+               ik: IKSolver, robot: Robot | None = None) -> list[Motion]:
     """:func:`to_motion` of each demonstration, in order."""
-    return [to_motion(d, config, ik) for d in demos]
+    return [to_motion(d, config, ik, robot) for d in demos]

@@ -37,14 +37,16 @@ __all__ = [
     "FRAME_RADIUS", "FRAME_RGBA", "MAX_IMAGE_SIZE", "PEN_RADIUS", "PEN_RGBA", "START_RADIUS",
     "START_RGBA", "VIEW", "SimulatorParams", "check_execution", "check_image_size",
     "check_joint_path", "check_postures", "check_settings", "path_dots", "plane_outline",
-    "setpoints", "track", "updates_per_step",
+    "setpoints", "track", "updates_per_step", "approach", "camera_for", "to_base",
+    "to_world",
 ]
 
 #: Camera of every simulator's ``render``: the teacher's view, in front of the
 #: robot, above and to the side of its right arm (m, torso frame), with a
 #: vertical field of view in degrees. Seen from the front, the drawing reads
 #: as the teacher drew it (see :mod:`iloci.sensorimotor.preprocess`).
-VIEW = {"eye": (0.45, -0.28, 0.25), "target": (0.11, -0.12, 0.11), "fov": 38.0}
+VIEW: dict[str, Any] = {"eye": (0.45, -0.28, 0.25), "target": (0.11, -0.12, 0.11),
+                        "fov": 38.0}
 
 #: Colour (RGBA, 0..1) and radius (m) of the pen path in an image.
 PEN_RGBA = (0.10, 0.20, 0.80, 1.0)
@@ -75,8 +77,6 @@ class SimulatorParams:
     #: Settings (field names) that must be >= 0.
     NON_NEGATIVE: ClassVar[tuple[str, ...]] = ("gravity",)
 
-    #: Robot (a name of :mod:`iloci.sensorimotor.robots`).
-    robot: str = "nao-v32-right-arm"
     #: Gravity (m/s^2) pulling along -z of the torso frame; 0 switches it off.
     gravity: float = 9.81
 
@@ -312,6 +312,75 @@ def updates_per_step(dt: float, period: float) -> int:
     """How many periods of at most ``period`` make up ``dt``: ``ceil(dt / period)``, >= 1."""
     # the slack keeps dt = k * period from rounding up to k + 1
     return max(1, math.ceil(dt / period - 1e-9))
+
+
+def to_world(robot: Robot, points: np.ndarray) -> np.ndarray:
+    """Base-frame points (T, 3) -> the URDF root frame, where engines load the robot."""
+    T = np.asarray(robot.base_pose, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    return p if np.array_equal(T, np.eye(4)) else p @ T[:3, :3].T + T[:3, 3]
+
+
+def to_base(robot: Robot, points: np.ndarray) -> np.ndarray:
+    """Root-frame points (T, 3) or (3,) -> the robot's base frame."""
+    T = np.asarray(robot.base_pose, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    return p if np.array_equal(T, np.eye(4)) else (p - T[:3, 3]) @ T[:3, :3]
+
+
+def camera_for(robot: Robot) -> dict[str, Any]:
+    """The teacher's camera for ``robot``, in the URDF root frame (like :data:`VIEW`).
+
+    The Nao arm gets :data:`VIEW`. Any other arm is seen from in front of
+    its drawing plane, above and to the side, from far enough to hold the
+    base, the plane and the arm between them.
+    """
+    if robot.name == "nao-v32-right-arm":
+        return dict(VIEW)
+    plane = robot.plane
+    u, v, n = plane.axes
+    centre = plane.origin
+    target = 0.75 * centre  # between the base and the plane, nearer the plane
+    radius = max(float(np.linalg.norm(centre)), float(np.hypot(plane.width, plane.height)))
+    direction = 0.75 * n - 0.45 * u + 0.5 * v
+    direction /= np.linalg.norm(direction)
+    distance = 0.8 * radius / math.tan(math.radians(VIEW["fov"] / 2))
+    eye = target + distance * direction
+    return {"eye": tuple(to_world(robot, eye[None])[0].tolist()),
+            "target": tuple(to_world(robot, target[None])[0].tolist()), "fov": VIEW["fov"]}
+
+
+def approach(current: np.ndarray, first: np.ndarray, dt: float,
+             max_speed: float = 0.5) -> np.ndarray:
+    """Joint path from the arm's current posture to a path's first one.
+
+    What a real arm must do before it draws: it is wherever it was left,
+    not at the path's start. Each joint moves linearly, the slowest so that
+    no joint exceeds ``max_speed``; the path's time step is kept.
+
+    Parameters
+    ----------
+    current, first : ndarray, shape (J,)
+        Joint angles (rad).
+    dt : float
+        Time step (s) of the returned path.
+    max_speed : float
+        Largest joint speed (rad/s).
+
+    Returns
+    -------
+    ndarray, shape (K, J)
+        From ``current`` (row 0) to ``first`` (last row), ``K >= 2``.
+    """
+    a = np.asarray(current, dtype=np.float64)
+    b = np.asarray(first, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 1:
+        raise InvalidInputError(f"current and first postures must both have shape (J,), got "
+                                f"{a.shape} and {b.shape}.")
+    if not (max_speed > 0 and dt > 0):
+        raise InvalidInputError("approach needs max_speed > 0 and dt > 0.")
+    steps = max(1, math.ceil(float(np.abs(b - a).max(initial=0.0)) / (max_speed * dt)))
+    return a + np.linspace(0.0, 1.0, steps + 1)[:, None] * (b - a)
 
 
 def plane_outline(plane: DrawingPlane) -> np.ndarray:

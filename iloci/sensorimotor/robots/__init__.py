@@ -1,14 +1,28 @@
-"""Robots iloci can draw with, and the drawing plane of each.
+"""Robots iloci draws with: the public robot description and the drawing plane.
 
-One robot ships with iloci: ``"nao-v32-right-arm"``, the right arm of the
-Nao V3.2 humanoid of the paper, as a URDF written from the published link
-dimensions and joint limits (package data, primitive geometry only).
+A :class:`Robot` says everything iloci needs of an arm: its URDF file, the
+base frame targets are expressed in, the pen-tip frame that draws, the
+``J`` joints used (their column order in every joint path), their limits,
+an optional rest posture, the start posture and the :class:`DrawingPlane`.
+Every back end (IK, simulators, an embedding stack's executor) reads the
+same description; :func:`get_robot` returns a shipped preset by name and
+:func:`describe_robot` describes any arm from its URDF. A config's
+``[robot]`` section (:class:`iloci.config.RobotConfig`) chooses one.
 
-The drawing plane is a y-z rectangle at a fixed x in the torso frame. The
-demonstration is scaled (aspect ratio kept) and centred into it. It was
-chosen by sampling: a grid search over plane positions for the largest
-smallest joint-limit margin. The margin, as checked by ``benchmarks/ik.py``
-(key ``plane`` of ``benchmarks/results/ik.json``) and by
+Presets
+-------
+``"nao-v32-right-arm"`` ships with iloci: the right arm of the Nao V3.2
+humanoid of the paper, as a URDF written from the published link
+dimensions and joint limits (package data, primitive geometry only). More
+presets come from plugins (``iloci-robots``: ``panda``, ``ur5``) through the
+``iloci_register_robots`` hook; ``iloci robots`` lists them.
+
+The Nao's drawing plane
+-----------------------
+A y-z rectangle at a fixed x in the torso frame, chosen by hand before the
+automatic search existed (:func:`iloci.sensorimotor.robots.plane.find_drawing_plane`
+places a plane for any other arm). Its margin, as checked by
+``benchmarks/ik.py`` (key ``plane`` of ``benchmarks/results/ik.json``) and by
 ``tests/plugins/test_pinocchio.py``, on a 41 x 41 grid over the rectangle
 *grown by 10 mm on every side*, each point solved by the Pinocchio IK from
 :attr:`Robot.q_home`:
@@ -23,36 +37,54 @@ margins are 23.9 degrees (RShoulderRoll) and 20.8 degrees (RElbowRoll).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 from importlib import resources
+import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from iloci.errors import InvalidInputError, UnknownComponentError
+from iloci.errors import InvalidInputError, UnknownComponentError, did_you_mean
+from iloci.sensorimotor.robots.urdf import MOVABLE, read_urdf, resolve_uri
 from iloci.validation import check_array
 
-__all__ = ["ROBOTS", "DrawingPlane", "Robot", "get_robot"]
+__all__ = ["ROBOTS", "DrawingPlane", "Robot", "RobotPreset", "available_robots",
+           "describe_robot", "get_robot", "place_robot", "robot_from_config"]
+
+
+def _unit(v: Sequence[float], what: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64)
+    n = float(np.linalg.norm(a)) if a.shape == (3,) and np.all(np.isfinite(a)) else 0.0
+    if n == 0.0:
+        raise InvalidInputError(f"{what} must be a non-zero 3-vector, got {v!r}.")
+    return a / n
 
 
 @dataclass(frozen=True)
 class DrawingPlane:
-    """A vertical rectangle the robot draws in: x fixed, spanning y and z.
+    """A rectangle the robot draws in, in the robot's base frame.
 
-    Coordinates are metres in the robot's torso frame (x forward, y left,
-    z up). A 2-D plane point is ``(y, z)`` in that frame, not relative to
-    the centre.
+    ``(x, y, z)`` is its centre (m, base frame). Its orientation is given by
+    ``normal`` (pointing away from the robot, the way the arm faces) and
+    ``up`` (the rectangle's height direction); its width runs along
+    ``u = up x normal``. The default, ``normal = (1, 0, 0)`` and
+    ``up = (0, 0, 1)``, is a vertical y-z rectangle facing the robot's
+    forward axis: ``u = +y``, the Nao's plane.
+
+    A 2-D plane point ``(a, b)`` is the position's coordinates along ``u``
+    and ``up`` (m, not relative to the centre): for the default orientation
+    exactly the base frame's ``(y, z)``.
 
     Attributes
     ----------
-    x : float
-        Distance of the plane in front of the torso origin (m).
-    y, z : float
-        Centre of the rectangle (m).
-    width : float
-        Extent along y (m).
-    height : float
-        Extent along z (m).
+    x, y, z : float
+        Centre (m, base frame).
+    width, height : float
+        Extent along ``u`` and along ``up`` (m).
+    normal, up : tuple of 3 floats
+        Unit vectors (base frame), orthogonal.
     """
 
     x: float
@@ -60,6 +92,8 @@ class DrawingPlane:
     z: float
     width: float
     height: float
+    normal: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
     def __post_init__(self) -> None:
         vals = (self.x, self.y, self.z, self.width, self.height)
@@ -67,11 +101,33 @@ class DrawingPlane:
             raise InvalidInputError(
                 f"drawing plane needs finite x, y, z and positive width and height, "
                 f"got {vals}.")
+        n, up = _unit(self.normal, "plane normal"), _unit(self.up, "plane up")
+        if abs(float(n @ up)) > 1e-6:
+            raise InvalidInputError(f"plane normal {self.normal} and up {self.up} must be "
+                                    "orthogonal.")
+        object.__setattr__(self, "normal", tuple(float(v) for v in n))
+        object.__setattr__(self, "up", tuple(float(v) for v in up))
+
+    @property
+    def axes(self) -> np.ndarray:
+        """Rows ``u`` (width), ``up`` (height), ``normal``: shape (3, 3), base frame."""
+        n, v = np.array(self.normal), np.array(self.up)
+        return np.array([np.cross(v, n), v, n])
+
+    @property
+    def origin(self) -> np.ndarray:
+        """Centre ``(x, y, z)``, shape (3,) (m, base frame)."""
+        return np.array([self.x, self.y, self.z])
+
+    @property
+    def distance(self) -> float:
+        """Signed distance of the plane from the base origin along ``normal`` (m)."""
+        return float(self.origin @ np.array(self.normal))
 
     @property
     def center(self) -> np.ndarray:
-        """Centre ``(y, z)``, shape (2,)."""
-        return np.array([self.y, self.z])
+        """Centre as a 2-D plane point, shape (2,)."""
+        return self.axes[:2] @ self.origin
 
     @property
     def size(self) -> np.ndarray:
@@ -80,7 +136,7 @@ class DrawingPlane:
 
     @property
     def corners(self) -> np.ndarray:
-        """The rectangle's corners ``(y, z)``, shape (4, 2), counter-clockwise."""
+        """The rectangle's corners as plane points, shape (4, 2), counter-clockwise."""
         hw, hh = self.width / 2, self.height / 2
         return self.center + np.array([[-hw, -hh], [hw, -hh], [hw, hh], [-hw, hh]])
 
@@ -100,7 +156,7 @@ class DrawingPlane:
         return np.all(np.abs(p - self.center) <= half, axis=1)
 
     def to_3d(self, points2d: np.ndarray) -> np.ndarray:
-        """Plane points ``(y, z)`` -> torso-frame points ``(x, y, z)``.
+        """Plane points ``(a, b)`` -> base-frame points ``(x, y, z)``.
 
         Parameters
         ----------
@@ -111,12 +167,13 @@ class DrawingPlane:
         ndarray, shape (T, 3)
         """
         p = _as_points(points2d, 2, "plane points")
-        return np.column_stack([np.full(len(p), self.x), p])
+        u, v, n = self.axes
+        return self.distance * n + p[:, :1] * u + p[:, 1:2] * v
 
     def to_2d(self, points3d: np.ndarray) -> np.ndarray:
-        """Torso-frame points ``(x, y, z)`` -> their ``(y, z)`` in the plane.
+        """Base-frame points ``(x, y, z)`` -> their plane points ``(a, b)``.
 
-        The x coordinate is dropped (orthogonal projection onto the plane).
+        The component along ``normal`` is dropped (orthogonal projection).
 
         Parameters
         ----------
@@ -127,33 +184,72 @@ class DrawingPlane:
         ndarray, shape (T, 2)
         """
         p = _as_points(points3d, 3, "3-D points")
-        return p[:, 1:3].copy()
+        return p @ self.axes[:2].T
+
+    def grown(self, margin: float) -> DrawingPlane:
+        """The same plane with ``margin`` (m) added on every side."""
+        return replace(self, width=self.width + 2 * margin, height=self.height + 2 * margin)
 
 
 def _as_points(a: np.ndarray, width: int, what: str) -> np.ndarray:
     return check_array(a, what, (None, width), finite_hint=" Pass finite coordinates.")
 
 
+def _vec3(v: Sequence[float] | np.ndarray) -> tuple[float, float, float]:
+    """Three floats (a direction or point; its length is checked by DrawingPlane)."""
+    a = [float(x) for x in v]
+    if len(a) != 3:
+        raise InvalidInputError(f"expected 3 numbers (x, y, z), got {a}.")
+    return a[0], a[1], a[2]
+
+
+def _frozen(a: Any) -> np.ndarray:
+    out = np.array(a, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class Robot:
-    """A drawing arm: its URDF, actuated joints and drawing plane.
+    """A drawing arm: everything iloci and its back ends need to know of it.
+
+    Build one with :func:`describe_robot` (any URDF) or :func:`get_robot`
+    (a preset); in a config, with a ``[robot]`` section.
 
     Attributes
     ----------
     name : str
-        Registered name, e.g. ``"nao-v32-right-arm"``.
+        Its name, e.g. ``"nao-v32-right-arm"``, ``"panda"``; recorded in
+        memory files.
     urdf_path : pathlib.Path
-        The URDF file (package data).
+        The URDF file.
     joint_names : tuple of str
-        The ``J`` actuated joints, in column order of every joint path.
+        The ``J`` joints used, in column order of every joint path.
     lower, upper : ndarray, shape (J,)
-        Joint limits (rad), as in the URDF.
+        Joint limits (rad, m for a prismatic joint), as in the URDF.
     end_effector_frame : str
-        Name of the URDF link whose origin draws (the pen tip).
+        The URDF link whose origin draws (the pen tip).
     q_home : ndarray, shape (J,)
-        Start configuration: its pen tip is near the plane's centre, every
-        joint well inside its limits. IK paths are warm-started from it.
+        Start posture: IK paths are warm-started from it; its pen tip is at
+        (or near) the plane's centre.
     plane : DrawingPlane
+        Where the robot draws (base frame).
+    base_frame : str
+        The URDF link whose frame targets are expressed in; it must not
+        move with the joints used (the root link or fixed to it).
+    fixed_joints : dict of str to float
+        The other movable joints of the URDF and the value each is held at.
+    rest : ndarray, shape (J,), or None
+        Rest posture: a redundant arm's IK pulls the joints towards it in
+        the null space of the pen-tip task. None: no such pull.
+    package_dirs : tuple of Path
+        Directories holding the packages ``package://`` mesh names refer to.
+    base_pose : ndarray, shape (4, 4)
+        The base frame in the URDF's root frame (identity when the base is
+        the root); simulators load the URDF with its root at the world origin.
+    plane_report : dict
+        How the plane was found (``"given"`` or the automatic search's
+        margins, see :func:`iloci.sensorimotor.robots.plane.find_drawing_plane`).
     """
 
     name: str
@@ -166,22 +262,213 @@ class Robot:
     plane: DrawingPlane
     base_frame: str = "torso"
     fixed_joints: dict[str, float] = field(default_factory=dict)
+    rest: np.ndarray | None = None
+    package_dirs: tuple[Path, ...] = ()
+    base_pose: np.ndarray = field(default_factory=lambda: _frozen(np.eye(4)))
+    plane_report: dict[str, Any] = field(default_factory=lambda: {"method": "given"})
+
+    @property
+    def dof(self) -> int:
+        """``J``, the number of joints used."""
+        return len(self.joint_names)
 
     @property
     def urdf_text(self) -> str:
         """The URDF as a string."""
         return self.urdf_path.read_text(encoding="utf-8")
 
+    @property
+    def tip_frame(self) -> str:
+        """Alias of :attr:`end_effector_frame`."""
+        return self.end_effector_frame
+
+    def resolve(self, uri: str) -> Path:
+        """The file a mesh name of this robot's URDF refers to (see :mod:`.urdf`)."""
+        return resolve_uri(uri, self.urdf_path.parent, self.package_dirs)
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-able summary: name, URDF, frames, joints, limits, postures, plane."""
+        p = self.plane
+        return {
+            "name": self.name, "urdf": str(self.urdf_path), "base_frame": self.base_frame,
+            "tip_frame": self.end_effector_frame, "joints": list(self.joint_names),
+            "lower": self.lower.tolist(), "upper": self.upper.tolist(),
+            "q_home": self.q_home.tolist(),
+            "rest": None if self.rest is None else self.rest.tolist(),
+            "fixed_joints": dict(self.fixed_joints),
+            "plane": {"center": p.origin.tolist(), "width": p.width, "height": p.height,
+                      "normal": list(p.normal), "up": list(p.up)},
+            "plane_report": dict(self.plane_report),
+        }
+
+    def with_plane(self, plane: DrawingPlane, q_home: np.ndarray,
+                   report: dict[str, Any] | None = None) -> Robot:
+        """The same robot drawing in another plane, starting from ``q_home``."""
+        return replace(self, plane=plane, q_home=_frozen(q_home),
+                       plane_report=dict(report or {"method": "given"}))
+
+
+def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = None,
+                   tip_frame: str, joints: Sequence[str] = (),
+                   rest: Sequence[float] | None = None,
+                   plane: DrawingPlane | None = None, name: str | None = None,
+                   package_dirs: Sequence[str | os.PathLike[str]] = (),
+                   fixed_joints: dict[str, float] | None = None) -> Robot:
+    """Describe an arm from its URDF.
+
+    Parameters
+    ----------
+    urdf : path-like or str
+        The URDF file, or ``"package://PACKAGE/path.urdf"`` for a file inside
+        an installed Python package or a package in ``package_dirs`` /
+        ``ROS_PACKAGE_PATH``.
+    base_frame : str, optional
+        Link whose frame targets and the plane are expressed in (default:
+        the URDF's root link). It must not move with ``joints``.
+    tip_frame : str
+        Link whose origin is the pen tip.
+    joints : sequence of str
+        Joints used, in column order (default: every movable joint from
+        ``base_frame`` to ``tip_frame``). Each must lie on that chain.
+    rest : sequence of J floats, optional
+        Rest posture (rad); it is also the start posture until a plane is
+        placed. Default: the middle of each joint's range.
+    plane : DrawingPlane, optional
+        Where to draw. Without one the robot's plane is a placeholder (a
+        1 cm square 0.3 m ahead) until
+        :func:`iloci.sensorimotor.robots.plane.find_drawing_plane` places it
+        (a config's ``plane = "auto"``).
+    name : str, optional
+        Default: the URDF's ``<robot name>``.
+    package_dirs : sequence of path-like
+        Where ``package://`` names are looked up first.
+    fixed_joints : dict, optional
+        Values (rad) of movable joints outside ``joints`` (default: 0, or
+        the nearest limit when 0 is outside it).
+
+    Returns
+    -------
+    Robot
+
+    Raises
+    ------
+    InvalidInputError
+        URDF not found or malformed; a frame or joint not found (with "did
+        you mean"); a joint off the base-to-tip chain, fixed, or unbounded;
+        ``rest`` of the wrong length or outside the limits; a moving base.
+    """
+    dirs = tuple(Path(d) for d in package_dirs)
+    path = _urdf_path(str(urdf), dirs)
+    tree = read_urdf(path)
+    base = base_frame or tree.root
+    tree.check_link(base, "base frame")
+    tree.check_link(tip_frame, "pen-tip frame")
+    on_chain = tree.movable_between(base, tip_frame)
+    if joints:
+        names = tuple(joints)
+        for j in names:
+            if j not in tree.joints:
+                raise InvalidInputError(
+                    f"joint {j!r} is not in {path}; movable joints from {base!r} to "
+                    f"{tip_frame!r}: {', '.join(on_chain) or '(none)'}."
+                    f"{did_you_mean(j, tree.joints)}")
+            if j not in on_chain:
+                raise InvalidInputError(
+                    f"joint {j!r} does not move the pen tip {tip_frame!r} relative to the "
+                    f"base {base!r} (it is fixed or off the chain); use joints among "
+                    f"{', '.join(on_chain) or '(none)'}.")
+        if len(set(names)) != len(names):
+            raise InvalidInputError(f"joints {list(names)} name a joint twice.")
+    else:
+        names = tuple(on_chain)
+    if not names:
+        raise InvalidInputError(f"no movable joint between {base!r} and {tip_frame!r} in "
+                                f"{path}.")
+    # the base must not move with the joints used: it lies above all of them
+    above_base = {j.name for j in tree.chain(tree.root, base)}
+    moving = [n for n in names if n in above_base]
+    if moving:
+        raise InvalidInputError(f"base frame {base!r} moves with joint(s) {moving}; choose "
+                                "a base frame above every joint used.")
+    lo = np.array([tree.joints[n].lower for n in names])
+    hi = np.array([tree.joints[n].upper for n in names])
+    unbounded = [n for n, a, b in zip(names, lo, hi) if not (np.isfinite(a) and np.isfinite(b)
+                                                             and a < b)]
+    if unbounded:
+        raise InvalidInputError(f"joint(s) {unbounded} of {path} have no finite limits "
+                                "(lower < upper); iloci needs them to keep margins.")
+    if rest is None:
+        q_rest = (lo + hi) / 2
+        rest_given = None
+    else:
+        q_rest = np.asarray(rest, dtype=np.float64)
+        if q_rest.shape != (len(names),) or not np.all(np.isfinite(q_rest)):
+            raise InvalidInputError(f"rest posture must be {len(names)} finite angles "
+                                    f"(joints {', '.join(names)}), got {list(rest)}.")
+        if np.any(q_rest < lo) or np.any(q_rest > hi):
+            raise InvalidInputError(f"rest posture {q_rest.round(4).tolist()} lies outside "
+                                    f"the limits [{lo.round(4).tolist()}, "
+                                    f"{hi.round(4).tolist()}].")
+        rest_given = q_rest
+    fixed = dict(fixed_joints or {})
+    for uj in tree.joints.values():
+        if uj.type in MOVABLE and uj.name not in names and uj.name not in fixed:
+            fixed[uj.name] = float(np.clip(0.0, uj.lower, uj.upper))
+    placeholder = plane is None
+    if plane is None:
+        plane = DrawingPlane(0.3, 0.0, 0.0, 0.01, 0.01)
+    return Robot(
+        name=name or tree.name, urdf_path=path, joint_names=names, lower=_frozen(lo),
+        upper=_frozen(hi), end_effector_frame=tip_frame, q_home=_frozen(q_rest),
+        plane=plane, base_frame=base, fixed_joints=fixed,
+        rest=None if rest_given is None else _frozen(rest_given), package_dirs=dirs,
+        base_pose=_frozen(tree.pose_of(base)),
+        plane_report={"method": "placeholder" if placeholder else "given"})
+
+
+def _urdf_path(urdf: str, dirs: tuple[Path, ...]) -> Path:
+    if urdf.startswith("package://"):
+        try:
+            return resolve_uri(urdf, Path.cwd(), dirs)
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"URDF not found: {exc}") from None
+    return Path(urdf).expanduser()
+
+
+# -- presets -------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class RobotPreset:
+    """A named robot a plugin ships: how to describe it, and a one-line summary.
+
+    Attributes
+    ----------
+    name : str
+    make : callable () -> Robot
+        Builds the description (may raise MissingBackendError when the
+        files it needs are not installed).
+    summary : str
+    joints : int
+        ``J``.
+    source : str
+        Distribution providing it (``"iloci"`` for the built-in one).
+    plane : str
+        ``"given"`` or ``"auto"`` (placed by the search when built).
+    """
+
+    name: str
+    make: Callable[[], Robot]
+    summary: str
+    joints: int
+    source: str = "iloci"
+    plane: str = "given"
+
 
 def _nao_v32_right_arm() -> Robot:
     path = Path(str(resources.files("iloci.sensorimotor.robots") / "nao_v32_right_arm.urdf"))
     # limits as in the URDF (docs/method.md, "The robot"), rad
-    lower = np.array([-2.0856685, -1.6493361, -2.0856685, 0.0087266])
-    upper = np.array([2.0856685, -0.0087266, 2.0856685, 1.5620696])
-    for a in (lower, upper):
-        a.flags.writeable = False
-    q_home = np.array(NAO_Q_HOME)
-    q_home.flags.writeable = False
+    lower = _frozen([-2.0856685, -1.6493361, -2.0856685, 0.0087266])
+    upper = _frozen([2.0856685, -0.0087266, 2.0856685, 1.5620696])
     return Robot(
         name="nao-v32-right-arm",
         urdf_path=path,
@@ -189,7 +476,7 @@ def _nao_v32_right_arm() -> Robot:
         lower=lower,
         upper=upper,
         end_effector_frame="r_pen_tip",
-        q_home=q_home,
+        q_home=_frozen(NAO_Q_HOME),
         plane=NAO_PLANE,
         fixed_joints={"RWristYaw": 0.0},
     )
@@ -204,20 +491,188 @@ NAO_PLANE = DrawingPlane(x=0.165, y=-0.125, z=0.10, width=0.10, height=0.10)
 #: about (-5.2, -46.1, 0.5, 66.4) degrees.
 NAO_Q_HOME = (-0.091452, -0.804138, 0.008353, 1.159141)
 
-#: Robot name -> constructor.
-ROBOTS = {"nao-v32-right-arm": _nao_v32_right_arm}
+#: The built-in robots: name -> preset. Plugins add more (see :func:`available_robots`).
+ROBOTS: dict[str, RobotPreset] = {
+    "nao-v32-right-arm": RobotPreset(
+        "nao-v32-right-arm", _nao_v32_right_arm,
+        "Nao V3.2 right arm (the paper's robot), primitive geometry, 10 cm plane", 4),
+}
 
 
-def get_robot(name: str = "nao-v32-right-arm") -> Robot:
-    """The robot registered under ``name``.
+def available_robots(plugin_manager: Any = None) -> dict[str, RobotPreset]:
+    """Every robot preset: the built-in ones and those plugins register.
+
+    Plugins implement the ``iloci_register_robots(robots)`` hook and add
+    :class:`RobotPreset` objects to the dict it receives.
+
+    Parameters
+    ----------
+    plugin_manager : pluggy.PluginManager, optional
+        Default: :func:`iloci.plugins.get_plugin_manager`.
+    """
+    from iloci.plugins import get_plugin_manager
+    pm = plugin_manager or get_plugin_manager()
+    found: dict[str, RobotPreset] = dict(ROBOTS)
+    pm.hook.iloci_register_robots(robots=found)
+    return found
+
+
+def get_robot(name: str = "nao-v32-right-arm", plugin_manager: Any = None) -> Robot:
+    """The preset robot registered under ``name``.
+
+    A preset whose plane is ``"auto"`` comes with its placeholder plane:
+    :func:`robot_from_config` (what :func:`iloci.build` uses) places it.
 
     Raises
     ------
     UnknownComponentError
-        No such robot (lists the known names).
+        No such robot (lists the known names, did you mean).
+    MissingBackendError
+        The preset's files are not installed.
     """
+    presets = available_robots(plugin_manager) if plugin_manager is not None or \
+        name not in ROBOTS else ROBOTS
     try:
-        make = ROBOTS[name]
+        preset = presets[name]
     except (KeyError, TypeError):
-        raise UnknownComponentError("robot", str(name), list(ROBOTS)) from None
-    return make()
+        raise UnknownComponentError("robot", str(name), list(presets)) from None
+    return preset.make()
+
+
+def robot_from_config(cfg: Any, plugin_manager: Any = None) -> tuple[Robot, str]:
+    """The robot a ``[robot]`` section describes, and what is left to do for it.
+
+    Parameters
+    ----------
+    cfg : iloci.config.RobotConfig
+
+    Returns
+    -------
+    (Robot, str)
+        The robot and ``"ready"``, ``"auto"`` (its plane must be placed by
+        :func:`iloci.sensorimotor.robots.plane.find_drawing_plane`) or
+        ``"home"`` (its plane is given; the start posture reaching the
+        plane's centre must be solved). :func:`iloci.build` does both with
+        the configured IK solver.
+    """
+    if not cfg.urdf:
+        robot = get_robot(cfg.name, plugin_manager)
+        mode = "auto" if robot.plane_report.get("method") == "placeholder" else "ready"
+        overrides = [k for k in ("base_frame", "tip_frame", "joints", "rest")
+                     if getattr(cfg, k)]
+        if overrides:
+            robot = describe_robot(
+                robot.urdf_path, base_frame=cfg.base_frame or robot.base_frame,
+                tip_frame=cfg.tip_frame or robot.end_effector_frame,
+                joints=cfg.joints or robot.joint_names,
+                rest=cfg.rest or (None if robot.rest is None else robot.rest.tolist()),
+                name=robot.name, package_dirs=robot.package_dirs)
+            mode = "auto"
+    else:
+        robot = describe_robot(cfg.urdf, base_frame=cfg.base_frame or None,
+                               tip_frame=cfg.tip_frame, joints=cfg.joints,
+                               rest=cfg.rest or None,
+                               name=None if cfg.name == "nao-v32-right-arm" else cfg.name,
+                               package_dirs=cfg.package_dirs)
+        mode = "auto"
+    if cfg.plane != "auto":
+        c = [float(v) for v in cfg.plane]
+        plane = DrawingPlane(c[0], c[1], c[2], c[3], c[4], normal=tuple(cfg.plane_normal),
+                             up=tuple(cfg.plane_up))
+        robot = robot.with_plane(plane, robot.q_home, {"method": "given"})
+        mode = "home"
+    return robot, mode
+
+
+def place_robot(robot: Robot, mode: str, ik: Any, cfg: Any) -> Robot:
+    """Finish what :func:`robot_from_config` left to do, with an IK solver for ``robot``.
+
+    ``"auto"``: find the plane (cached per process for the same robot and
+    settings); ``"home"``: solve the start posture at the given plane's
+    centre from the rest posture; ``"ready"``: nothing.
+    """
+    if mode == "ready":
+        return robot
+    start = np.asarray(robot.rest if robot.rest is not None else robot.q_home)
+    if mode == "home":
+        q = np.asarray(ik.solve(robot.plane.to_3d(robot.plane.center[None]), start))[0]
+        return robot.with_plane(robot.plane, q, robot.plane_report)
+    import math
+    from iloci.sensorimotor.robots.plane import find_drawing_plane
+    settings = {k: getattr(cfg, k) for k in (
+        "plane_normal", "plane_up", "plane_aspect", "plane_joint_margin", "plane_min_singular",
+        "plane_max_height", "plane_min_up", "plane_seed")}
+    key = _plane_key(robot, settings, ik)
+    found = _PLANES.get(key) or _read_cached_plane(key)
+    if found is None:
+        found = find_drawing_plane(
+            robot, ik, normal=tuple(cfg.plane_normal), up=tuple(cfg.plane_up),
+            aspect=cfg.plane_aspect, joint_margin=math.radians(cfg.plane_joint_margin),
+            min_singular=cfg.plane_min_singular, max_height=cfg.plane_max_height,
+            min_up=cfg.plane_min_up, seed=cfg.plane_seed)
+        _write_cached_plane(key, found)
+    _PLANES[key] = found
+    plane, q_home, report = found
+    return robot.with_plane(plane, q_home, report)
+
+
+def _plane_key(robot: Robot, settings: dict[str, Any], ik: Any) -> str:
+    """Digest of everything the automatic plane depends on."""
+    import hashlib
+    import json
+    from iloci import __version__
+    h = hashlib.sha256()
+    h.update(robot.urdf_path.read_bytes())
+    h.update(json.dumps({
+        "iloci": __version__, "base": robot.base_frame, "tip": robot.end_effector_frame,
+        "joints": robot.joint_names, "fixed": robot.fixed_joints,
+        "rest": None if robot.rest is None else robot.rest.tolist(),
+        "q_home": robot.q_home.tolist(), "ik": repr(ik),
+        "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
+    }, sort_keys=True).encode())
+    return h.hexdigest()[:32]
+
+
+def plane_cache_dir() -> Path:
+    """Where automatic planes are cached: ``$ILOCI_CACHE_DIR`` or ``~/.cache/iloci``, ``/planes``.
+
+    The search takes tens of seconds; every process building the same
+    robot with the same settings (e.g. the folds of an evaluation) reads
+    the plane found first. Delete the directory to search again.
+    """
+    root = os.environ.get("ILOCI_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "iloci")
+    return Path(root) / "planes"
+
+
+def _read_cached_plane(key: str) -> tuple[DrawingPlane, np.ndarray, dict[str, Any]] | None:
+    import json
+    f = plane_cache_dir() / f"{key}.json"
+    try:
+        d = json.loads(f.read_text(encoding="utf-8"))
+        p = d["plane"]
+        x, y, z = _vec3(p["center"])
+        plane = DrawingPlane(x, y, z, float(p["width"]), float(p["height"]),
+                             normal=_vec3(p["normal"]), up=_vec3(p["up"]))
+        return plane, np.array(d["q_home"], dtype=np.float64), d["report"]
+    except (OSError, ValueError, KeyError, TypeError, InvalidInputError):
+        return None
+
+
+def _write_cached_plane(key: str, found: tuple[DrawingPlane, np.ndarray, dict[str, Any]]
+                        ) -> None:
+    import contextlib
+    import json
+    from iloci.data.files import write_atomic
+    plane, q_home, report = found
+    data = {"plane": {"center": plane.origin.tolist(), "width": plane.width,
+                      "height": plane.height, "normal": list(plane.normal),
+                      "up": list(plane.up)},
+            "q_home": np.asarray(q_home).tolist(), "report": report}
+    with contextlib.suppress(OSError):  # a read-only home only costs the next search
+        write_atomic(plane_cache_dir() / f"{key}.json",
+                     lambda fh: fh.write(json.dumps(data, indent=1).encode()), mkdir=True)
+
+
+#: Planes found in this process, by robot and search settings.
+_PLANES: dict[str, tuple[DrawingPlane, np.ndarray, dict[str, Any]]] = {}

@@ -33,6 +33,10 @@ class MuJoCoParams(SimulatorParams):
     #: Gain of each joint's velocity servo (N m s / rad), which tracks the
     #: path's velocity and damps the position servo.
     kv: float = 2.0
+    #: Compensate gravity on every link (MuJoCo's ``gravcomp``), as the
+    #: controllers of industrial arms do: without it a heavy arm (the
+    #: Panda's, the UR5's) sags by its gravity torque over ``kp``.
+    gravity_compensation: bool = False
 
     def validate(self) -> None:
         super().validate()

@@ -50,6 +50,7 @@ from iloci.errors import IlociError, InvalidInputError, MissingBackendError
 from iloci.interfaces import Execution
 from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot, get_robot
+from iloci.sensorimotor.robots.urdf import resolved_urdf_text
 from iloci_mujoco import choose_opengl
 from iloci_mujoco.params import MuJoCoParams
 
@@ -105,7 +106,8 @@ class MuJoCoSimulator:
 
     def __init__(self, robot: str | Robot = "nao-v32-right-arm",
                  control_period: float = 0.001, timestep: float = 0.0002,
-                 kp: float = 1000.0, kv: float = 2.0, gravity: float = 9.81) -> None:
+                 kp: float = 1000.0, kv: float = 2.0, gravity: float = 9.81,
+                 gravity_compensation: bool = False) -> None:
         if _IMPORT_ERROR is not None:
             raise _IMPORT_ERROR
         simulation.check_settings(MuJoCoParams(
@@ -116,6 +118,7 @@ class MuJoCoSimulator:
         self.kp = float(kp)
         self.kv = float(kv)
         self.gravity = float(gravity)
+        self.gravity_compensation = bool(gravity_compensation)
         self.joint_names = tuple(self.robot.joint_names)
         self.lower = np.array(self.robot.lower, dtype=np.float64)
         self.upper = np.array(self.robot.upper, dtype=np.float64)
@@ -124,11 +127,36 @@ class MuJoCoSimulator:
         m = self.model
         self._qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in self.joint_names])
         self._pen = m.body(self.robot.end_effector_frame).id
+        self._held = [(int(m.jnt_qposadr[m.joint(n).id]), float(v))
+                      for n, v in self.robot.fixed_joints.items()
+                      if n not in self.joint_names and mujoco.mj_name2id(
+                          m, mujoco.mjtObj.mjOBJ_JOINT, n) >= 0]
         self._renderer: mujoco.Renderer | None = None
 
     def _compile(self) -> mujoco.MjModel:
+        # MuJoCo reads the URDF with its mesh names made absolute (package://,
+        # relative paths), visual COLLADA meshes swapped for their STL beside
+        # them or in the sibling collision directory (MuJoCo reads no .dae),
+        # and every link kept as a body (fusestatic off) so frames stay named
+        import xml.etree.ElementTree as ET
         try:
-            spec = mujoco.MjSpec.from_file(str(self.robot.urdf_path))
+            text = resolved_urdf_text(self.robot.urdf_path, self.robot.package_dirs,
+                                      replace_suffix={".dae": ".stl"})
+            root = ET.fromstring(text)
+            ext = root.find("mujoco")
+            if ext is None:
+                ext = ET.SubElement(root, "mujoco")
+            comp = ext.find("compiler")
+            if comp is None:
+                comp = ET.SubElement(ext, "compiler")
+            comp.set("fusestatic", "false")
+            comp.set("strippath", "false")
+            # keep the visual shapes: render shows them, not the collision ones
+            comp.set("discardvisual", comp.get("discardvisual", "false"))
+            comp.set("balanceinertia", comp.get("balanceinertia", "true"))
+            spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
+        except InvalidInputError:
+            raise
         except Exception as exc:  # noqa: BLE001  (MuJoCo's parser error, own message)
             raise InvalidInputError(f"MuJoCo cannot load the URDF of {self.robot.name!r} "
                                     f"({self.robot.urdf_path}): {exc}") from None
@@ -139,7 +167,18 @@ class MuJoCoSimulator:
             raise InvalidInputError(
                 f"URDF {self.robot.urdf_path} compiled by MuJoCo lacks joint(s) {missing} or "
                 f"the pen-tip body {self.robot.end_effector_frame!r} that robot "
-                f"{self.robot.name!r} names (keep fusestatic='false' in its <mujoco> tag).")
+                f"{self.robot.name!r} names.")
+        # other movable joints are held where the robot fixes them (the IK assumes it)
+        for name, joint in joints.items():
+            if name not in self.joint_names:
+                eq = spec.add_equality()
+                eq.type = mujoco.mjtEq.mjEQ_JOINT
+                eq.name1 = name
+                eq.data[0] = float(self.robot.fixed_joints.get(name, 0.0))
+                joint.ref = 0.0
+        if self.gravity_compensation:
+            for b in spec.bodies:
+                b.gravcomp = 1.0
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.gravity = [0.0, 0.0, -self.gravity]
         spec.option.timestep = self.timestep
@@ -164,7 +203,11 @@ class MuJoCoSimulator:
         spec.visual.headlight.ambient = [0.45, 0.45, 0.45]
         spec.visual.headlight.diffuse = [0.55, 0.55, 0.55]
         spec.visual.global_.fovy = simulation.VIEW["fov"]
-        return spec.compile()
+        try:
+            return spec.compile()
+        except ValueError as exc:  # MuJoCo's compiler (a mesh it cannot read, ...)
+            raise InvalidInputError(f"MuJoCo cannot compile the URDF of {self.robot.name!r} "
+                                    f"({self.robot.urdf_path}): {exc}") from None
 
     def __repr__(self) -> str:
         return (f"MuJoCoSimulator(robot={self.robot.name!r}, control_period="
@@ -189,6 +232,8 @@ class MuJoCoSimulator:
         d = self._d
         mujoco.mj_resetData(self.model, d)
         d.qpos[self._qadr] = q
+        for adr, value in self._held:
+            d.qpos[adr] = value
         mujoco.mj_forward(self.model, d)
 
     def forward(self, q: np.ndarray) -> np.ndarray:
@@ -203,7 +248,7 @@ class MuJoCoSimulator:
         for i, qi in enumerate(qs):
             d.qpos[self._qadr] = qi
             mujoco.mj_kinematics(m, d)
-            out[i] = d.xpos[self._pen]
+            out[i] = simulation.to_base(self.robot, d.xpos[self._pen])
         return out[0] if single else out
 
     def execute(self, joint_path: np.ndarray, dt: float) -> Execution:
@@ -232,7 +277,7 @@ class MuJoCoSimulator:
         def read() -> tuple[np.ndarray, np.ndarray]:
             # mj_step leaves xpos at the state before its integration
             mujoco.mj_kinematics(m, d)
-            return d.qpos[qadr], d.xpos[pen]
+            return d.qpos[qadr], simulation.to_base(self.robot, d.xpos[pen])
 
         return simulation.track(q, step, self.control_period, hold, read)
 
@@ -275,9 +320,10 @@ class MuJoCoSimulator:
         """
         w, h = simulation.check_image_size(width, height)
         q, pen = simulation.check_execution(execution, self.robot)
+        pen = simulation.to_world(self.robot, pen)
         renderer = self._get_renderer(w, h)
         self._set_posture(q[-1])
-        camera = simulation.VIEW
+        camera = simulation.camera_for(self.robot)
         eye, target = np.array(camera["eye"]), np.array(camera["target"])
         look = target - eye
         cam = mujoco.MjvCamera()
@@ -290,9 +336,11 @@ class MuJoCoSimulator:
         option.geomgroup[0] = 0  # hide collision geometry, show the visual shapes
         renderer.update_scene(self._d, camera=cam, scene_option=option)
         scene = renderer.scene
-        frame = simulation.plane_outline(self.robot.plane)
-        line = (simulation.FRAME_RADIUS, simulation.FRAME_RGBA)
-        ink = (simulation.PEN_RADIUS, simulation.PEN_RGBA)
+        frame = simulation.to_world(self.robot, simulation.plane_outline(self.robot.plane))
+        # pen and outline thickness grow with the plane (drawn for the Nao's 10 cm)
+        scale = max(1.0, max(self.robot.plane.width, self.robot.plane.height) / 0.1)
+        line = (scale * simulation.FRAME_RADIUS, simulation.FRAME_RGBA)
+        ink = (scale * simulation.PEN_RADIUS, simulation.PEN_RGBA)
         segments = [(a, b, *line) for a, b in itertools.pairwise(frame)]
         segments += [(a, b, *ink) for a, b in itertools.pairwise(pen)]
         if len(pen) == 1:
@@ -309,7 +357,7 @@ class MuJoCoSimulator:
             scene.ngeom += 1
         g = scene.geoms[scene.ngeom]
         mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_SPHERE,
-                            np.full(3, simulation.START_RADIUS), pen[0], eye3,
+                            np.full(3, scale * simulation.START_RADIUS), pen[0], eye3,
                             np.asarray(simulation.START_RGBA, dtype=np.float32))
         scene.ngeom += 1
         return np.ascontiguousarray(renderer.render(), dtype=np.uint8)

@@ -55,6 +55,10 @@ class PinocchioIK:
         Iterations per point and start.
     damping : float
         Damping ``lambda`` (m).
+    posture_gain : float
+        Fraction of the way to the robot's rest posture taken per iteration
+        in the null space of the pen-tip task (redundant arms with a
+        ``rest`` posture only; 0 switches it off).
 
     Attributes
     ----------
@@ -67,7 +71,7 @@ class PinocchioIK:
 
     def __init__(self, robot: str | Robot = "nao-v32-right-arm", tolerance: float = 1e-7,
                  max_error: float = 1e-4, max_iterations: int = 100,
-                 damping: float = 1e-3) -> None:
+                 damping: float = 1e-3, posture_gain: float = 0.1) -> None:
         if not (0 < tolerance <= max_error):
             raise InvalidInputError(
                 f"need 0 < tolerance <= max_error, got {tolerance} and {max_error}.")
@@ -81,25 +85,39 @@ class PinocchioIK:
         self.max_iterations = int(max_iterations)
         self.damping = float(damping)
 
-        model = pin.buildModelFromUrdf(str(self.robot.urdf_path))
-        names = tuple(model.names[i] for i in range(1, model.njoints))
-        if names != tuple(self.robot.joint_names) or model.nq != len(names):
-            raise InvalidInputError(
-                f"URDF {self.robot.urdf_path} has joints {names}; the robot "
-                f"{self.robot.name!r} expects {self.robot.joint_names} (one revolute "
-                "DOF each, other joints fixed).")
-        if not model.existFrame(self.robot.end_effector_frame):
-            raise InvalidInputError(
-                f"URDF {self.robot.urdf_path} has no frame "
-                f"{self.robot.end_effector_frame!r} (the pen tip).")
-        self._model = model
-        self._data = model.createData()
-        self._frame = model.getFrameId(self.robot.end_effector_frame)
+        self.posture_gain = float(posture_gain)
+        if not 0 <= self.posture_gain <= 1:
+            raise InvalidInputError(f"posture_gain must be in [0, 1], got {posture_gain}.")
+        self._model, self._perm = _reduced_model(self.robot)
+        self._data = self._model.createData()
+        self._frame = self._model.getFrameId(self.robot.end_effector_frame)
+        # the base frame's placement (fixed: no joint used moves it)
+        pin.framesForwardKinematics(self._model, self._data, pin.neutral(self._model))
+        base = self._model.getFrameId(self.robot.base_frame)
+        oMb = self._data.oMf[base]
+        self._base_R = None if np.allclose(oMb.rotation, np.eye(3)) and \
+            np.allclose(oMb.translation, 0) else (oMb.rotation.copy(), oMb.translation.copy())
         self.joint_names = tuple(self.robot.joint_names)
         self.lower = np.array(self.robot.lower, dtype=np.float64)
         self.upper = np.array(self.robot.upper, dtype=np.float64)
-        self._restarts = (np.array(self.robot.q_home, dtype=np.float64),
-                          (self.lower + self.upper) / 2)
+        self._rest = None if self.robot.rest is None or self.posture_gain == 0 else \
+            np.array(self.robot.rest, dtype=np.float64)
+        # solving runs in the reduced model's joint order (self._perm: model -> robot
+        # column); paths are reordered at the boundary when the orders differ
+        self._lo_m, self._hi_m = self._to_model(self.lower), self._to_model(self.upper)
+        self._rest_m = None if self._rest is None else self._to_model(self._rest)
+        self._restarts = (self._to_model(np.array(self.robot.q_home, dtype=np.float64)),
+                          (self._lo_m + self._hi_m) / 2)
+
+    def _to_model(self, q: np.ndarray) -> np.ndarray:
+        return q if self._perm is None else q[..., self._perm]
+
+    def _to_robot(self, q: np.ndarray) -> np.ndarray:
+        if self._perm is None:
+            return q
+        out = np.empty_like(q)
+        out[..., self._perm] = q
+        return out
 
     def __repr__(self) -> str:
         return f"PinocchioIK(robot={self.robot.name!r}, max_error={self.max_error})"
@@ -123,9 +141,12 @@ class PinocchioIK:
         qs = qa[None] if single else qa
         out = np.empty((len(qs), 3))
         m, d, f = self._model, self._data, self._frame
-        for i, qi in enumerate(qs):
+        for i, qi in enumerate(self._to_model(qs)):
             pin.forwardKinematics(m, d, qi)
             out[i] = pin.updateFramePlacement(m, d, f).translation
+        if self._base_R is not None:  # world -> base frame
+            R, t = self._base_R
+            out = (out - t) @ R
         return out[0] if single else out
 
     # ------------------------------------------------------------------ solve
@@ -179,8 +200,10 @@ class PinocchioIK:
                     f"q0 {np.round(q, 4).tolist()} lies outside the joint limits "
                     f"[{np.round(self.lower, 4).tolist()}, {np.round(self.upper, 4).tolist()}].")
             q = q.copy()
+        q = self._to_model(q)
+        world = pts if self._base_R is None else pts @ self._base_R[0].T + self._base_R[1]
         path = np.empty((len(pts), len(self.joint_names)))
-        for i, target in enumerate(pts):
+        for i, target in enumerate(world):
             q, err = self._solve_point(target, q)
             if err > self.max_error:
                 best_q, best_err = q, err
@@ -192,40 +215,53 @@ class PinocchioIK:
                         break
                 q, err = best_q, best_err
                 if err > self.max_error:
-                    x, y, z = (float(v) for v in target)
+                    x, y, z = (float(v) for v in pts[i])
                     raise UnreachableTargetError(
                         f"IK target {i} of {len(pts)} at (x={x:.4f}, y={y:.4f}, z={z:.4f}) m "
                         f"is outside the reachable workspace of {self.robot.name!r}: the "
                         f"closest pen-tip position found is {err * 1000:.2f} mm away. Keep "
                         "targets inside the robot's drawing plane "
                         "(iloci.sensorimotor.robots.get_robot(...).plane).",
-                        index=i, point=target, error=err)
+                        index=i, point=pts[i], error=err)
             path[i] = q
-        return path
+        return self._to_robot(path)
 
     def _solve_point(self, target: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, float]:
         """Damped least squares from ``q`` towards one target; returns (q, error)."""
         m, d, f = self._model, self._data, self._frame
-        lo, hi = self.lower, self.upper
+        lo, hi = self._lo_m, self._hi_m
+        rest, gain = self._rest_m, self.posture_gain
         lam2 = self.damping ** 2
         tol = self.tolerance
         tx, ty, tz = float(target[0]), float(target[1]), float(target[2])
         err = math.inf
-        for _ in range(self.max_iterations):
+        for it in range(self.max_iterations):
             pin.computeJointJacobians(m, d, q)
             p = pin.updateFramePlacement(m, d, f).translation
             e = np.array((tx - p[0], ty - p[1], tz - p[2]))
             err = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-            if err < tol:
+            # with a rest posture every point takes at least one step, so the
+            # null-space pull acts even where the task is already met
+            if err < tol and (rest is None or it > 0):
                 break
             J = pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED)[:3]
-            dq = _dls_step(J, e, lam2)
+            if rest is None:
+                dq = _dls_step(J, e, lam2)
+            else:
+                # task step plus a pull towards the rest posture projected on the
+                # task's (damped) null space: z - J^+ J z
+                z = gain * (rest - q)
+                dq = z + _dls_step(J, e - J @ z, lam2)
             # freeze joints at a limit that the step pushes further out
             blocked = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
             if blocked.any():
                 J = J.copy()
                 J[:, blocked] = 0.0
-                dq = _dls_step(J, e, lam2)
+                if rest is None:
+                    dq = _dls_step(J, e, lam2)
+                else:
+                    z = np.where(blocked, 0.0, gain * (rest - q))
+                    dq = z + _dls_step(J, e - J @ z, lam2)
             big = float(np.abs(dq).max())
             if big > _MAX_STEP:
                 dq *= _MAX_STEP / big
@@ -251,6 +287,49 @@ class PinocchioIK:
         if not np.all(np.isfinite(qa)):
             raise InvalidInputError(f"{name} contains NaN or inf.")
         return qa
+
+
+def _reduced_model(robot: Robot) -> tuple[pin.Model, np.ndarray | None]:
+    """The URDF's model with every joint but the robot's locked; and the joint order.
+
+    Returns the model and ``perm``, the index array with
+    ``q_model = q_robot[perm]``, or None when the orders agree.
+    """
+    try:
+        full = pin.buildModelFromUrdf(str(robot.urdf_path))
+    except (RuntimeError, ValueError) as exc:
+        raise InvalidInputError(f"Pinocchio cannot read the URDF of {robot.name!r} "
+                                f"({robot.urdf_path}): {exc}") from None
+    names = [full.names[i] for i in range(1, full.njoints)]
+    missing = [n for n in robot.joint_names if n not in names]
+    if missing:
+        raise InvalidInputError(f"URDF {robot.urdf_path} has no joint(s) {missing}; its "
+                                f"joints are {names}.")
+    for n in robot.joint_names:
+        if full.joints[full.getJointId(n)].nq != 1:
+            raise InvalidInputError(f"joint {n!r} of {robot.name!r} has "
+                                    f"{full.joints[full.getJointId(n)].nq} coordinates; "
+                                    "iloci drives one-coordinate joints only.")
+    for frame, what in ((robot.end_effector_frame, "pen-tip"), (robot.base_frame, "base")):
+        if not full.existFrame(frame):
+            raise InvalidInputError(f"URDF {robot.urdf_path} has no {what} frame {frame!r}.")
+    q_ref = pin.neutral(full)
+    lock = []
+    for n in names:
+        if n in robot.joint_names:
+            continue
+        jid = full.getJointId(n)
+        lock.append(jid)
+        if n in robot.fixed_joints and full.joints[jid].nq == 1:
+            q_ref[full.joints[jid].idx_q] = robot.fixed_joints[n]
+    model = pin.buildReducedModel(full, lock, q_ref) if lock else full
+    order = np.array([model.joints[model.getJointId(n)].idx_q for n in robot.joint_names])
+    if model.nq != len(robot.joint_names):
+        raise InvalidInputError(f"the reduced model of {robot.name!r} has {model.nq} "
+                                f"coordinates for joints {robot.joint_names}.")
+    # q_model[order[k]] = q_robot[k]  <=>  q_model = q_robot[argsort(order)]
+    perm = np.argsort(order)
+    return model, (None if np.array_equal(perm, np.arange(len(perm))) else perm)
 
 
 def _dls_step(J: np.ndarray, e: np.ndarray, lam2: float) -> np.ndarray:

@@ -12,11 +12,10 @@ __all__ = ["PinocchioIKParams"]
 class PinocchioIKParams:
     """Settings of :class:`iloci_pinocchio.ik.PinocchioIK`."""
 
-    #: A saved memory's motor channels are this robot's joint angles.
-    MEMORY_KEYS: ClassVar[tuple[str, ...]] = ("robot",)
+    #: A saved memory's motor channels are this robot's joint angles, which
+    #: the null-space pull shapes for a redundant arm.
+    MEMORY_KEYS: ClassVar[tuple[str, ...]] = ("posture_gain",)
 
-    #: Robot (a name of :mod:`iloci.sensorimotor.robots`).
-    robot: str = "nao-v32-right-arm"
     #: Stop iterating on a point once its position error is below this (m).
     tolerance: float = 1e-7
     #: A point whose error stays above this after every start is unreachable (m).
@@ -26,6 +25,10 @@ class PinocchioIKParams:
     #: Damping lambda of the least-squares step (m); keeps steps bounded near
     #: singular (stretched-arm) configurations.
     damping: float = 1e-3
+    #: Redundant arms with a rest posture: fraction of the way to it taken
+    #: per iteration in the null space of the pen-tip task, so that among
+    #: the many solutions the path keeps near the rest posture (0: off).
+    posture_gain: float = 0.1
 
     def validate(self) -> None:
         if not 0 < self.tolerance <= self.max_error:
@@ -33,5 +36,7 @@ class PinocchioIKParams:
                              f"{self.tolerance}, max_error={self.max_error}")
         if self.max_iterations < 1:
             raise ValueError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if not 0 <= self.posture_gain <= 1:
+            raise ValueError(f"posture_gain must be in [0, 1], got {self.posture_gain}")
         if self.damping < 0:
             raise ValueError(f"damping must be >= 0, got {self.damping}")

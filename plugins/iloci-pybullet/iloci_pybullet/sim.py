@@ -29,7 +29,9 @@ import contextlib
 import ctypes
 import os
 import sys
+import tempfile
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Self
 
 import numpy as np
@@ -38,6 +40,7 @@ from iloci.errors import IlociError, InvalidInputError
 from iloci.interfaces import Execution
 from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot, get_robot
+from iloci.sensorimotor.robots.urdf import resolved_urdf_text
 from iloci_pybullet.params import PyBulletParams
 
 
@@ -122,9 +125,18 @@ class PyBulletSimulator:
             self._client: BulletClient | None = BulletClient(connection_mode=pb.DIRECT)
         c = self._client
         c.setGravity(0.0, 0.0, -self.gravity)
-        # the torso frame is the world frame: base at the origin, fixed
-        self._body = c.loadURDF(str(self.robot.urdf_path), basePosition=(0, 0, 0),
-                                useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE)
+        # the URDF with its mesh names resolved (package://, relative) to absolute paths
+        self._urdf_dir = tempfile.TemporaryDirectory(prefix="iloci-pybullet-")
+        self._urdf = Path(self._urdf_dir.name) / self.robot.urdf_path.name
+        self._urdf.write_text(resolved_urdf_text(self.robot.urdf_path, self.robot.package_dirs),
+                              encoding="utf-8")
+        # the URDF's root frame is the world frame: root at the origin, fixed
+        try:
+            self._body = c.loadURDF(str(self._urdf), basePosition=(0, 0, 0),
+                                    useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE)
+        except pb.error as exc:
+            raise InvalidInputError(f"PyBullet cannot load the URDF of {self.robot.name!r} "
+                                    f"({self.robot.urdf_path}): {exc}") from None
         joints = {}
         links = {}
         for i in range(c.getNumJoints(self._body)):
@@ -143,13 +155,18 @@ class PyBulletSimulator:
         # the motors' torque limit is the URDF's effort limit
         self._forces = [float(joints[n][2]) for n in self.joint_names]
         self._pen = links[self.robot.end_effector_frame]
-        # switch off the default velocity motors on every other movable joint
-        others = [i for n, (i, kind, _) in joints.items()
-                  if kind != pb.JOINT_FIXED and n not in self.joint_names]
-        if others:
-            c.setJointMotorControlArray(self._body, others, pb.VELOCITY_CONTROL,
-                                        forces=[0.0] * len(others))
+        # every other movable joint is held where the robot fixes it (the IK
+        # assumes it there), by a motor as strong as its effort limit (>= 1)
+        held = [(i, float(self.robot.fixed_joints.get(n, 0.0)), max(float(f), 1.0))
+                for n, (i, kind, f) in joints.items()
+                if kind != pb.JOINT_FIXED and n not in self.joint_names]
+        for i, value, force in held:
+            c.resetJointState(self._body, i, value, 0.0)
+            c.setJointMotorControl2(self._body, i, pb.POSITION_CONTROL, targetPosition=value,
+                                    force=force)
         self._home_state = c.saveState()
+        # pen and outline thickness grow with the plane (drawn for the Nao's 10 cm)
+        self._scale = max(1.0, max(self.robot.plane.width, self.robot.plane.height) / 0.1)
         self._scene: BulletClient | None = None
 
     def __repr__(self) -> str:
@@ -175,8 +192,9 @@ class PyBulletSimulator:
         for j, qj in zip(self._joints, q):
             c.resetJointState(self._body, j, float(qj), 0.0)
 
-    def _pen_position(self) -> tuple[float, float, float]:
-        return self._c.getLinkState(self._body, self._pen, computeForwardKinematics=True)[4]
+    def _pen_position(self) -> np.ndarray:
+        world = self._c.getLinkState(self._body, self._pen, computeForwardKinematics=True)[4]
+        return simulation.to_base(self.robot, np.array(world))
 
     def _joint_positions(self) -> list[float]:
         return [s[0] for s in self._c.getJointStates(self._body, self._joints)]
@@ -236,8 +254,7 @@ class PyBulletSimulator:
             return self._scene
         with _quiet():
             c = BulletClient(connection_mode=pb.DIRECT)
-        body = c.loadURDF(str(self.robot.urdf_path), basePosition=(0, 0, 0),
-                          useFixedBase=True)
+        body = c.loadURDF(str(self._urdf), basePosition=(0, 0, 0), useFixedBase=True)
 
         def dots(points, radius, rgba) -> list[int]:
             shape = c.createVisualShape(pb.GEOM_SPHERE, radius=radius, rgbaColor=rgba)
@@ -245,13 +262,15 @@ class PyBulletSimulator:
             return [c.createMultiBody(baseMass=0, baseVisualShapeIndex=shape,
                                       basePosition=tuple(map(float, p))) for p in points]
 
-        outline = simulation.plane_outline(self.robot.plane)
-        dots(simulation.path_dots(outline, 0.004), simulation.FRAME_RADIUS, simulation.FRAME_RGBA)
+        outline = simulation.to_world(self.robot, simulation.plane_outline(self.robot.plane))
+        dots(simulation.path_dots(outline, 0.004 * self._scale), self._scale *
+             simulation.FRAME_RADIUS, simulation.FRAME_RGBA)
         parked = np.tile(_PARKED, (_POOL, 1))
         self._scene = c
         self._scene_body = body
-        self._pen_dots = dots(parked, simulation.PEN_RADIUS, simulation.PEN_RGBA)
-        self._start_dot = dots(parked[:1], simulation.START_RADIUS, simulation.START_RGBA)[0]
+        self._pen_dots = dots(parked, self._scale * simulation.PEN_RADIUS, simulation.PEN_RGBA)
+        self._start_dot = dots(parked[:1], self._scale * simulation.START_RADIUS,
+                               simulation.START_RGBA)[0]
         self._dots_used = 0
         return c
 
@@ -267,13 +286,14 @@ class PyBulletSimulator:
         """
         w, h = simulation.check_image_size(width, height)
         q, pen = simulation.check_execution(execution, self.robot)
+        pen = simulation.to_world(self.robot, pen)
         c = self._scene_client()
         for j, qj in zip(self._joints, q[-1]):
             c.resetJointState(self._scene_body, j, float(qj), 0.0)
         # dots 0.8 mm apart (radius 1.6 mm) make a solid line; a very long
         # path spreads the pool's dots further apart
         length = float(np.linalg.norm(np.diff(pen, axis=0), axis=1).sum())
-        spacing = max(0.0008, 1.05 * length / (_POOL - len(pen)))
+        spacing = max(0.0008 * self._scale, 1.05 * length / (_POOL - len(pen)))
         points = simulation.path_dots(pen, spacing)[:_POOL]
         move = c.resetBasePositionAndOrientation
         for i, p in zip(self._pen_dots, points):
@@ -282,9 +302,9 @@ class PyBulletSimulator:
             move(i, _PARKED, (0, 0, 0, 1))
         self._dots_used = len(points)
         move(self._start_dot, tuple(map(float, pen[0])), (0, 0, 0, 1))
-        camera = simulation.VIEW
+        camera = simulation.camera_for(self.robot)
         view = c.computeViewMatrix(camera["eye"], camera["target"], (0, 0, 1))
-        proj = c.computeProjectionMatrixFOV(camera["fov"], w / h, 0.01, 5.0)
+        proj = c.computeProjectionMatrixFOV(camera["fov"], w / h, 0.01, 20.0)
         img = c.getCameraImage(w, h, view, proj, renderer=pb.ER_TINY_RENDERER,
                                lightDirection=(1.0, -0.6, 1.5), shadow=0)
         rgba = np.reshape(np.asarray(img[2], dtype=np.uint8), (h, w, 4))

@@ -1,0 +1,97 @@
+"""``iloci robots``: the robot presets available, and any robot's description.
+
+::
+
+    iloci robots                      # presets: name, joints, source, plane
+    iloci robots --show panda         # one robot: URDF, frames, joints, limits, plane
+    iloci robots --show -c my.toml    # the robot a config describes (plane placed)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("robots", help="list the robots available (presets) or describe one",
+                       description="List the robot presets (built in and from plugins), or "
+                                   "describe one robot: its URDF, frames, joints, limits and "
+                                   "drawing plane (placed automatically when it has none).")
+    p.add_argument("--show", nargs="?", const="", metavar="NAME",
+                   help="describe robot NAME (default: the config's robot)")
+    p.add_argument("--config", "-c", help="TOML config whose [robot] to describe with --show")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from iloci.errors import MissingBackendError
+    from iloci.sensorimotor.robots import available_robots
+
+    if args.show is None:
+        presets = available_robots()
+        rows = []
+        for p in presets.values():
+            status = "available"
+            try:
+                p.make()
+            except MissingBackendError as exc:
+                status = f"missing: {exc}"
+            rows.append({"name": p.name, "joints": p.joints, "source": p.source,
+                         "plane": p.plane, "status": status, "summary": p.summary})
+        if args.json:
+            print(json.dumps(rows, indent=2))
+            return 0
+        cols = ("name", "joints", "source", "plane", "summary")
+        widths = {c: max(len(c), *(len(str(r[c])) for r in rows)) for c in cols}
+        print("  ".join(c.upper().ljust(widths[c]) for c in cols).rstrip())
+        for r in rows:
+            print("  ".join(str(r[c]).ljust(widths[c]) for c in cols).rstrip())
+            if r["status"] != "available":
+                print(f"  ({r['status']})")
+        print("\nUse one with [robot] name = \"...\" in a config, or describe any arm from its "
+              "URDF (see docs/robots.md).")
+        return 0
+    desc = describe(args.show or None, args.config)
+    if args.json:
+        print(json.dumps(desc, indent=2))
+        return 0
+    deg = np.degrees
+    print(f"robot {desc['name']}: {len(desc['joints'])} joints, URDF {desc['urdf']}")
+    print(f"  base frame {desc['base_frame']!r}, pen tip {desc['tip_frame']!r}")
+    for j, lo, hi, q in zip(desc["joints"], desc["lower"], desc["upper"], desc["q_home"]):
+        print(f"  {j:24s} [{deg(lo):8.1f}, {deg(hi):8.1f}] deg, start {deg(q):7.1f}")
+    p = desc["plane"]
+    c = np.round(np.array(p["center"]) * 1000, 1).tolist()
+    print(f"  plane: centre {c} mm, {p['width'] * 1000:.0f} x {p['height'] * 1000:.0f} mm, "
+          f"normal {p['normal']}, up {p['up']}")
+    rep = desc["plane_report"]
+    if rep.get("method") == "auto":
+        print(f"  placed automatically: every joint >= {rep['min_joint_margin_deg']:.1f} deg "
+              f"inside its limits, smallest Jacobian singular value {rep['min_singular']:.3f} "
+              f"m/rad ({rep['min_singular_relative']:.2f} of the best), on a 15 x 15 grid "
+              f"grown by {rep['edge_m'] * 1000:.0f} mm")
+    else:
+        print("  plane given")
+    return 0
+
+
+def describe(name: str | None, config: str | None) -> dict:
+    """The description of robot ``name`` (or the config's), its plane placed."""
+    from iloci.config import load_config
+    from iloci.plugins import get_plugin_manager, get_registry
+    from iloci.sensorimotor.robots import place_robot, robot_from_config
+
+    pm = get_plugin_manager()
+    registry = get_registry(pm)
+    cfg = load_config(config, registry=registry)
+    robot_cfg = cfg.robot
+    if name:
+        import dataclasses
+        robot_cfg = dataclasses.replace(robot_cfg, name=name, urdf="")
+    robot, mode = robot_from_config(robot_cfg, pm)
+    ik = registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot)
+    return place_robot(robot, mode, ik, robot_cfg).describe()

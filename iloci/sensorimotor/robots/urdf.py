@@ -1,0 +1,299 @@
+"""What iloci reads from a URDF itself: links, joints, the kinematic chain, mesh files.
+
+Kinematics and dynamics are the back ends' business (Pinocchio, PyBullet,
+MuJoCo each parse the URDF); the kernel only needs the tree, to choose the
+joints between a base and a pen-tip frame, to check names (with "did you
+mean"), to read joint limits, and to resolve mesh file names so that every
+engine loads the same meshes. The file is parsed with the standard
+library's :mod:`xml.etree.ElementTree`.
+
+Mesh file names
+---------------
+A ``<mesh filename=...>`` is resolved as ROS tools do:
+
+* ``package://NAME/rest``: ``rest`` under the directory of package ``NAME``,
+  looked up in the robot's ``package_dirs`` (each a directory that holds
+  ``NAME/``), then ``ROS_PACKAGE_PATH``, then the directories above the URDF
+  (a URDF inside ``.../NAME/urdf/`` finds ``NAME``), then an importable
+  Python package ``NAME``;
+* ``file:///abs/path`` and absolute paths as they are;
+* relative paths relative to the URDF's directory.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import importlib.util
+import os
+from pathlib import Path
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from iloci.errors import InvalidInputError, did_you_mean
+
+__all__ = ["MOVABLE", "UrdfJoint", "UrdfTree", "read_urdf", "resolve_uri", "resolved_urdf_text"]
+
+#: URDF joint types with one degree of freedom a drawing arm can use.
+MOVABLE = ("revolute", "continuous", "prismatic")
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One ``<joint>`` of a URDF.
+
+    Attributes
+    ----------
+    name, type, parent, child : str
+        As in the file (``parent`` and ``child`` are link names).
+    lower, upper : float
+        Limits (rad or m); +-inf for a ``continuous`` joint or a joint
+        without ``<limit>``.
+    origin : ndarray, shape (4, 4)
+        The child link's frame in the parent link's frame at zero motion.
+    """
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    lower: float
+    upper: float
+    origin: np.ndarray
+
+
+@dataclass(frozen=True)
+class UrdfTree:
+    """The kinematic tree of a URDF file.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+    name : str
+        The ``<robot name=...>``.
+    links : tuple of str
+    joints : dict of str to UrdfJoint
+        By joint name.
+    root : str
+        The one link that is no joint's child.
+    """
+
+    path: Path
+    name: str
+    links: tuple[str, ...]
+    joints: dict[str, UrdfJoint]
+    root: str
+
+    def parent_joint(self, link: str) -> UrdfJoint | None:
+        """The joint whose child is ``link`` (None for the root)."""
+        for j in self.joints.values():
+            if j.child == link:
+                return j
+        return None
+
+    def check_link(self, link: str, what: str) -> None:
+        """Raise InvalidInputError naming ``what`` when ``link`` is not a link (did you mean)."""
+        if link not in self.links:
+            raise InvalidInputError(
+                f"{what} {link!r} is not a link of {self.path}; its links are "
+                f"{', '.join(self.links)}.{did_you_mean(link, self.links)}")
+
+    def chain(self, base: str, tip: str) -> list[UrdfJoint]:
+        """The joints from link ``base`` down to link ``tip``, in order.
+
+        Raises
+        ------
+        InvalidInputError
+            A name is not a link (did you mean), or ``base`` is not an
+            ancestor of ``tip``.
+        """
+        self.check_link(base, "base frame")
+        self.check_link(tip, "pen-tip frame")
+        out = []
+        link = tip
+        while link != base:
+            j = self.parent_joint(link)
+            if j is None:
+                raise InvalidInputError(
+                    f"the pen-tip frame {tip!r} does not hang below the base frame {base!r} "
+                    f"in {self.path} (the tree's root is {self.root!r}); choose a base frame "
+                    "on the way from the root to the pen tip.")
+            out.append(j)
+            link = j.parent
+        return out[::-1]
+
+    def movable_between(self, base: str, tip: str) -> list[str]:
+        """Names of the movable joints (see :data:`MOVABLE`) from ``base`` to ``tip``."""
+        return [j.name for j in self.chain(base, tip) if j.type in MOVABLE]
+
+    def pose_of(self, link: str) -> np.ndarray:
+        """Pose (4, 4) of ``link`` in the root frame with every joint at zero."""
+        T = np.eye(4)
+        for j in self.chain(self.root, link):
+            T = T @ j.origin
+        return T
+
+
+def _floats(text: str | None, n: int, what: str, path: Path) -> np.ndarray:
+    if text is None:
+        return np.zeros(n)
+    try:
+        v = np.array([float(x) for x in text.split()])
+    except ValueError:
+        v = np.zeros(0)
+    if v.shape != (n,):
+        raise InvalidInputError(f"{path}: {what} {text!r} is not {n} numbers.")
+    return v
+
+
+def _child_attr(el: ET.Element, tag: str, attr: str) -> str:
+    """Attribute ``attr`` of ``el``'s first ``<tag>`` child; "" when either is missing."""
+    child = el.find(tag)
+    return child.get(attr, "") if child is not None else ""
+
+
+def _origin(el: ET.Element | None, path: Path) -> np.ndarray:
+    T = np.eye(4)
+    if el is None:
+        return T
+    xyz = _floats(el.get("xyz"), 3, "origin xyz", path)
+    r, p, y = _floats(el.get("rpy"), 3, "origin rpy", path)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    # URDF: fixed-axis roll about x, then pitch about y, then yaw about z
+    T[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                 [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                 [-sp, cp * sr, cp * cr]]
+    T[:3, 3] = xyz
+    return T
+
+
+def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
+    """Parse a URDF file's kinematic tree.
+
+    Raises
+    ------
+    InvalidInputError
+        The file does not exist, is not XML, or is not a URDF tree (no
+        ``<robot>``, a joint naming an unknown link, not exactly one root).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidInputError(
+            f"URDF not found: {p}. Give an existing file path, or "
+            "'package://PACKAGE/path/to/robot.urdf' for a file inside an installed package; "
+            "`iloci robots` lists the shipped robots.")
+    try:
+        root = ET.parse(p).getroot()
+    except ET.ParseError as exc:
+        raise InvalidInputError(f"{p} is not valid XML: {exc}.") from None
+    if root.tag != "robot":
+        raise InvalidInputError(f"{p} is not a URDF: its root element is <{root.tag}>, "
+                                "not <robot>.")
+    links = tuple(el.get("name", "") for el in root.findall("link"))
+    joints: dict[str, UrdfJoint] = {}
+    for el in root.findall("joint"):
+        name, kind = el.get("name", ""), el.get("type", "")
+        parent, child = (_child_attr(el, tag, "link") for tag in ("parent", "child"))
+        for link in (parent, child):
+            if link not in links:
+                raise InvalidInputError(f"{p}: joint {name!r} names link {link!r}, which the "
+                                        "file does not define.")
+        lim = el.find("limit")
+        lo, hi = -np.inf, np.inf
+        if kind != "continuous" and lim is not None:
+            lo = float(lim.get("lower", "0"))
+            hi = float(lim.get("upper", "0"))
+        joints[name] = UrdfJoint(name, kind, parent, child, lo, hi, _origin(el.find("origin"), p))
+    children = {j.child for j in joints.values()}
+    roots = [link for link in links if link not in children]
+    if len(roots) != 1:
+        raise InvalidInputError(f"{p}: a URDF tree has exactly one root link, found "
+                                f"{roots or 'none'}.")
+    return UrdfTree(p, root.get("name", p.stem), links, joints, roots[0])
+
+
+def resolve_uri(uri: str, urdf_dir: Path, package_dirs: tuple[Path, ...] = ()) -> Path:
+    """The file a URDF's mesh (or other resource) name refers to.
+
+    Parameters
+    ----------
+    uri : str
+        ``package://NAME/rest``, ``file://...``, an absolute or a relative path.
+    urdf_dir : Path
+        Directory of the URDF (relative paths and the ancestor search start there).
+    package_dirs : tuple of Path
+        Directories holding packages (``DIR/NAME/``), searched first.
+
+    Raises
+    ------
+    InvalidInputError
+        No such file (names the places searched).
+    """
+    uri = uri.removeprefix("file://")
+    if not uri.startswith("package://"):
+        f = Path(uri)
+        f = f if f.is_absolute() else urdf_dir / f
+        if not f.is_file():
+            raise InvalidInputError(f"mesh file {uri!r} of the URDF in {urdf_dir} not found "
+                                    f"(looked for {f}).")
+        return f
+    name, _, rest = uri[len("package://"):].partition("/")
+    tried: list[Path] = []
+    roots = list(package_dirs)
+    roots += [Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d]
+    roots += [d.parent for d in (urdf_dir, *urdf_dir.parents) if d.name == name]
+    for r in roots:
+        f = r / name / rest
+        tried.append(f)
+        if f.is_file():
+            return f
+    try:
+        spec = importlib.util.find_spec(name.replace("-", "_"))
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.submodule_search_locations:
+        for loc in spec.submodule_search_locations:
+            f = Path(loc) / rest
+            tried.append(f)
+            if f.is_file():
+                return f
+    raise InvalidInputError(
+        f"cannot resolve {uri!r}: package {name!r} not found (tried "
+        f"{', '.join(map(str, tried)) or 'no location'}). Add the directory holding "
+        f"{name}/ to the robot's package_dirs or to ROS_PACKAGE_PATH.")
+
+
+def resolved_urdf_text(path: Path, package_dirs: tuple[Path, ...] = (),
+                       replace_suffix: dict[str, str] | None = None) -> str:
+    """The URDF's text with every mesh file name made an absolute path.
+
+    Parameters
+    ----------
+    path : Path
+    package_dirs : tuple of Path
+        As for :func:`resolve_uri`.
+    replace_suffix : dict, optional
+        For engines that cannot read a mesh format: e.g. ``{".dae": ".stl"}``
+        swaps a visual mesh for a file of the same stem with that suffix
+        when one exists beside it or in a sibling ``collision`` directory.
+
+    Raises
+    ------
+    InvalidInputError
+        A mesh file cannot be found.
+    """
+    tree = ET.parse(path)
+    for mesh in tree.getroot().iter("mesh"):
+        uri = mesh.get("filename")
+        if not uri:
+            continue
+        f = resolve_uri(uri, path.parent, package_dirs)
+        for old, new in (replace_suffix or {}).items():
+            if f.suffix.lower() == old:
+                for cand in (f.with_suffix(new),
+                             f.parent.parent / "collision" / (f.stem + new)):
+                    if cand.is_file():
+                        f = cand
+                        break
+        mesh.set("filename", str(f.resolve()))
+    return ET.tostring(tree.getroot(), encoding="unicode")
