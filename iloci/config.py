@@ -103,13 +103,14 @@ class LearnerConfig:
     #: (median 14.6 s against 19.0 s) and scored 96.4 % CCR against 97.7 %.
     rehearsal_epochs: int = 0
     #: Recognition answers "unknown" when its familiarity (see
-    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration the
-    #: network reproduces well, 0.5 when it reproduces it as badly as one
-    #: known concept reproduces its neighbour) is below this; 0 never does
-    #: (the paper always names a concept).
+    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration that
+    #: some memory entry's PB reproduces well, 0.5 when the best entry
+    #: reproduces it as badly as one known concept reproduces its neighbour)
+    #: is below this; 0 never does (the paper always names a concept).
     unknown_below: float = 0.0
-    #: Novelty answer: when a demonstration's familiarity is below this, the
-    #: robot first imitates it back as something new; "yes" founds the new
+    #: Novelty answer: when a demonstration's familiarity (of its prediction
+    #: error from PB_obs: how well the network reproduces it with its own PB)
+    #: is below this, the robot first imitates it back as something new; "yes" founds the new
     #: concept in one interaction, "no" sends it back to guessing. 0 never
     #: does (the paper tries every known concept before founding one).
     novelty_below: float = 0.0

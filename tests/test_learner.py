@@ -20,6 +20,7 @@ import iloci
 from iloci import hookimpl
 from iloci.agent import SkippedDemonstrationWarning
 from iloci.concepts import rehearsal
+from iloci.concepts.learner import novelty_scale
 from iloci.concepts.memory import entries_equal
 from iloci.data import load_lasa
 from iloci.errors import FeedbackError, MissingBackendError, NotFittedError
@@ -424,9 +425,17 @@ def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
     for r in recs:
         assert 0 < r.familiarity <= 1 and r.unknown == (r.familiarity < 0.999)
         assert np.isfinite(r.error) and r.error >= 0
+    # familiarity asks how well the best known entry reproduces it, on the
+    # memory's own scale
+    seqs = [agent.memory.encoder.encode(agent.motion(lasa[k]))[0] for k in ("GShape/1", "Sine/0")]
+    best = agent.learner.entry_errors(seqs).min(axis=1)
+    scale = novelty_scale(agent.learner.model, agent.memory)
+    np.testing.assert_allclose([r.reproduction_error for r in recs], best, rtol=1e-6)
+    np.testing.assert_allclose([r.familiarity for r in recs], scale / (scale + best), rtol=1e-6)
     off = make_agent()
     off.teach([lasa["GShape/0"], lasa["Angle/0"]])
-    assert not any(r.unknown for r in off.recognize([lasa["Sine/0"]]))
+    plain = off.recognize([lasa["Sine/0"]])[0]
+    assert not plain.unknown and np.isnan(plain.reproduction_error)
 
 
 @pytest.mark.parametrize("confirmation", [-1, 1])

@@ -123,6 +123,12 @@ class Recognition:
     error : float
         Closed-loop prediction error (mean squared, encoded units) of the
         sequence from PB_obs: how well the network can reproduce it at all.
+    reproduction_error : float
+        The lowest closed-loop prediction error of the sequence generated
+        from any memory entry's PB (:meth:`Learner.entry_errors`): how well
+        the nearest thing the robot *knows* reproduces it. Computed when
+        ``[learner] decision = "reproduction"`` or ``unknown_below > 0``,
+        else NaN.
     """
 
     demo: str
@@ -134,13 +140,15 @@ class Recognition:
     sources: tuple[str, ...]
     pb_obs: np.ndarray = field(repr=False)
     error: float = float("nan")
-    #: How well the network reproduces the demonstration against the memory's
-    #: own error scale (:func:`familiarity`); NaN when the memory cannot
-    #: calibrate it (fewer than two concepts).
+    #: How well what the memory knows reproduces the demonstration against
+    #: the memory's own error scale (:func:`familiarity` of
+    #: ``reproduction_error`` when computed, else of ``error``); NaN when the
+    #: memory cannot calibrate it (fewer than two concepts).
     familiarity: float = float("nan")
     #: True when ``familiarity`` is below ``[learner] unknown_below``: the
     #: robot answers "I don't know" (``concept`` is still the nearest one).
     unknown: bool = False
+    reproduction_error: float = float("nan")
 
 
 def perform(memory: Memory, model: PerceptualModel, index: int, *,
@@ -621,10 +629,21 @@ class Learner:
         pbs_rec = self.memory.pbs_rec
         dist = cdist(pb_obs, pbs_rec, "euclidean")
         labels = self.memory.concept_labels
-        ranking = (self.entry_errors(seqs) if self.config.decision == "reproduction"
-                   else dist)
+        entry_errors = (self.entry_errors(seqs) if self.config.decision == "reproduction"
+                        or self.config.unknown_below > 0 else None)
+        ranking = (entry_errors if entry_errors is not None
+                   and self.config.decision == "reproduction" else dist)
         nearest, conf = confidence(ranking, labels)
-        fam = familiarity(errors, novelty_scale(self.model, self.memory))
+        # "unknown" asks whether anything the robot knows reproduces the
+        # demonstration (its best entry's error), on the scale at which one
+        # known concept reproduces its neighbour (novelty_scale): the same
+        # quantity on both sides. PB_obs's own error measures how well the
+        # network reproduces it with a free PB, which generalises to shapes
+        # it never learned.
+        rep = (entry_errors.min(axis=1) if entry_errors is not None
+               else np.full(len(seqs), np.nan))
+        fam = familiarity(rep if entry_errors is not None else errors,
+                          novelty_scale(self.model, self.memory))
         below = self.config.unknown_below
         out = []
         for b, i in enumerate(nearest):
@@ -632,7 +651,7 @@ class Learner:
             out.append(Recognition(keys[b], e.concept, float(conf[b]), float(dist[b, i]),
                                    int(i), e.source, tuple(e.sources), pb_obs[b].copy(),
                                    float(errors[b]), float(fam[b]),
-                                   bool(below > 0 and fam[b] < below)))
+                                   bool(below > 0 and fam[b] < below), float(rep[b])))
         return out
 
 

@@ -90,9 +90,11 @@ class FoldResult:
         Distinct true concepts among the memory's robot concepts.
     taught : list of bool
         Per test demonstration: was its true concept in the learning set.
-    distance, error : list of float
+    distance, error, reproduction_error : list of float
         Per test demonstration: PB distance to the nearest PB_rec;
-        prediction error from PB_obs.
+        prediction error from PB_obs; lowest prediction error from a memory
+        entry's PB (NaN when not computed, see
+        :attr:`~iloci.concepts.learner.Recognition.reproduction_error`).
     familiarity : list of float
     unknown : list of bool
         Recognition's familiarity and whether it answered "unknown".
@@ -139,6 +141,7 @@ class FoldResult:
     taught: list[bool] = field(default_factory=list)
     distance: list[float] = field(default_factory=list)
     error: list[float] = field(default_factory=list)
+    reproduction_error: list[float] = field(default_factory=list)
     familiarity: list[float] = field(default_factory=list)
     unknown: list[bool] = field(default_factory=list)
     memory_other_distance: list[float] = field(default_factory=list)
@@ -364,6 +367,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
                 for t in true],
         distance=[float(r.distance) for r in recs],
         error=[float(r.error) for r in recs],
+        reproduction_error=[float(r.reproduction_error) for r in recs],
         familiarity=[float(r.familiarity) for r in recs],
         unknown=[bool(r.unknown) for r in recs],
         memory_other_distance=_other_concept_distances(mem),
