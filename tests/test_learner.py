@@ -478,7 +478,7 @@ def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa)
 def test_rehearsal_from_kept_demonstrations(lasa, tmp_path):
     """rehearse_from = "demonstrations": each entry keeps its encoded demonstration,
     rehearsal trains on it (not on a regeneration), and it survives save/load."""
-    assert make_agent().config.learner.rehearse_from == "regenerated"   # the paper's default
+    assert make_agent().config.learner.rehearse_from == "demonstrations"   # iloci's default
     agent = make_agent(rehearse_from="demonstrations")
     demos = [lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"], lasa["GShape/3"]]
     agent.teach(demos)
