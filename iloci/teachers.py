@@ -16,6 +16,7 @@ import io
 import os
 import re
 import sys
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -84,6 +85,12 @@ class OracleTeacher:
 class NoisyTeacher(OracleTeacher):
     """An oracle that flips each feedback with probability ``p``.
 
+    Whether a feedback is flipped is drawn from ``(seed, demonstration key,
+    attempt)`` alone, not from a stream of draws: the same demonstration
+    answered at the same attempt gets the same error, so a session resumed
+    after a crash (which teaches the interrupted demonstration again from
+    its first attempt) gives the same feedbacks as one never interrupted.
+
     Parameters
     ----------
     p : float
@@ -97,11 +104,15 @@ class NoisyTeacher(OracleTeacher):
         super().__init__(concepts)
         self.p = float(p)
         self.seed = seed
-        self._rng = np.random.default_rng(seed)
+
+    def flips(self, demo: Demonstration, attempt: int) -> bool:
+        """Whether the feedback for ``demo`` at ``attempt`` is flipped."""
+        key = zlib.crc32(demo.key.encode("utf-8"))
+        return bool(np.random.default_rng([self.seed, key, int(attempt)]).random() < self.p)
 
     def feedback(self, demo: Demonstration, response: Response) -> int:
         value = super().feedback(demo, response)
-        return -value if self._rng.random() < self.p else value
+        return -value if self.flips(demo, response.attempt) else value
 
 
 class DrawingTeacher(OracleTeacher):

@@ -161,6 +161,25 @@ def test_oracle_and_noisy_teachers_judge_the_novelty_answer():
     assert NoisyTeacher(p=0.0).feedback(g, _novel(("Angle/0",))) == 1
 
 
+def test_noisy_teacher_errs_by_demonstration_and_attempt_not_by_call_order():
+    """A resumed session re-teaches the interrupted demonstration from attempt
+    1: the noisy teacher must answer it as the uninterrupted session did."""
+    from iloci.teachers import NoisyTeacher
+
+    demos = [d for s in ("GShape", "Angle", "Sine", "Leaf_1") for d in load_lasa(s)]
+    guesses = [(d, Response("c1", np.zeros((20, 2)), np.zeros((20, 4)), d.key, (d.key,),
+                            attempt=a)) for d in demos for a in (1, 2, 3)]
+    first = NoisyTeacher(p=0.3, seed=7)
+    forward = [first.feedback(d, r) for d, r in guesses]
+    resumed = NoisyTeacher(p=0.3, seed=7)       # a new process, asked in another order
+    backward = [resumed.feedback(d, r) for d, r in reversed(guesses)][::-1]
+    assert forward == backward
+    flipped = sum(v == -1 for v in forward) / len(forward)   # the oracle says +1 to each
+    assert 0.15 < flipped < 0.45, flipped                    # p = 0.3 over 84 draws
+    other = [NoisyTeacher(p=0.3, seed=8).feedback(d, r) for d, r in guesses]
+    assert other != forward                                  # the seed matters
+
+
 def test_console_teacher_asks_whether_a_novelty_answer_is_new():
     out = io.StringIO()
     teacher = ConsoleTeacher("", stdin=io.StringIO("y\n"), stdout=out)
