@@ -19,7 +19,7 @@ else (:func:`preprocess`):
   interpolated by a cubic spline, so 25 samples give the curve they were
   taken from rather than a polygon.
 * **Smoothing along the path**: a Gaussian local linear regression whose
-  bandwidth is a fraction of the path's length (``smoothing``, default 2 %),
+  bandwidth is a fraction of the path's length (``smoothing``, default 4 %),
   not a number of samples, so it removes the same jitter at 25 samples as
   at 10 000 (:func:`local_linear`). Each sample is weighted by the stretch
   of path it stands for, so samples crowded where the pen was slow do not
@@ -304,7 +304,7 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     return out
 
 
-def resample_path(positions: np.ndarray, steps: int = 50, smoothing: float = 0.02,
+def resample_path(positions: np.ndarray, steps: int = 50, smoothing: float = 0.04,
                   presmooth: float = PRESMOOTH) -> np.ndarray:
     """``steps`` points evenly spaced along the drawn path, smoothed along it.
 
@@ -405,7 +405,7 @@ def fit_to_plane(points: np.ndarray, plane: DrawingPlane) -> np.ndarray:
 
 
 def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_length",
-               smoothing: float = 0.02, smoothing_window: int = 31,
+               smoothing: float = 0.04, smoothing_window: int = 31,
                rest_tolerance: float = 0.01, y_axis: str = "up", min_points: int = 5,
                plane: DrawingPlane) -> np.ndarray:
     """Read one demonstration as the robot's drawing: plane points.
