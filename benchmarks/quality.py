@@ -66,6 +66,10 @@ ROWS: dict[str, dict[str, Any]] = {
     "paper": PAPER,
     "novelty-only": _with(BEST, {"learner": {"confirm_rewards": False}}),
     "pb-decision": _with(BEST, {"learner": {"decision": "pb_distance"}}),
+    # the novelty answer's familiarity of the PB_obs error (before: of the best
+    # entry's reproduction error, the default)
+    "novelty-prediction": _with(BEST, {"learner": {"decision": "pb_distance",
+                                                   "familiarity": "prediction"}}),
     "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
     "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
     "paper-untaught": _with(PAPER, {"evaluation": {"untaught": 4}}),
@@ -78,9 +82,9 @@ ROWS: dict[str, dict[str, Any]] = {
 }
 
 #: Rows run by default, in order (the cheap, decisive ones first).
-DEFAULT_ROWS = ("best", "paper", "pb-decision", "noisy-0.1", "untaught", "paper-noisy-0.1",
-                "noisy-0.05", "noisy-0.2", "reproduction-only", "novelty-only", "stream",
-                "paper-stream")
+DEFAULT_ROWS = ("best", "paper", "pb-decision", "novelty-prediction", "noisy-0.1", "untaught",
+                "paper-noisy-0.1", "noisy-0.05", "noisy-0.2", "reproduction-only", "novelty-only",
+                "stream", "paper-stream")
 
 
 def _merge(base: dict, changes: dict) -> dict:

@@ -418,6 +418,33 @@ def test_novelty_answer_founds_a_concept_in_one_interaction_or_goes_back_to_gues
     assert fourth.first_guess_correct is False and third.first_guess_correct is True
 
 
+@pytest.mark.parametrize("kind", ["reproduction", "prediction"])
+def test_novelty_answer_asks_the_configured_familiarity(lasa, kind):
+    # "reproduction" (default): how well the best known entry's PB reproduces
+    # the demonstration; "prediction": the error from its own PB_obs
+    agent = make_agent(novelty_below=1.0, familiarity=kind)
+    teacher = ScriptedTeacher([-1, 1])
+    agent.teacher = teacher
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    seq = agent.memory.encoder.encode(agent.motion(lasa["Sine/0"]))[0]
+    learner = agent.learner
+    if kind == "reproduction":
+        error = learner.entry_errors([seq]).min()
+    else:
+        error = learner.model.prediction_error([seq], learner.recognize_pbs([seq]))[0]
+    scale = novelty_scale(learner.model, agent.memory)
+    agent.learn(lasa["Sine/0"])
+    novel = teacher.responses[-1]
+    assert novel.novel
+    np.testing.assert_allclose(novel.extra["familiarity"], scale / (scale + error), rtol=1e-6)
+
+
+def test_familiarity_setting_is_checked():
+    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be 'reproduction' "
+                                                       "or 'prediction', got 'pb'"):
+        iloci.build(small_config(familiarity="pb"))
+
+
 def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
     agent = make_agent(unknown_below=0.999)
     agent.teach([lasa["GShape/0"], lasa["Angle/0"]])

@@ -142,7 +142,8 @@ class Recognition:
     error: float = float("nan")
     #: How well what the memory knows reproduces the demonstration against
     #: the memory's own error scale (:func:`familiarity` of
-    #: ``reproduction_error`` when computed, else of ``error``); NaN when the
+    #: ``reproduction_error`` when computed and ``[learner] familiarity`` is
+    #: ``"reproduction"``, else of ``error``); NaN when the
     #: memory cannot calibrate it (fewer than two concepts).
     familiarity: float = float("nan")
     #: True when ``familiarity`` is below ``[learner] unknown_below``: the
@@ -272,10 +273,11 @@ def familiarity(error: np.ndarray | float, scale: float) -> np.ndarray:
     Parameters
     ----------
     error : float or ndarray
-        Closed-loop prediction error of a demonstration from its PB_obs
-        (how well the network can reproduce it at all; on LASA it separated
-        taught from untaught concepts better than the PB distance: AUROC
-        0.95 against 0.86, 5 folds, 4 of 22 concepts left out).
+        Closed-loop prediction error of a demonstration (mean squared,
+        encoded units): by default (``[learner] familiarity =
+        "reproduction"``) the lowest over memory entries of the error with
+        which the entry's PB reproduces it (:meth:`Learner.entry_errors`),
+        else the error from its PB_obs.
     scale : float
         :func:`novelty_scale` of the memory.
 
@@ -629,8 +631,9 @@ class Learner:
         pbs_rec = self.memory.pbs_rec
         dist = cdist(pb_obs, pbs_rec, "euclidean")
         labels = self.memory.concept_labels
+        reproduction = self.config.familiarity == "reproduction"
         entry_errors = (self.entry_errors(seqs) if self.config.decision == "reproduction"
-                        or self.config.unknown_below > 0 else None)
+                        or (self.config.unknown_below > 0 and reproduction) else None)
         ranking = (entry_errors if entry_errors is not None
                    and self.config.decision == "reproduction" else dist)
         nearest, conf = confidence(ranking, labels)
@@ -642,7 +645,7 @@ class Learner:
         # it never learned.
         rep = (entry_errors.min(axis=1) if entry_errors is not None
                else np.full(len(seqs), np.nan))
-        fam = familiarity(rep if entry_errors is not None else errors,
+        fam = familiarity(rep if entry_errors is not None and reproduction else errors,
                           novelty_scale(self.model, self.memory))
         below = self.config.unknown_below
         out = []
@@ -781,8 +784,14 @@ class Turn:
         self._novel = False        # the current answer is the novelty answer
         self._confirming = False   # the current answer asks to confirm a reward after a no
         if learner.config.novelty_below > 0:
-            error = float(np.asarray(learner.model.prediction_error([seq],
-                                                                    self.pb_obs[None]))[0])
+            # [learner] familiarity: is it like an entry the robot knows
+            # (reproduction), or can the network reproduce it at all (prediction)
+            if learner.config.familiarity == "reproduction":
+                error = float(np.min(self.ranking if learner.config.decision == "reproduction"
+                                     else learner.entry_errors([seq])[0]))
+            else:
+                error = float(np.asarray(learner.model.prediction_error(
+                    [seq], self.pb_obs[None]))[0])
             fam = float(familiarity(error, novelty_scale(learner.model, mem)))
             if fam < learner.config.novelty_below:
                 self._fam = fam
