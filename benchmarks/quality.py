@@ -77,6 +77,10 @@ ROWS: dict[str, dict[str, Any]] = {
     "noisy-0.1": _with(BEST, {"teacher": {"name": "noisy", "p": 0.1}}),
     "noisy-0.2": _with(BEST, {"teacher": {"name": "noisy", "p": 0.2}}),
     "paper-noisy-0.1": _with(PAPER, {"teacher": {"name": "noisy", "p": 0.1}}),
+    # a reward that makes a new exemplar is confirmed too (oracle: its cost)
+    "confirm-exemplars": _with(BEST, {"learner": {"confirm_new_exemplars": True}}),
+    "confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"confirm_new_exemplars": True},
+                                               "teacher": {"name": "noisy", "p": 0.1}}),
     "stream": _with(BEST, {"evaluation": {"protocol": "stream"}}),
     "paper-stream": _with(PAPER, {"evaluation": {"protocol": "stream"}}),
 }

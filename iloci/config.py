@@ -131,6 +131,13 @@ class LearnerConfig:
     #: confirms it, so one slip of the teacher cannot merge two concepts.
     #: Off: the paper's protocol (every reward is final).
     confirm_rewards: bool = False
+    #: With this on, the robot also asks once more before a reward makes a
+    #: new exemplar (the demonstration is not within ``similarity_threshold``
+    #: of the guessed concept's entry), even on the first guess: a
+    #: teacher's slip there would file a demonstration of a concept not yet
+    #: taught under another one. A reward that only strengthens an entry is
+    #: kept as given. Off: the paper's protocol.
+    confirm_new_exemplars: bool = False
     #: What ranks the robot's concepts for a demonstration, in recognition
     #: and in the order of its guesses: ``"pb_distance"`` (the paper: the
     #: concept of the PB_rec nearest to PB_obs) or ``"reproduction"`` (the

@@ -483,6 +483,30 @@ def test_a_reward_after_a_no_is_kept_only_when_the_teacher_confirms_it(lasa, con
         assert outcome.action == "new_concept" and len(agent.memory.concepts()) == 3
 
 
+@pytest.mark.parametrize("confirmation", [-1, 1])
+def test_a_reward_that_makes_a_new_exemplar_is_confirmed_first(lasa, confirmation):
+    # similarity_threshold 0: every reward would make a new exemplar
+    rec = Recorder()
+    agent = make_agent(rec, confirm_new_exemplars=True, similarity_threshold=0.0)
+    agent.teacher = ScriptedTeacher([-1, 1, confirmation, -1])
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])  # -1: a second concept
+    outcome = agent.learn(lasa["GShape/1"])  # +1 on the first guess: asked to confirm
+    actions = [e.action for e in rec.interactions if e.demo == "GShape/1"]
+    assert actions[0] == "confirm"
+    if confirmation == 1:
+        assert outcome.feedbacks == (1, 1) and outcome.action == "new_exemplar"
+        assert len(agent.memory.concepts()) == 2
+    else:  # not confirmed: the other concept is refused too, a concept of its own
+        assert outcome.feedbacks == (1, -1, -1) and outcome.action == "new_concept"
+        assert len(agent.memory.concepts()) == 3
+    # a reward that only strengthens an entry is kept as given
+    plain = make_agent(confirm_new_exemplars=True, similarity_threshold=10.0)
+    plain.teacher = ScriptedTeacher([-1, 1])
+    plain.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert plain.learn(lasa["GShape/1"]).feedbacks == (1,)
+
+
 def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa):
     agent = make_agent(decision="reproduction")
     agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])

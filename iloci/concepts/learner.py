@@ -938,10 +938,13 @@ class Turn:
         common, extra = self._common(answer, 1)
         if self._confirming:
             self._confirming = False
-        elif learner.config.confirm_rewards and -1 in self.feedbacks:
-            # a reward after a "no" goes against the robot's own ranking: a
-            # teacher's slip here would merge two concepts, so it is kept
-            # only when the teacher confirms it (asked once more)
+        elif ((learner.config.confirm_rewards and -1 in self.feedbacks)
+              or (learner.config.confirm_new_exemplars
+                  and self.distances[nearest] >= learner.config.similarity_threshold)):
+            # a reward after a "no" goes against the robot's own ranking, and
+            # one that makes a new exemplar widens a concept: a teacher's slip
+            # there would merge two concepts, so it is kept only when the
+            # teacher confirms it (asked once more)
             ev = InteractionEvent(action="confirm", extra=extra, **common)
             self.feedbacks.append(1)
             self.events.append(ev)
