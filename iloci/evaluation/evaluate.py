@@ -72,6 +72,10 @@ class FoldResult:
         Mean generation error of the memory's entries.
     rehearsals : int
     rehearsal_seconds, wall_seconds : float
+        Wall time of the rehearsals; of the fold's learning (building the
+        agent, teaching) plus the recognition of its test set, which a
+        parallel evaluation runs as a task of its own (waiting between the
+        two not counted).
     skipped : list of [str, str]
         (demonstration, reason) of each learning demonstration skipped.
     robot_predicted : list of str
