@@ -33,6 +33,7 @@
 #endif
 
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -107,10 +108,12 @@ enum { EPI_NONE = 0, EPI_TANH = 1, EPI_DTANH = 2 };
 #if defined(__SSE2__)
 #define VMIN _mm_min_ps
 #define VMAX _mm_max_ps
+#define SET1 _mm_set1_ps
 #elif defined(__ARM_NEON)
 #include <arm_neon.h>
 #define VMIN vminq_f32
 #define VMAX vmaxq_f32
+#define SET1 vdupq_n_f32
 #endif
 #include "_native_kernel.h"  /* undefines the parameters above */
 
@@ -129,6 +132,7 @@ TARGET static inline __attribute__((always_inline)) __m256 recip_avx2(__m256 q) 
 #define WIDE 0
 #define VMIN _mm256_min_ps
 #define VMAX _mm256_max_ps
+#define SET1 _mm256_set1_ps
 #include "_native_kernel.h"  /* undefines the parameters above */
 
 /* -- AVX-512: 16 floats, 32 registers -------------------------------------- */
@@ -145,6 +149,7 @@ TARGET static inline __attribute__((always_inline)) __m512 recip_avx512(__m512 q
 #define WIDE 1
 #define VMIN _mm512_min_ps
 #define VMAX _mm512_max_ps
+#define SET1 _mm512_set1_ps
 #include "_native_kernel.h"  /* undefines the parameters above */
 #endif
 
