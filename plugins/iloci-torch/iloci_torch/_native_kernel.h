@@ -363,6 +363,121 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
     return 0;
 }
 
+/* Closed-loop residuals of every row under PB = bound tanh(u), and by
+ * forward-mode differentiation along u's P coordinates each row's
+ * Gauss-Newton system: e[r] = sum_{t,j} res^2, A[r] = J^T J (P x P), g[r] =
+ * J^T res, res[t, r, j] = (o_t[j] - x_{t+1}[j]) sw[t, r], j < D. The P
+ * derivative copies of the batch are carried through the steps as P blocks
+ * of R rows (the torch path's residuals_and_jacobian, without storing J). */
+TARGET static void F(lm_system)(lm_work *w, const float *u, double *e, double *A,
+                                double *g) {
+    const int D = w->D, P = w->P, R = w->R, L = w->L, Sp = w->Sp, Hp = w->Hp;
+    const float bound = w->bound;
+    for (int r = 0; r < R; r++) {
+        e[r] = 0.0;
+        for (int k = 0; k < P; k++) {
+            g[r * P + k] = 0.0;
+            for (int q = 0; q < P; q++) A[(r * P + k) * P + q] = 0.0;
+        }
+    }
+    /* pre = PB @ Wp + bh; dpre[k, r] = bound (1 - tanh(u_rk)^2) Wp[k] */
+    for (int r = 0; r < R; r++) {
+        for (int h = 0; h < Hp; h++) w->pre[r * Hp + h] = w->bh[h];
+        for (int k = 0; k < P; k++) {
+            float th = tanhf(u[r * P + k]), pb = bound * th, dp = bound * (1.0f - th * th);
+            for (int h = 0; h < Hp; h++) {
+                w->pre[r * Hp + h] += pb * w->Wp[k * Hp + h];
+                w->dpre[((size_t)k * R + r) * Hp + h] = dp * w->Wp[k * Hp + h];
+            }
+        }
+    }
+    for (int t = 0; t < L; t++) {
+        float *h = w->Hs + (size_t)t * R * Hp, *o = w->Os + (size_t)t * R * Sp;
+        const float *in = t ? w->Os + (size_t)(t - 1) * R * Sp : w->s0;
+        F(gemm)(R, Sp, Hp, in, Sp, w->Ws, w->pre, Hp, 0, h, EPI_TANH, NULL);
+        F(gemm)(R, Hp, Sp, h, Hp, w->Wo, w->bo, 0, 0, o, EPI_TANH, NULL);
+        for (int k = 0; k < P; k++) {
+            float *dh = w->dh + (size_t)k * R * Hp, *dout = w->dout + (size_t)k * R * Sp;
+            /* d s_0 / du = 0 (s_0 is the data); then s_t = o_{t-1} */
+            F(gemm)(R, t ? Sp : 0, Hp, dout, Sp, w->Ws, w->dpre + (size_t)k * R * Hp, Hp, 0,
+                    dh, EPI_DTANH, h);
+            F(gemm)(R, Hp, Sp, dh, Hp, w->Wo, NULL, 0, 0, dout, EPI_DTANH, o);
+        }
+        const float *x = w->X + (size_t)(t + 1) * R * D, *sw = w->sw + (size_t)t * R;
+        for (int r = 0; r < R; r++) {
+            float jd[LM_P_MAX][WIDTH_MAX], res[WIDTH_MAX];
+            for (int j = 0; j < D; j++) {
+                res[j] = (o[r * Sp + j] - x[r * D + j]) * sw[r];
+                e[r] += (double)res[j] * res[j];
+                for (int k = 0; k < P; k++)
+                    jd[k][j] = w->dout[((size_t)k * R + r) * Sp + j] * sw[r];
+            }
+            for (int k = 0; k < P; k++) {
+                double gk = 0.0;
+                for (int j = 0; j < D; j++) gk += (double)jd[k][j] * res[j];
+                g[r * P + k] += gk;
+                for (int q = 0; q <= k; q++) {
+                    double a = 0.0;
+                    for (int j = 0; j < D; j++) a += (double)jd[k][j] * jd[q][j];
+                    A[(r * P + k) * P + q] += a;
+                    if (q != k) A[(r * P + q) * P + k] += a;
+                }
+            }
+        }
+    }
+}
+
+/* Levenberg-Marquardt on each row's u, the weights frozen: see
+ * iloci_rnnpb_recognize in _native.c. Returns 0, or 1 when out of memory. */
+TARGET static int F(recognize)(iloci_rnnpb_recognize_args *a) {
+    lm_work w;
+    if (lm_work_init(&w, a)) return 1;
+    const int R = a->R, P = a->P;
+    double *e = w.sys, *A = e + R, *g = A + (size_t)R * P * P;
+    double *e2 = g + (size_t)R * P, *A2 = e2 + R, *g2 = A2 + (size_t)R * P * P;
+    double *lam = g2 + (size_t)R * P;
+    float *trial = w.trial;
+    F(lm_system)(&w, a->u, e, A, g);
+    for (int r = 0; r < R; r++) lam[r] = a->damping;
+    for (int step = 0; step < a->steps; step++) {
+        for (int r = 0; r < R; r++) {
+            double M[LM_P_MAX][LM_P_MAX], delta[LM_P_MAX];
+            const double *Ar = A + (size_t)r * P * P, *gr = g + (size_t)r * P;
+            for (int k = 0; k < P; k++) {
+                for (int q = 0; q < P; q++) M[k][q] = Ar[k * P + q];
+                M[k][k] += lam[r] * (Ar[k * P + k] + a->tiny);
+            }
+            int ok = solve_spd(P, M, gr, delta);
+            for (int k = 0; k < P; k++) {
+                double v = ok ? a->u[r * P + k] - delta[k] : NAN;
+                trial[r * P + k] = (float)(v < -a->u_max ? -a->u_max
+                                           : v > a->u_max ? a->u_max : v);
+            }
+        }
+        F(lm_system)(&w, trial, e2, A2, g2);
+        for (int r = 0; r < R; r++) {
+            /* false for NaN: a bad step is never kept */
+            int better = e2[r] < e[r] && isfinite(trial[r * P]);
+            for (int k = 0; k < P && better; k++) better = isfinite(trial[r * P + k]);
+            if (better) {
+                e[r] = e2[r];
+                for (int k = 0; k < P; k++) {
+                    a->u[r * P + k] = trial[r * P + k];
+                    g[r * P + k] = g2[r * P + k];
+                    for (int q = 0; q < P; q++)
+                        A[((size_t)r * P + k) * P + q] = A2[((size_t)r * P + k) * P + q];
+                }
+            }
+            lam[r] *= better ? a->down : a->up;
+            lam[r] = lam[r] < a->lam_min ? a->lam_min : lam[r] > a->lam_max ? a->lam_max : lam[r];
+        }
+    }
+    if (a->err)
+        for (int r = 0; r < R; r++) a->err[r] = (float)e[r];
+    lm_work_free(&w);
+    return 0;
+}
+
 #undef V
 #undef VU
 #undef VI
