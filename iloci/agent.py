@@ -110,6 +110,12 @@ class Agent:
             or get_robot()
         from iloci.concepts.memory import Memory
         self.memory = Memory()
+        #: A :class:`~iloci.sensorimotor.pipeline.MotionCache` :meth:`motion`
+        #: looks demonstrations up in (None: convert each time). Set it only
+        #: to a cache filled under this agent's sensorimotor settings, robot
+        #: and IK solver (an evaluation shares one between the folds a
+        #: process runs).
+        self.motion_cache: Any = None
         #: Called with each RehearsalProgress (see Learner); None for none.
         self.on_progress: Callable[[Any], None] | None = None
         self._worker: Any = None
@@ -156,7 +162,12 @@ class Agent:
         if not isinstance(demo, Demonstration):
             raise InvalidInputError(f"expected a Demonstration, got {type(demo).__name__}; "
                                     "wrap an (N, 2) array with iloci.Demonstration(positions).")
-        return to_motion(demo, self.config.sensorimotor, self.ik_solver, robot=self.robot)
+
+        def convert(d: Demonstration):
+            return to_motion(d, self.config.sensorimotor, self.ik_solver, robot=self.robot)
+
+        return convert(demo) if self.motion_cache is None else \
+            self.motion_cache.get(demo, convert)
 
     def fit_encoder(self, motions: Iterable[Any]) -> None:
         """Fit the sensorimotor encoding scales on learning data (once, before learning).

@@ -279,3 +279,29 @@ def test_a_worker_error_reaches_the_caller_as_itself(small_config):
                              install="pip install house-teachers")
     with pytest.raises(MissingBackendError, match="pip install house-teachers"):
         evaluate(_house_config(), plugin_manager=pm, jobs=2, folds=[0], baseline=False)
+
+
+def test_a_motion_cache_shared_between_folds_changes_no_result(small_config):
+    from iloci.config import load_config
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import fold_plan, run_fold
+    from iloci.sensorimotor.pipeline import MotionCache
+
+    config = load_config(small_config)
+    demos = load_lasa(list(config.data.shapes))
+    plan = fold_plan(demos, config)
+
+    def fold(k, cache):
+        learn, test = plan[k]
+        res = run_fold(config, k, [demos[i] for i in learn], [demos[i] for i in test],
+                       baseline=False, motion_cache=cache).to_dict()
+        for key in ("wall_seconds", "rehearsal_seconds"):
+            res.pop(key)
+        return json.dumps(res, sort_keys=True)  # NaN == NaN as text
+
+    cache = MotionCache()
+    fold(0, cache)
+    converted = cache.misses
+    assert converted == len(demos) and cache.hits == 0  # every demonstration met once
+    assert fold(1, cache) == fold(1, None)  # the second fold only looks them up
+    assert cache.misses == converted and cache.hits == len(demos)

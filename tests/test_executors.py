@@ -69,6 +69,19 @@ def test_local_executor_runs_every_call_in_workers_and_relays_messages(worker_mo
     assert os.getpid() not in {n["pid"] for n in notes}
 
 
+def test_follow_up_tasks_run_after_the_tasks_queued_before_them(worker_module):
+    sq = worker_module.square
+    asked = []
+
+    def then(result):
+        asked.append(result)
+        return [(sq, (result,))] if result in (4, 9) else []
+
+    # one worker: tasks run in the order they were queued
+    out = list(LocalExecutor(1).run_then([(sq, (2,)), (sq, (3,))], lambda m: None, then))
+    assert out == [4, 9, 16, 81] and asked == out
+
+
 def test_an_iloci_error_in_a_worker_reaches_the_caller_as_itself(worker_module):
     with pytest.raises(UnknownComponentError, match="nope"):
         list(LocalExecutor(2).run(worker_module.fail, [(1,), (2,)], lambda m: None))

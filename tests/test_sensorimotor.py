@@ -427,3 +427,34 @@ def test_simulation_module_is_light():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_motion_cache_converts_each_demonstration_once_and_never_mixes_them_up():
+    from iloci.interfaces import Demonstration
+    from iloci.sensorimotor.pipeline import MotionCache
+
+    calls = []
+
+    def convert(d):
+        calls.append(d.key)
+        if d.shape == "bad":
+            raise InvalidInputError("unusable")
+        T = len(d.positions)
+        return Motion(d.key, d.positions, np.zeros((T, 3)), np.zeros((T, 4)), 0.1)
+
+    xy = np.linspace(0.0, 1.0, 20)[:, None] * np.array([[1.0, 2.0]])
+    a = Demonstration(xy, shape="line", index=0)
+    cache = MotionCache(max_items=2)
+    m = cache.get(a, convert)
+    assert cache.get(Demonstration(xy.copy(), shape="line", index=0), convert) is m
+    # the same key with other positions (a perturbed copy) or times is converted anew
+    moved = Demonstration(xy + 1e-9, shape="line", index=0)
+    assert cache.get(moved, convert) is not m
+    slower = Demonstration(xy, times=np.linspace(0, 2, 20), shape="line", index=0)
+    cache.get(slower, convert)
+    assert (cache.hits, cache.misses, len(cache)) == (1, 3, 2)  # oldest dropped
+    with pytest.raises(InvalidInputError):
+        cache.get(Demonstration(xy, shape="bad", index=0), convert)
+    assert len(cache) == 2 and calls == ["line/0"] * 3 + ["bad/0"]
+    with pytest.raises(InvalidInputError):
+        MotionCache(max_items=0)

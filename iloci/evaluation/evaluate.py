@@ -17,6 +17,7 @@ a :class:`FoldResult`; :func:`summarize` turns them into ``metrics.json``.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+import dataclasses
 from dataclasses import asdict, dataclass, field
 import importlib.metadata as md
 import os
@@ -34,8 +35,8 @@ from iloci.evaluation.metrics import (auroc, correct_classification_rate, majori
                                       matched_names, mean_std, purity)
 from iloci.hookspecs import hookimpl
 
-__all__ = ["Evaluation", "FoldResult", "default_jobs", "evaluate", "fold_plan",
-           "memory_counts", "robustness_suite", "run_fold", "summarize",
+__all__ = ["Evaluation", "FoldResult", "LearnedFold", "default_jobs", "evaluate",
+           "fold_plan", "learn_fold", "memory_counts", "robustness_suite", "run_fold", "summarize",
            "summarize_robustness", "untaught_concepts", "versions"]
 
 
@@ -71,6 +72,10 @@ class FoldResult:
         Mean generation error of the memory's entries.
     rehearsals : int
     rehearsal_seconds, wall_seconds : float
+        Wall time of the rehearsals; of the fold's learning (building the
+        agent, teaching) plus the recognition of its test set, which a
+        parallel evaluation runs as a task of its own (waiting between the
+        two not counted).
     skipped : list of [str, str]
         (demonstration, reason) of each learning demonstration skipped.
     robot_predicted : list of str
@@ -276,8 +281,13 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
              details: bool = True, plugin_manager: Any = None,
              memory_dir: str | None = None,
              overrides: dict[str, Any] | None = None,
-             robustness: bool | None = None) -> FoldResult:
+             robustness: bool | None = None,
+             motion_cache: Any = None) -> FoldResult:
     """Teach a fresh agent ``learn`` (in order), recognize ``test``; one fold.
+
+    :func:`learn_fold`, then the recognition of ``test`` and
+    :meth:`LearnedFold.complete` (which parallel evaluations run in
+    separate tasks, with the same results).
 
     Parameters
     ----------
@@ -305,8 +315,105 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         Recognize ``test`` again under each perturbation of
         :data:`iloci.evaluation.perturb.SUITE` (and run the baseline on it
         when ``baseline``); default ``config.evaluation.robustness``.
+    motion_cache : MotionCache, optional
+        Motions (preprocessing + IK) of demonstrations met before under
+        this config, e.g. in another fold
+        (:class:`~iloci.sensorimotor.pipeline.MotionCache`); the fold adds
+        the ones it converts. Results are the same with or without it.
     """
-    from iloci.agent import learn_and_recognize
+    learned, agent = learn_fold(config, fold, learn, test, send=send, baseline=baseline,
+                                details=details, plugin_manager=plugin_manager,
+                                memory_dir=memory_dir, overrides=overrides,
+                                robustness=robustness, motion_cache=motion_cache)
+    t0 = time.perf_counter()
+    recs = agent.recognize(list(test)) if len(test) else []
+    return learned.complete(recs, time.perf_counter() - t0)
+
+
+@dataclass
+class LearnedFold:
+    """A fold whose learning is done and whose test set is still to recognize.
+
+    What :func:`learn_fold` returns (picklable: a parallel evaluation sends
+    it from the worker that learned to the parent, and recognizes the test
+    set in another task on the saved agent).
+
+    Attributes
+    ----------
+    result : FoldResult
+        Every field but the ones recognition gives (``predicted``,
+        ``confidence``, ``ccr``... empty); ``wall_seconds`` is the learning
+        time so far.
+    majority, matched : dict
+        Robot concept -> true concept name
+        (:func:`~iloci.evaluation.metrics.majority_names`,
+        :func:`~iloci.evaluation.metrics.matched_names`).
+    known : dict
+        Demonstration key -> true concept, over ``learn`` and ``test``.
+    details : bool
+        Add the test PB_obs to ``result.pb_points``.
+    """
+
+    result: FoldResult
+    majority: dict[str, Any]
+    matched: dict[str, Any]
+    known: dict[str, str]
+    details: bool
+
+    def complete(self, recs: Sequence[Any], seconds: float) -> FoldResult:
+        """The fold's result with ``recs`` (one Recognition per test demonstration, in order).
+
+        ``seconds``: the recognition's wall time, added to ``wall_seconds``.
+        """
+        res = dataclasses.replace(self.result)
+        majority, matched, known = self.majority, self.matched, self.known
+        true = res.true_concepts
+        if len(recs) != len(true):
+            raise InvalidInputError(f"fold {res.fold}: {len(recs)} recognitions for "
+                                    f"{len(true)} test demonstrations.")
+        res.robot_predicted = [r.concept for r in recs]
+        # an answer whose robot concept has no true name keeps its robot label: never correct
+        res.predicted = ["unknown" if r.unknown else majority.get(r.concept) or r.concept
+                         for r in recs]
+        res.matched_predicted = ["unknown" if r.unknown else matched.get(r.concept)
+                                 or r.concept for r in recs]
+        res.source_predicted = [_true_concept(r.source, known) for r in recs]
+        res.confidence = [float(r.confidence) for r in recs]
+        res.ccr = correct_classification_rate(true, res.predicted)
+        res.ccr_matched = correct_classification_rate(true, res.matched_predicted)
+        res.ccr_source = correct_classification_rate(true, res.source_predicted)
+        res.distance = [float(r.distance) for r in recs]
+        res.error = [float(r.error) for r in recs]
+        res.reproduction_error = [float(r.reproduction_error) for r in recs]
+        res.familiarity = [float(r.familiarity) for r in recs]
+        res.unknown = [bool(r.unknown) for r in recs]
+        res.wall_seconds = res.wall_seconds + seconds
+        if self.details:
+            res.pb_points = list(res.pb_points)
+            res.pb_concepts = list(res.pb_concepts)
+            res.pb_kinds = list(res.pb_kinds)
+            for r, c in zip(recs, true):
+                res.pb_points.append([float(x) for x in r.pb_obs])
+                res.pb_concepts.append(c)
+                res.pb_kinds.append("test")
+        return res
+
+
+def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Sequence[Any], *,
+               send: Callable[[dict], None] | None = None, baseline: bool = True,
+               details: bool = True, plugin_manager: Any = None,
+               memory_dir: str | None = None,
+               overrides: dict[str, Any] | None = None,
+               robustness: bool | None = None,
+               motion_cache: Any = None) -> tuple[LearnedFold, Any]:
+    """:func:`run_fold` up to the recognition of ``test``: the learned fold and its agent.
+
+    Parameters as for :func:`run_fold`. The DTW baseline and the robustness
+    suite (which recognizes perturbed copies of ``test``) run here.
+    Recognizing ``test`` with the returned agent (or with one loaded from
+    its saved file: the same answers) and passing the recognitions to
+    :meth:`LearnedFold.complete` gives :func:`run_fold`'s result.
+    """
     from iloci.plugins import get_plugin_manager, get_registry
 
     pm = plugin_manager or get_plugin_manager()
@@ -316,8 +423,10 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     if observer is not None:
         pm.register(observer)
     try:
-        agent, report, recs = learn_and_recognize(config, learn, test, plugin_manager=pm,
-                                                  **(overrides or {}))
+        from iloci.agent import build
+        agent = build(config, plugin_manager=pm, **(overrides or {}))
+        agent.motion_cache = motion_cache
+        report = agent.teach(learn)
     finally:
         if observer is not None:
             pm.unregister(observer)
@@ -330,22 +439,15 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     entries = mem.entries
     members = mem.concept_members(lambda k: _true_concept(k, known))
     majority, matched = majority_names(members), matched_names(members)
-    robot = [r.concept for r in recs]
-    # an answer whose robot concept has no true name keeps its robot label: never correct
-    predicted = ["unknown" if r.unknown else majority.get(r.concept) or r.concept
-                 for r in recs]
-    matched_pred = ["unknown" if r.unknown else matched.get(r.concept) or r.concept
-                    for r in recs]
-    source_pred = [_true_concept(r.source, known) for r in recs]
     counts = memory_counts(mem)
     res = FoldResult(
         fold=fold,
         learn=[d.key for d in learn],
         test=[d.key for d in test],
         true_concepts=true,
-        predicted=predicted,
-        confidence=[float(r.confidence) for r in recs],
-        ccr=correct_classification_rate(true, predicted),
+        predicted=[],
+        confidence=[],
+        ccr=float("nan"),
         feedbacks=[int(f) for f in report.feedbacks],
         first_guess=[bool(g) for g in report.first_guess_correct],
         interactions_per_demo=len(report.feedbacks) / max(1, len(report.outcomes)),
@@ -356,20 +458,10 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         rehearsal_seconds=float(sum(r.seconds for r in report.rehearsals)),
         wall_seconds=wall,
         skipped=[list(s) for s in report.skipped],
-        robot_predicted=robot,
-        matched_predicted=matched_pred,
-        ccr_matched=correct_classification_rate(true, matched_pred),
-        source_predicted=source_pred,
-        ccr_source=correct_classification_rate(true, source_pred),
         purity=purity(members),
         named_concepts=len({n for n in majority.values() if n is not None}),
         taught=[t in {d.true_concept or _true_concept(d.key, known) for d in learn}
                 for t in true],
-        distance=[float(r.distance) for r in recs],
-        error=[float(r.error) for r in recs],
-        reproduction_error=[float(r.reproduction_error) for r in recs],
-        familiarity=[float(r.familiarity) for r in recs],
-        unknown=[bool(r.unknown) for r in recs],
         memory_other_distance=_other_concept_distances(mem),
         memory_generation_error=[float(e.generation_error) for e in entries],
     )
@@ -378,10 +470,6 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
             res.pb_points.append([float(x) for x in e.pb_rec])
             res.pb_concepts.append(majority.get(e.concept) or e.concept)
             res.pb_kinds.append("prototype" if e.prototype else "exemplar")
-        for r, c in zip(recs, true):
-            res.pb_points.append([float(x) for x in r.pb_obs])
-            res.pb_concepts.append(c)
-            res.pb_kinds.append("test")
         for label in mem.concepts():
             name = majority.get(label) or label
             if name in res.shapes:
@@ -399,7 +487,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
         res.robustness = robustness_suite(agent, list(learn), list(test), true, known,
                                           seed=config.evaluation.seed * 1000 + fold,
                                           baseline=baseline)
-    return res
+    return LearnedFold(res, majority, matched, known, details), agent
 
 
 def _other_concept_distances(mem: Any) -> list[float]:
@@ -746,12 +834,15 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
               "seconds": res.wall_seconds})
 
     if serial:  # in this process: the observers see every learning event
+        from iloci.sensorimotor.pipeline import MotionCache
+        motions = MotionCache()  # each demonstration converted once, not once per fold
         for k in wanted:
             learn_idx, test_idx = plan[k]
             emit({"kind": "fold_start", "fold": k, "total": len(learn_idx)})
             finished(run_fold(config, k, [demos[i] for i in learn_idx],
                               [demos[i] for i in test_idx], send=emit, baseline=baseline,
-                              plugin_manager=pm, memory_dir=memory_dir))
+                              plugin_manager=pm, memory_dir=memory_dir,
+                              motion_cache=motions))
     else:
         tasks = [FoldTask(k, *plan[k], memory_dir=memory_dir) for k in wanted]
         run_folds_in_processes(config.to_dict(), tasks,

@@ -88,6 +88,21 @@ class LocalExecutor:
 
     def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
             emit: Callable[[dict], None]) -> Iterator[Any]:
+        return self.run_then([(fn, args) for args in calls], emit)
+
+    def run_then(self, tasks: Sequence[tuple[Callable[..., Any], tuple]],
+                 emit: Callable[[dict], None],
+                 then: Callable[[Any], Sequence[tuple[Callable[..., Any], tuple]]]
+                 | None = None) -> Iterator[Any]:
+        """:meth:`run` over ``(fn, args)`` pairs, each result able to queue more tasks.
+
+        ``then(result)`` (called in the caller as each result arrives,
+        before it is yielded) returns further ``(fn, args)`` pairs; they
+        run after every task queued before them (the pool takes tasks in
+        the order they were queued), so follow-up work fills the workers
+        that would otherwise idle while the last long tasks finish.
+        Results of every task, first or follow-up, are yielded.
+        """
         import multiprocessing as mp
         from multiprocessing.managers import SyncManager
 
@@ -98,17 +113,20 @@ class LocalExecutor:
         manager.start(_worker_init)
         queue = manager.Queue()
         env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
-        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, len(calls))),
+        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, len(tasks))),
                                      initializer=_worker_init, env=env, reuse=False)
         finished = False
         try:
-            pending = {pool.submit(fn, *args, queue) for args in calls}
+            pending = {pool.submit(fn, *args, queue) for fn, args in tasks}
             while pending:
                 done, pending = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_COMPLETED)
                 while not queue.empty():
                     emit(queue.get())
                 for fut in done:
-                    yield fut.result()
+                    result = fut.result()
+                    for fn, args in (then(result) if then is not None else ()):
+                        pending.add(pool.submit(fn, *args, queue))
+                    yield result
             finished = True
         finally:
             # workers are killed unless every call finished: an error, Ctrl-C,

@@ -7,12 +7,21 @@ cannot receive the caller's plugin manager (plugin objects and modules do
 not pickle); when the caller has one, the worker gets the registry entries
 it resolved the config's component names to (:func:`resolved_specs`) and
 registers them alone (:class:`ResolvedComponents`).
+
+On the local executor a fold is two tasks: its learning
+(:func:`~iloci.evaluation.evaluate.learn_fold`, which saves the learned
+agent) and, queued when that ends, the recognition of its test set by the
+saved agent in whichever worker is free; results are those of
+:func:`~iloci.evaluation.evaluate.run_fold`. A worker converts each
+demonstration (preprocessing + IK) once for all the folds it runs
+(:class:`~iloci.sensorimotor.pipeline.MotionCache`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+import os
 from typing import Any
 
 from iloci.errors import InvalidInputError
@@ -119,16 +128,29 @@ def resolved_specs(config: Any, pm: Any) -> list[Any]:
     return specs
 
 
+#: A worker's motion caches (:class:`~iloci.sensorimotor.pipeline.MotionCache`),
+#: one per config and set of components: the folds a worker runs convert each
+#: demonstration once.
+_MOTION_CACHES: dict[str, Any] = {}
+
+
+def _motion_cache(config_dict: dict, specs: Sequence[Any] | None) -> Any:
+    import json
+
+    from iloci.sensorimotor.pipeline import MotionCache
+    key = json.dumps(config_dict, sort_keys=True, default=repr) + repr(
+        None if specs is None else [(s.kind, s.name, s.plugin, s.factory) for s in specs])
+    if key not in _MOTION_CACHES:
+        _MOTION_CACHES.clear()  # another evaluation: its cache alone is kept
+        _MOTION_CACHES[key] = MotionCache()
+    return _MOTION_CACHES[key]
+
+
 def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
                         specs: Sequence[Any] | None, queue: Any) -> Any:
     """One fold in an executor's worker; ``queue.put`` receives its progress messages."""
-    from iloci.data import load_lasa
     from iloci.evaluation.evaluate import run_fold
-    from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
-    demos = load_lasa(shapes or None)
-    # specs: what the caller's plugin manager resolved; None: the default manager's
-    pm = None if specs is None else get_plugin_manager(
-        autoload=False, block=DEFAULT_PLUGINS, plugins=[ResolvedComponents(specs)])
+    demos, pm = _worker_context(config_dict, shapes, specs)
 
     def send(msg: dict) -> None:
         if queue is not None:
@@ -138,7 +160,61 @@ def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], ba
     send({"kind": "fold_start", "fold": task.fold, "total": len(task.learn)})
     return run_fold(config_dict, task.fold, [demos[i] for i in task.learn],
                     [demos[i] for i in task.test], send=send, baseline=baseline,
-                    plugin_manager=pm, memory_dir=task.memory_dir)
+                    plugin_manager=pm, memory_dir=task.memory_dir,
+                    motion_cache=_motion_cache(config_dict, specs))
+
+
+def _worker_context(config_dict: dict, shapes: list[str],
+                    specs: Sequence[Any] | None) -> tuple[list[Any], Any]:
+    """A worker's demonstrations and plugin manager (None: the default one)."""
+    from iloci.data import load_lasa
+    from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
+    demos = load_lasa(shapes or None)
+    # specs: what the caller's plugin manager resolved; None: the default manager's
+    pm = None if specs is None else get_plugin_manager(
+        autoload=False, block=DEFAULT_PLUGINS, plugins=[ResolvedComponents(specs)])
+    return demos, pm
+
+
+def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
+                          specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
+    """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``."""
+    from iloci.evaluation.evaluate import learn_fold
+    demos, pm = _worker_context(config_dict, shapes, specs)
+
+    def send(msg: dict) -> None:
+        if queue is not None:
+            queue.put(msg)
+
+    send({"kind": "fold_start", "fold": task.fold, "total": len(task.learn)})
+    learned, agent = learn_fold(config_dict, task.fold, [demos[i] for i in task.learn],
+                                [demos[i] for i in task.test], send=send, baseline=baseline,
+                                plugin_manager=pm, memory_dir=task.memory_dir,
+                                motion_cache=_motion_cache(config_dict, specs))
+    if not os.path.exists(agent_path):  # memory_dir already holds it
+        agent.save(agent_path)
+    return learned
+
+
+@dataclass(frozen=True)
+class _Recognized:
+    fold: int
+    recognitions: list[Any]
+    seconds: float
+
+
+def _recognize_in_worker(config_dict: dict, fold: int, test: list[int], shapes: list[str],
+                         specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
+    """Recognize a fold's test set with its saved agent, in a worker."""
+    import time
+
+    from iloci.agent import Agent
+    demos, pm = _worker_context(config_dict, shapes, specs)
+    agent = Agent.load(agent_path, config_dict, plugin_manager=pm)
+    agent.motion_cache = _motion_cache(config_dict, specs)
+    t0 = time.perf_counter()
+    recs = agent.recognize([demos[i] for i in test])
+    return _Recognized(fold, recs, time.perf_counter() - t0)
 
 
 def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
@@ -174,9 +250,38 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
         Whatever a fold raised, or KeyboardInterrupt: the executor stops
         its workers first.
     """
-    calls = []
     for task in tasks:
-        calls.append((config_dict, task, shapes, baseline, specs))
         emit({"kind": "fold_queued", "fold": task.fold, "total": len(task.learn)})
-    for res in runner.run(_run_fold_in_worker, calls, emit):
-        on_result(res)
+    if not hasattr(runner, "run_then") or not all(t.test for t in tasks):
+        calls = [(config_dict, task, shapes, baseline, specs) for task in tasks]
+        for res in runner.run(_run_fold_in_worker, calls, emit):
+            on_result(res)
+        return
+    # Learning a fold is sequential; recognizing its test set is a task of
+    # its own, queued when the learning ends, behind the learning tasks not
+    # yet started: with 5 folds on 2 workers, the worker with 2 folds
+    # recognizes the others' test sets while the other learns its third.
+    import tempfile
+
+    from iloci.evaluation.evaluate import LearnedFold
+    with tempfile.TemporaryDirectory(prefix="iloci-evaluate-") as tmp:
+        def agent_path(task: FoldTask) -> str:
+            return os.path.join(task.memory_dir or tmp, f"fold-{task.fold}.npz")
+
+        by_fold = {task.fold: task for task in tasks}
+        learned: dict[int, LearnedFold] = {}
+
+        def then(res: Any) -> list[tuple[Callable[..., Any], tuple]]:
+            if not isinstance(res, LearnedFold):
+                return []
+            task = by_fold[res.result.fold]
+            return [(_recognize_in_worker, (config_dict, task.fold, task.test, shapes, specs,
+                                            agent_path(task)))]
+
+        first = [(_learn_fold_in_worker, (config_dict, task, shapes, baseline, specs,
+                                          agent_path(task))) for task in tasks]
+        for res in runner.run_then(first, emit, then):
+            if isinstance(res, LearnedFold):
+                learned[res.result.fold] = res
+            else:
+                on_result(learned.pop(res.fold).complete(res.recognitions, res.seconds))

@@ -9,8 +9,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+import hashlib
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from iloci.interfaces import Demonstration, IKSolver
 from iloci.sensorimotor.preprocess import preprocess
 from iloci.sensorimotor.robots import Robot, get_robot
 
-__all__ = ["Motion", "preprocessed", "to_motion", "to_motions"]
+__all__ = ["Motion", "MotionCache", "preprocessed", "to_motion", "to_motions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,3 +148,66 @@ def to_motions(demos: Iterable[Demonstration], config: SensorimotorConfig | Conf
                ik: IKSolver, robot: Robot | None = None) -> list[Motion]:
     """:func:`to_motion` of each demonstration, in order."""
     return [to_motion(d, config, ik, robot) for d in demos]
+
+
+class MotionCache:
+    """Motions of demonstrations already converted, for one set of conversion settings.
+
+    :func:`to_motion` (preprocessing + IK, a few ms per demonstration) gives
+    the same motion for the same demonstration whenever the sensorimotor
+    settings, the robot and the IK solver are the same. An evaluation meets
+    each demonstration in every fold (in the learning set of one, in the
+    test set of the others); an agent given a cache
+    (:attr:`iloci.agent.Agent.motion_cache`) converts each once per process.
+
+    A cache holds motions for ONE conversion setting: its owner keeps it
+    for one config (sensorimotor section, robot, IK solver) and never
+    shares it between configs. Entries are keyed by the demonstration's key
+    and a BLAKE2b digest of its positions and times, so a changed or
+    perturbed demonstration under the same key is converted anew, never
+    answered with another's motion.
+
+    Parameters
+    ----------
+    max_items : int
+        Motions kept (oldest dropped first); about 4 KB each at 50 steps.
+    """
+
+    def __init__(self, max_items: int = 4096) -> None:
+        if max_items < 1:
+            raise InvalidInputError(f"max_items must be >= 1, got {max_items}.")
+        self.max_items = max_items
+        self._items: dict[tuple[str, bytes], Motion] = {}
+        #: Lookups answered from the cache, and conversions run.
+        self.hits = 0
+        self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    @staticmethod
+    def _key(demo: Demonstration) -> tuple[str, bytes]:
+        h = hashlib.blake2b(digest_size=16)
+        for a in (demo.positions, demo.times):
+            a = np.ascontiguousarray(a, dtype=np.float64)
+            h.update(repr(a.shape).encode())
+            h.update(a.tobytes())
+        return demo.key, h.digest()
+
+    def get(self, demo: Demonstration, convert: Callable[[Demonstration], Motion]) -> Motion:
+        """The motion of ``demo``: from the cache, else ``convert(demo)`` (then kept).
+
+        Errors of ``convert`` (an unusable or unreachable demonstration)
+        propagate and nothing is kept.
+        """
+        key = self._key(demo)
+        motion = self._items.get(key)
+        if motion is not None:
+            self.hits += 1
+            return motion
+        motion = convert(demo)
+        self.misses += 1
+        if len(self._items) >= self.max_items:
+            del self._items[next(iter(self._items))]
+        self._items[key] = motion
+        return motion

@@ -131,6 +131,39 @@ def test_native_kernel_trains_like_the_torch_operations(params, isa, monkeypatch
 
 
 @needs_native
+@pytest.mark.parametrize("isa", list(ISAS))
+@pytest.mark.parametrize("params", [
+    {},
+    {"hidden": 20, "context": 5, "pb": 2},
+    {"hidden": 100, "context": 40, "recognition_damping": 1.0},
+], ids=["paper", "small", "wide-damped"])
+def test_native_recognition_steps_like_the_torch_operations(params, isa, monkeypatch):
+    """Levenberg-Marquardt in the native kernel: the torch path's steps, other rounding."""
+    if isa not in native_isas():
+        pytest.skip(f"this CPU cannot run {isa}")
+    monkeypatch.setenv(ISA_ENV, isa)
+    seqs = synthetic_sequences(6, 6, lengths=(14, 20, 11))
+    native = TorchRNNPB(seed=3, epochs=60, **params)
+    pbs = native.train(seqs)
+    ops = TorchRNNPB(seed=3, kernel="torch", **params)
+    ops.load_state(native.state())
+    # new drawings: the learned ones, perturbed, started from every stored PB
+    rng = np.random.default_rng(0)
+    probes = [s + rng.normal(0.0, 0.02, s.shape) for s in seqs]
+    got, want = native.recognize(probes, pbs), ops.recognize(probes, pbs)
+    # the minima are shallow: float32 rounding (the torch path also forms
+    # J^T J in float32, the kernel in float64) moves the PB found by ~1e-3
+    np.testing.assert_allclose(got, want, atol=5e-3)
+    e_got, e_want = native.prediction_error(probes, got), ops.prediction_error(probes, want)
+    np.testing.assert_allclose(e_got, e_want, rtol=1e-3)
+    # and the steps did something: the error is below the best start's
+    starts = ops.prediction_error(probes, pbs[np.argmin(
+        [[ops.prediction_error([p], pbs[[k]])[0] for k in range(len(pbs))] for p in probes],
+        axis=1)])
+    assert np.all(e_got <= starts + 1e-9) and np.any(e_got < 0.99 * starts)
+
+
+@needs_native
 def test_native_kernel_continues_from_the_current_weights():
     seqs = synthetic_sequences(4, 6)
     native, _, ops, _ = _train_both(seqs, 3)

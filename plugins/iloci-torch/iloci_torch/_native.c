@@ -1,9 +1,11 @@
 /*
- * torch-rnnpb's float32 training kernel in C: every epoch of
+ * torch-rnnpb's float32 kernel in C: every epoch of
  * iloci_torch.rnnpb.TorchRNNPB.train (closed-loop forward pass, hand-written
  * BPTT, gradient clipping, the learning-rate schedule, Adam on the weights
- * and on the PBs) in one call, for one of three instruction sets chosen at
- * run time: AVX-512, AVX2 + FMA, or portable C.
+ * and on the PBs) in one call, and every Levenberg-Marquardt step of its
+ * recognition (forward-mode derivatives along the PB) in another, for one of
+ * three instruction sets chosen at run time: AVX-512, AVX2 + FMA, or
+ * portable C.
  *
  * Why: at paper size a training step is ~200 matrix products of 36 x 32 x 64.
  * Through torch each costs more to dispatch than to compute; here they are
@@ -33,6 +35,7 @@
 #endif
 
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -89,17 +92,118 @@ static double schedule_decay(const iloci_rnnpb_train_args *a, int t) {
 
 enum { EPI_NONE = 0, EPI_TANH = 1, EPI_DTANH = 2 };
 
+/* The arguments of one recognition (mirrored by RecognizeArgs in native.py):
+ * Levenberg-Marquardt on each row's PB, the weights frozen, exactly the
+ * steps of TorchRNNPB._recognize_kernel (the torch path): X (T, R, D) padded
+ * sequences; sw (T - 1, R) the square root of mask times each row's weight;
+ * the weights as in iloci_rnnpb_train_args (read only); u (R, P) the starts,
+ * PB = bound tanh(u), updated in place; err (R,), when not NULL, receives
+ * each row's final sum of squared weighted residuals. The LM constants are
+ * iloci.rnnpb.common's LM_*. */
+typedef struct {
+    int32_t size;               /* sizeof(iloci_rnnpb_recognize_args) */
+    int32_t isa;
+    int32_t steps, T, R, D, C, H, P;
+    float bound;
+    double damping;             /* initial damping (recognition_damping) */
+    double down, up, lam_min, lam_max, tiny, u_max;
+    const float *X, *sw;
+    const float *w_in, *b_hidden, *w_out, *b_out;
+    float *u;
+    float *err;
+    int32_t isa_used;
+} iloci_rnnpb_recognize_args;
+
+/* PB units a recognition handles (its per-row systems live on the stack). */
+#define LM_P_MAX 16
+
+/* Padded weights and buffers of one recognition. */
+typedef struct {
+    int D, P, R, L, Sp, Hp;
+    float bound;
+    const float *X, *sw;
+    float *Ws, *Wp, *bh, *Wo, *bo;    /* padded as in training */
+    float *s0, *pre, *Hs, *Os, *dpre, *dh, *dout, *trial;
+    double *sys;                      /* e, A, g of the current and the trial u; damping */
+    float *mem;
+} lm_work;
+
+static void lm_work_free(lm_work *w) { free(w->mem); free(w->sys); }
+
+/* Returns 0, or 1 when out of memory. */
+static int lm_work_init(lm_work *w, const iloci_rnnpb_recognize_args *a) {
+    const int D = a->D, H = a->H, P = a->P, R = a->R, S = a->D + a->C;
+    const int Sp = round16(S), Hp = round16(H), L = a->T - 1;
+    const size_t nWs = (size_t)Sp * Hp, nWp = (size_t)P * Hp, nWo = (size_t)Hp * Sp;
+    size_t total = nWs + nWp + Hp + nWo + Sp + (size_t)R * Sp + (size_t)R * Hp
+                   + (size_t)L * R * (Hp + Sp) + (size_t)P * R * (2 * Hp + Sp) + (size_t)R * P;
+    w->mem = (float *)calloc(total, sizeof(float));
+    w->sys = (double *)calloc((size_t)R * (2 * (1 + P + P * P) + 1), sizeof(double));
+    if (!w->mem || !w->sys) { lm_work_free(w); return 1; }
+    w->D = D; w->P = P; w->R = R; w->L = L; w->Sp = Sp; w->Hp = Hp;
+    w->bound = a->bound; w->X = a->X; w->sw = a->sw;
+    w->Ws = w->mem; w->Wp = w->Ws + nWs; w->bh = w->Wp + nWp; w->Wo = w->bh + Hp;
+    w->bo = w->Wo + nWo; w->s0 = w->bo + Sp; w->pre = w->s0 + (size_t)R * Sp;
+    w->Hs = w->pre + (size_t)R * Hp; w->Os = w->Hs + (size_t)L * R * Hp;
+    w->dpre = w->Os + (size_t)L * R * Sp; w->dh = w->dpre + (size_t)P * R * Hp;
+    w->dout = w->dh + (size_t)P * R * Hp; w->trial = w->dout + (size_t)P * R * Sp;
+    for (int j = 0; j < S; j++) {
+        for (int h = 0; h < H; h++) w->Ws[j * Hp + h] = a->w_in[j * H + h];
+        w->bo[j] = a->b_out[j];
+    }
+    for (int k = 0; k < P; k++)
+        for (int h = 0; h < H; h++) w->Wp[k * Hp + h] = a->w_in[(S + k) * H + h];
+    for (int h = 0; h < H; h++) {
+        w->bh[h] = a->b_hidden[h];
+        for (int j = 0; j < S; j++) w->Wo[h * Sp + j] = a->w_out[h * S + j];
+    }
+    for (int r = 0; r < R; r++)
+        for (int j = 0; j < D; j++) w->s0[r * Sp + j] = a->X[r * D + j];
+    return 0;
+}
+
+/* Solves M x = b for a symmetric positive definite n x n M (Cholesky, in
+ * place). Returns 0 where M is not positive definite or a value is not
+ * finite (the step is then rejected, as torch's solve_ex's non-finite one). */
+static int solve_spd(int n, double M[LM_P_MAX][LM_P_MAX], const double *b, double *x) {
+    for (int j = 0; j < n; j++) {
+        double d = M[j][j];
+        for (int k = 0; k < j; k++) d -= M[j][k] * M[j][k];
+        if (!(d > 0.0) || !isfinite(d)) return 0;
+        M[j][j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double v = M[i][j];
+            for (int k = 0; k < j; k++) v -= M[i][k] * M[j][k];
+            M[i][j] = v / M[j][j];
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double v = b[i];
+        for (int k = 0; k < i; k++) v -= M[i][k] * x[k];
+        x[i] = v / M[i][i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double v = x[i];
+        for (int k = i + 1; k < n; k++) v -= M[k][i] * x[k];
+        x[i] = v / M[i][i];
+    }
+    for (int i = 0; i < n; i++)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
 /* Each instruction set below sets the kernel's register tiles: GEMM_NB_ROWS
  * (vectors, rows) of the forward and backward products' main column block,
  * TN_NB_ROWS (vectors, rows of W) of the weight gradients'. They keep
  * (vectors x rows) accumulators plus a row of B in the vector registers (16
  * for SSE2 and AVX2, 32 for AVX-512 and NEON); chosen by timing the
- * paper-size step on an AVX-512 machine (benchmarks/rnnpb.py). */
+ * paper-size step on an AVX-512 machine (benchmarks/rnnpb.py; the portable
+ * path's 4 x 3 forced on it: 4 % faster than 4 x 2 with SSE2). */
 
 /* -- portable: the compiler's baseline vector unit ------------------------- */
 #define VW 4
 #define SUFFIX portable
-#define GEMM_NB_ROWS 4, 2
+#define GEMM_NB_ROWS 4, 3
 #define TN_NB_ROWS 4, 2
 #define TARGET
 #define RECIP(q) (1.0f / (q))
@@ -107,10 +211,12 @@ enum { EPI_NONE = 0, EPI_TANH = 1, EPI_DTANH = 2 };
 #if defined(__SSE2__)
 #define VMIN _mm_min_ps
 #define VMAX _mm_max_ps
+#define SET1 _mm_set1_ps
 #elif defined(__ARM_NEON)
 #include <arm_neon.h>
 #define VMIN vminq_f32
 #define VMAX vmaxq_f32
+#define SET1 vdupq_n_f32
 #endif
 #include "_native_kernel.h"  /* undefines the parameters above */
 
@@ -129,6 +235,7 @@ TARGET static inline __attribute__((always_inline)) __m256 recip_avx2(__m256 q) 
 #define WIDE 0
 #define VMIN _mm256_min_ps
 #define VMAX _mm256_max_ps
+#define SET1 _mm256_set1_ps
 #include "_native_kernel.h"  /* undefines the parameters above */
 
 /* -- AVX-512: 16 floats, 32 registers -------------------------------------- */
@@ -145,6 +252,7 @@ TARGET static inline __attribute__((always_inline)) __m512 recip_avx512(__m512 q
 #define WIDE 1
 #define VMIN _mm512_min_ps
 #define VMAX _mm512_max_ps
+#define SET1 _mm512_set1_ps
 #include "_native_kernel.h"  /* undefines the parameters above */
 #endif
 
@@ -196,6 +304,32 @@ int iloci_rnnpb_train(iloci_rnnpb_train_args *a) {
     case ISA_AVX2: return train_avx2(a);
 #endif
     default: return train_portable(a);
+    }
+}
+
+/* sizeof the recognition's argument struct, so the caller can check its layout. */
+int iloci_rnnpb_recognize_args_size(void) { return (int)sizeof(iloci_rnnpb_recognize_args); }
+
+/* Entry point for ctypes: recognition_steps Levenberg-Marquardt steps on
+ * every row's u at once. Returns OK (u and err set), NO_MEMORY, TOO_WIDE
+ * (padded widths beyond WIDTH_MAX or more than LM_P_MAX PB units),
+ * ISA_UNSUPPORTED or BAD_ARGS, as iloci_rnnpb_train. */
+int iloci_rnnpb_recognize(iloci_rnnpb_recognize_args *a) {
+    if (a == NULL || a->size != (int32_t)sizeof(*a)) return BAD_ARGS;
+    if (a->steps < 0 || a->T < 2 || a->R < 1 || a->D < 1 || a->C < 0 || a->H < 1
+        || a->P < 1 || a->X == NULL || a->sw == NULL || a->u == NULL)
+        return BAD_ARGS;
+    if (round16(a->D + a->C) > WIDTH_MAX || round16(a->H) > WIDTH_MAX || a->P > LM_P_MAX)
+        return TOO_WIDE;
+    int isa = a->isa == ISA_AUTO ? iloci_rnnpb_best_isa() : a->isa;
+    if (!iloci_rnnpb_isa_supported(isa)) return ISA_UNSUPPORTED;
+    a->isa_used = isa;
+    switch (isa) {
+#if ILOCI_X86
+    case ISA_AVX512: return recognize_avx512(a);
+    case ISA_AVX2: return recognize_avx2(a);
+#endif
+    default: return recognize_portable(a);
     }
 }
 

@@ -1,4 +1,4 @@
-"""torch-rnnpb's native training kernel: finding it, choosing its instruction set.
+"""torch-rnnpb's native kernel (training, recognition): finding it, choosing its instruction set.
 
 Light: ctypes only, no torch, so ``iloci plugins`` can say which kernel
 will run without importing torch. The kernel itself is ``_native.c`` (an
@@ -50,6 +50,25 @@ class TrainArgs(ctypes.Structure):
     ]
 
 
+class RecognizeArgs(ctypes.Structure):
+    """``iloci_rnnpb_recognize_args`` of ``_native.c``: one recognition's arguments, by name."""
+
+    _fields_ = [
+        ("size", ctypes.c_int32), ("isa", ctypes.c_int32),
+        ("steps", ctypes.c_int32), ("T", ctypes.c_int32), ("R", ctypes.c_int32),
+        ("D", ctypes.c_int32), ("C", ctypes.c_int32), ("H", ctypes.c_int32),
+        ("P", ctypes.c_int32), ("bound", ctypes.c_float),
+        ("damping", ctypes.c_double), ("down", ctypes.c_double), ("up", ctypes.c_double),
+        ("lam_min", ctypes.c_double), ("lam_max", ctypes.c_double),
+        ("tiny", ctypes.c_double), ("u_max", ctypes.c_double),
+        ("X", ctypes.c_void_p), ("sw", ctypes.c_void_p),
+        ("w_in", ctypes.c_void_p), ("b_hidden", ctypes.c_void_p),
+        ("w_out", ctypes.c_void_p), ("b_out", ctypes.c_void_p),
+        ("u", ctypes.c_void_p), ("err", ctypes.c_void_p),
+        ("isa_used", ctypes.c_int32),
+    ]
+
+
 @lru_cache(maxsize=1)
 def native_lib() -> ctypes.CDLL | None:
     """The native training kernel (``_native.c``), or None where it was not built."""
@@ -58,11 +77,15 @@ def native_lib() -> ctypes.CDLL | None:
     except ImportError:
         return None
     lib = ctypes.CDLL(_native.__file__)
-    if lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(TrainArgs):
+    recognize_size = getattr(lib, "iloci_rnnpb_recognize_args_size", None)
+    if (lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(TrainArgs)
+            or recognize_size is None or recognize_size() != ctypes.sizeof(RecognizeArgs)):
         # a stale build of another layout: never pass it a struct it misreads
         return None
     lib.iloci_rnnpb_train.argtypes = [ctypes.POINTER(TrainArgs)]
     lib.iloci_rnnpb_train.restype = ctypes.c_int
+    lib.iloci_rnnpb_recognize.argtypes = [ctypes.POINTER(RecognizeArgs)]
+    lib.iloci_rnnpb_recognize.restype = ctypes.c_int
     lib.iloci_rnnpb_isa_supported.argtypes = [ctypes.c_int]
     return lib
 
@@ -129,8 +152,8 @@ def kernel_info(kernel: str = "auto", dtype: str = "float32") -> str:
 
 
 def describe() -> str:
-    """One line for ``iloci plugins``: what float32 training runs on here by default."""
+    """One line for ``iloci plugins``: what float32 training and recognition run on here."""
     try:
-        return "float32 training runs the " + kernel_info()
+        return "float32 training and recognition run the " + kernel_info()
     except IlociError as exc:
         return str(exc)

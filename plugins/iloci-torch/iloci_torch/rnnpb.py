@@ -36,8 +36,8 @@ import torch
 from iloci.errors import IlociError
 from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
                          WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
-from iloci_torch.native import (ISAS, NATIVE_CODES, TrainArgs, kernel_info, native_lib,
-                                requested_isa)
+from iloci_torch.native import (ISAS, NATIVE_CODES, RecognizeArgs, TrainArgs, kernel_info,
+                                native_lib, requested_isa)
 
 __all__ = ["TorchRNNPB"]
 
@@ -296,6 +296,10 @@ class TorchRNNPB(RNNPBBase):
     when the package was installed with a C compiler; it picks at run time
     the widest instruction set the CPU has (AVX-512, AVX2 + FMA, or portable
     C; ``ILOCI_RNNPB_ISA`` forces one) and :func:`kernel_info` says which.
+    Recognition's Levenberg-Marquardt steps run there too (float32 network,
+    each PB's ``P x P`` system in float64): about 3 ms instead of 16 to
+    recognize one sequence from 3 starts against 25 stored PBs (measured by
+    ``benchmarks/rnnpb.py --speed``, ``recognize_one_ms``).
     Float64 training, ``kernel = "torch"``, and sizes beyond the kernel
     (more than 256 hidden or state units) use torch operations. Both follow
     the same algorithm and update order as the numpy reference
@@ -429,6 +433,10 @@ class TorchRNNPB(RNNPBBase):
     def _recognize_kernel(self, X, mask, weight, u):
         if self.params.recognition_method == "adam":
             return self._recognize_adam(X, mask, weight, u)
+        if self.params.kernel != "torch" and self._dtype == torch.float32:
+            done = self._recognize_native(X, mask, weight, u)
+            if done is not None:
+                return done
         p = self.params
         net = self._net
         Xt, ut = self._t(X), self._t(u)
@@ -458,6 +466,48 @@ class TorchRNNPB(RNNPBBase):
                 lam = torch.where(ok, lam * LM_DOWN, lam * LM_UP).clamp_(LM_MIN, LM_MAX)
                 e = torch.where(ok, e_new, e)
         return ut.numpy().astype(np.float64)
+
+    def _recognize_native(self, X, mask, weight, u):
+        """The Levenberg-Marquardt steps below in the native kernel; None where it cannot run.
+
+        The same steps, constants and acceptance rule as the torch
+        operations, in float32 with each row's ``P x P`` system in float64;
+        ``iloci_rnnpb_recognize`` in ``_native.c``. It cannot run where the
+        extension was not built or the sizes exceed its widths (then torch
+        operations run, or with ``kernel = "native"`` an error is raised).
+        """
+        lib = native_lib()
+        if lib is None:
+            if self.params.kernel == "native":
+                raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
+                                 'install a C compiler and reinstall, or set kernel = "auto".')
+            return None
+        p, net = self.params, self._net
+        d, h, c, pb = self._sizes
+        f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+        w = {k: f32(net.views[k].numpy()) for k in WEIGHT_NAMES}
+        Xf, sw = f32(X), f32(np.sqrt(mask * weight[None, :]))
+        uf = np.array(u, np.float32, order="C")
+        args = RecognizeArgs(
+            size=ctypes.sizeof(RecognizeArgs), isa=ISAS.get(requested_isa(), 0),
+            steps=int(p.recognition_steps), T=X.shape[0], R=X.shape[1], D=d, C=c, H=h, P=pb,
+            bound=float(p.pb_bound), damping=float(p.recognition_damping),
+            down=LM_DOWN, up=LM_UP, lam_min=LM_MIN, lam_max=LM_MAX, tiny=LM_TINY,
+            u_max=LM_U_MAX, X=Xf.ctypes.data, sw=sw.ctypes.data,
+            w_in=w["w_in"].ctypes.data, b_hidden=w["b_hidden"].ctypes.data,
+            w_out=w["w_out"].ctypes.data, b_out=w["b_out"].ctypes.data,
+            u=uf.ctypes.data, err=None)
+        code = lib.iloci_rnnpb_recognize(ctypes.byref(args))
+        if code == 1:
+            raise IlociError("not enough memory to recognize this batch; recognize fewer or "
+                             "shorter sequences at once.")
+        if code == 2 and p.kernel != "native":  # wider than the kernel's tiles
+            return None
+        if code != 0:
+            raise IlociError(f"the native kernel refused to recognize (code {code}: "
+                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
+                             "to recognize with torch operations.")
+        return uf.astype(np.float64)
 
     def _recognize_adam(self, X, mask, weight, u):
         p = self.params
