@@ -558,6 +558,14 @@ class RNNPBBase:
         """
         raise NotImplementedError
 
+    def _train_multiple(self) -> int:
+        """Rows :meth:`train` pads its batch to a multiple of (``batch_multiple``).
+
+        A back end whose training kernel compiles nothing per shape returns
+        1: padded rows cost as much as real ones in every epoch.
+        """
+        return self.batch_multiple
+
     def _error_kernel(self, X: np.ndarray, mask: np.ndarray, pbs: np.ndarray,
                       exact: bool) -> np.ndarray:
         """Closed-loop prediction error per row (R,); float64 when ``exact``."""
@@ -569,10 +577,11 @@ class RNNPBBase:
 
     # -- public API ------------------------------------------------------------
 
-    def _padded(self, seqs: list[np.ndarray], geometric: bool | None = None
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _padded(self, seqs: list[np.ndarray], geometric: bool | None = None,
+                multiple: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         geometric = self.geometric_buckets if geometric is None else geometric
-        rows = bucket(len(seqs), self.batch_multiple, geometric)
+        rows = bucket(len(seqs), self.batch_multiple if multiple is None else multiple,
+                      geometric)
         X, mask = pad_sequences(seqs, rows)
         steps = mask.sum(axis=0)
         per_seq = np.divide(1.0, steps, out=np.zeros(rows), where=steps > 0)
@@ -622,7 +631,7 @@ class RNNPBBase:
             raise InvalidInputError(f"epochs must be an integer >= 0, got {epochs!r}.")
         # training pads to the next multiple only: its cost grows with the
         # padded rows over every epoch, which outweighs a compilation
-        X, mask, per_seq = self._padded(seqs, geometric=False)
+        X, mask, per_seq = self._padded(seqs, geometric=False, multiple=self._train_multiple())
         u = np.zeros((X.shape[1], self.pb_size))
         u[:b] = pb_to_u(pbs0, self.params.pb_bound)
         if n > 0:

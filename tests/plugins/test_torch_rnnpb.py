@@ -164,6 +164,19 @@ def test_native_recognition_steps_like_the_torch_operations(params, isa, monkeyp
 
 
 @needs_native
+def test_native_training_pads_no_rows_and_padding_would_change_nothing(monkeypatch):
+    seqs = synthetic_sequences(5, 6, lengths=(12, 17, 9))
+    a = TorchRNNPB(seed=2)
+    assert a._train_multiple() == 1 and TorchRNNPB(seed=2, kernel="torch")._train_multiple() == 4
+    pbs_a = a.train(seqs, epochs=20)
+    b = TorchRNNPB(seed=2)
+    monkeypatch.setattr(b, "_train_multiple", lambda: 4)    # 5 rows padded to 8, as before
+    pbs_b = b.train(seqs, epochs=20)
+    assert _max_weight_difference(a, b) == 0.0
+    np.testing.assert_array_equal(pbs_a, pbs_b)
+
+
+@needs_native
 def test_native_kernel_continues_from_the_current_weights():
     seqs = synthetic_sequences(4, 6)
     native, _, ops, _ = _train_both(seqs, 3)

@@ -25,6 +25,10 @@ ISAS = {"avx512": 3, "avx2": 2, "portable": 1}
 ISA_ENV = "ILOCI_RNNPB_ISA"
 
 
+#: Widest padded layer the native kernel trains (``WIDTH_MAX`` in ``_native.c``):
+#: hidden and state units are padded to multiples of 16.
+NATIVE_WIDTH_MAX = 256
+
 #: What a non-zero return of ``iloci_rnnpb_train`` means.
 NATIVE_CODES = {1: "out of memory", 2: "more than 256 hidden or state units",
                  3: "instruction set not supported here", 4: "malformed arguments"}
