@@ -121,8 +121,8 @@ class LearnerConfig:
     #: ``"prediction"`` (the error from PB_obs, a PB fitted freely to the
     #: demonstration: can the network reproduce it at all? It generalises
     #: to shapes never taught). With the novelty answer at 0.8, LASA's 5
-    #: folds, seeds 0 / 1 / 2: 2.01 / 2.48 / 2.08 feedbacks per learning
-    #: demonstration with ``"reproduction"`` against 2.64 / 4.00 / 3.40
+    #: folds, seeds 0 / 1 / 2: 1.98 / 2.19 / 2.21 feedbacks per learning
+    #: demonstration with ``"reproduction"`` against 2.58 / 3.51 / 3.30
     #: (benchmarks/quality.py, docs/method.md).
     familiarity: str = "reproduction"
     #: A reward that comes after a "no" for the same demonstration goes
@@ -138,7 +138,8 @@ class LearnerConfig:
     #: taught under another one. A reward that only strengthens an entry is
     #: kept as given. Off: the paper's protocol. With the noisy teacher at
     #: p = 0.1 (docs/method.md) CCR 97.66 / 94.78 / 97.53 % for seeds
-    #: 0 / 1 / 2 against 98.22 / 94.64 / 95.75 % without it.
+    #: 0 / 1 / 2 against 98.22 / 94.64 / 95.75 % without it (before
+    #: recognition's native Levenberg-Marquardt steps).
     confirm_new_exemplars: bool = False
     #: What ranks the robot's concepts for a demonstration, in recognition
     #: and in the order of its guesses: ``"pb_distance"`` (the paper: the
