@@ -13,6 +13,7 @@
  *   VMIN, VMAX  the instruction set's element-wise min and max, where it has
  *           them (otherwise a compare and a blend)
  *   SET1    the instruction set's broadcast of a float, where it has one
+ *   K_UNROLL  a pragma unrolling the products' loop over K, or nothing
  *
  * The arithmetic is GNU C vector extensions (GCC, Clang): the compiler maps
  * them to the target's registers, so the portable path is the same source
@@ -106,6 +107,7 @@ INL ptrdiff_t F(gemm_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int ROW
                 c[q][v] = acc ? LD(C + (i + q) * ldn + VW * v)
                         : init ? LD(init + (i + q) * init_stride + VW * v)
                         : F(splat)(0.0f);
+        K_UNROLL
         for (ptrdiff_t k = 0; k < K; k++) {
             const float *b = B + k * ldn;
             V bv[4];
@@ -506,5 +508,6 @@ TARGET static int F(recognize)(iloci_rnnpb_recognize_args *a) {
 #undef VMIN
 #undef VMAX
 #undef SET1
+#undef K_UNROLL
 #undef GEMM_NB_ROWS
 #undef TN_NB_ROWS
