@@ -81,6 +81,14 @@ ROWS: dict[str, dict[str, Any]] = {
     "confirm-exemplars": _with(BEST, {"learner": {"confirm_new_exemplars": True}}),
     "confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"confirm_new_exemplars": True},
                                                "teacher": {"name": "noisy", "p": 0.1}}),
+    # the noisy teacher with the PB-distance decision (the reproduction
+    # decision scores below it with the oracle since recognition's steps run
+    # in the native kernel), without and with confirmed new exemplars
+    "pb-noisy-0.1": _with(BEST, {"learner": {"decision": "pb_distance"},
+                                 "teacher": {"name": "noisy", "p": 0.1}}),
+    "pb-confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"decision": "pb_distance",
+                                                               "confirm_new_exemplars": True},
+                                                   "teacher": {"name": "noisy", "p": 0.1}}),
     "stream": _with(BEST, {"evaluation": {"protocol": "stream"}}),
     "paper-stream": _with(PAPER, {"evaluation": {"protocol": "stream"}}),
 }
