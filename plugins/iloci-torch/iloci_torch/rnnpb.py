@@ -392,17 +392,44 @@ class TorchRNNPB(RNNPBBase):
         self.kernel_ = "torch operations"
         return ut.numpy().astype(np.float64), float(loss)
 
+    def _native_library(self) -> ctypes.CDLL | None:
+        """The native kernel; None where it was not built (an error with kernel = "native")."""
+        lib = native_lib()
+        if lib is None and self.params.kernel == "native":
+            raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
+                             'install a C compiler and reinstall, or set kernel = "auto".')
+        return lib
+
+    def _native_ran(self, code: int, what: str) -> bool:
+        """Whether the native kernel's call to ``what`` ("train", "recognize") succeeded.
+
+        False where the sizes exceed the kernel's widths (torch operations
+        then run, unless ``kernel = "native"``).
+
+        Raises
+        ------
+        IlociError
+            Out of memory, or any other refusal (the model is unchanged).
+        """
+        if code == 1:
+            raise IlociError(f"not enough memory to {what} this batch; {what} fewer or shorter "
+                             "sequences at once. The model was left unchanged.")
+        if code == 2 and self.params.kernel != "native":  # wider than the kernel's tiles
+            return False
+        if code != 0:
+            raise IlociError(f"the native kernel refused to {what} (code {code}: "
+                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
+                             f"to {what} with torch operations.")
+        return True
+
     def _train_native(self, X, mask, weight, u, epochs):
         """``_train_kernel`` in the native kernel; None where it cannot run.
 
         It cannot where the extension was not built or the sizes exceed its
         widths; with ``kernel = "native"`` that is an error instead.
         """
-        lib = native_lib()
+        lib = self._native_library()
         if lib is None:
-            if self.params.kernel == "native":
-                raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
-                                 'install a C compiler and reinstall, or set kernel = "auto".')
             return None
         isa = requested_isa()
         p, net = self.params, self._net
@@ -423,16 +450,8 @@ class TorchRNNPB(RNNPBBase):
             b_hidden=w["b_hidden"].ctypes.data, w_out=w["w_out"].ctypes.data,
             b_out=w["b_out"].ctypes.data, u=uf.ctypes.data,
             loss_history=history.ctypes.data)
-        code = lib.iloci_rnnpb_train(ctypes.byref(args))
-        if code == 1:
-            raise IlociError("not enough memory to train this batch; train fewer or shorter "
-                             "sequences at once. The model was left unchanged.")
-        if code == 2 and p.kernel != "native":  # wider than the kernel's tiles
+        if not self._native_ran(lib.iloci_rnnpb_train(ctypes.byref(args)), "train"):
             return None
-        if code != 0:
-            raise IlociError(f"the native kernel refused to train (code {code}: "
-                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
-                             "to train with torch operations.")
         if not all(np.isfinite(a).all() for a in w.values()):
             raise diverged_error()
         for k in WEIGHT_NAMES:
@@ -488,11 +507,8 @@ class TorchRNNPB(RNNPBBase):
         extension was not built or the sizes exceed its widths (then torch
         operations run, or with ``kernel = "native"`` an error is raised).
         """
-        lib = native_lib()
+        lib = self._native_library()
         if lib is None:
-            if self.params.kernel == "native":
-                raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
-                                 'install a C compiler and reinstall, or set kernel = "auto".')
             return None
         p, net = self.params, self._net
         d, h, c, pb = self._sizes
@@ -509,16 +525,8 @@ class TorchRNNPB(RNNPBBase):
             w_in=w["w_in"].ctypes.data, b_hidden=w["b_hidden"].ctypes.data,
             w_out=w["w_out"].ctypes.data, b_out=w["b_out"].ctypes.data,
             u=uf.ctypes.data, err=None)
-        code = lib.iloci_rnnpb_recognize(ctypes.byref(args))
-        if code == 1:
-            raise IlociError("not enough memory to recognize this batch; recognize fewer or "
-                             "shorter sequences at once.")
-        if code == 2 and p.kernel != "native":  # wider than the kernel's tiles
+        if not self._native_ran(lib.iloci_rnnpb_recognize(ctypes.byref(args)), "recognize"):
             return None
-        if code != 0:
-            raise IlociError(f"the native kernel refused to recognize (code {code}: "
-                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
-                             "to recognize with torch operations.")
         return uf.astype(np.float64)
 
     def _recognize_adam(self, X, mask, weight, u):
