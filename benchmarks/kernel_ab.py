@@ -11,6 +11,7 @@ ctypes and times the same training on the same data, alternating, in one
 process:
 
     per round: old kernel, 200 epochs; new kernel (AVX-512 forced), 200 epochs
+               (the order alternating from round to round)
     data: 36 LASA sequences x 50 steps x 6 joint features (fold 0's learning
           set, as benchmarks/rnnpb.py), H 60, C 25, P 4, float32, closed loop
     result: median ms per step (wall and process CPU time) over the rounds,
@@ -140,7 +141,9 @@ def main() -> None:
         load_before = os.getloadavg()
         ends = {}
         for r in range(args.rounds + 1):            # round 0 warms up, not counted
-            for which in ("old", "new"):
+            # the order alternates, so neither kernel always runs on a cache
+            # (or a clock) the other one warmed
+            for which in (("old", "new") if r % 2 else ("new", "old")):
                 wall, cpu, ends[which] = run(which)
                 if r:
                     times[which]["wall"].append(wall)
