@@ -85,6 +85,30 @@ typedef struct {
 
 static int round16(int n) { return (n + 15) / 16 * 16; }
 
+/* The weights padded into the kernel's layout, flat = Ws (S_p, H_p) | Wp (P,
+ * H_p) | bh (H_p) | Wo (H_p, S_p) | bo (S_p), zero-filled beforehand; and
+ * s0 (R, S_p) = [x_0, 0] per row. The layout of both training and
+ * recognition. */
+static void pad_network(int D, int C, int H, int P, int R, const float *w_in,
+                        const float *b_hidden, const float *w_out, const float *b_out,
+                        const float *X, float *flat, float *s0) {
+    const int S = D + C, Sp = round16(S), Hp = round16(H);
+    float *Ws = flat, *Wp = Ws + (size_t)Sp * Hp, *bh = Wp + (size_t)P * Hp;
+    float *Wo = bh + Hp, *bo = Wo + (size_t)Hp * Sp;
+    for (int j = 0; j < S; j++) {
+        for (int h = 0; h < H; h++) Ws[j * Hp + h] = w_in[j * H + h];
+        bo[j] = b_out[j];
+    }
+    for (int k = 0; k < P; k++)
+        for (int h = 0; h < H; h++) Wp[k * Hp + h] = w_in[(S + k) * H + h];
+    for (int h = 0; h < H; h++) {
+        bh[h] = b_hidden[h];
+        for (int j = 0; j < S; j++) Wo[h * Sp + j] = w_out[h * S + j];
+    }
+    for (int r = 0; r < R; r++)
+        for (int j = 0; j < D; j++) s0[r * Sp + j] = X[r * D + j];
+}
+
 /* The learning rates' decay factor at epoch t (1-based): decay^((t-1)/epochs). */
 static double schedule_decay(const iloci_rnnpb_train_args *a, int t) {
     return pow(a->decay, (double)(t - 1) / a->epochs);
@@ -147,18 +171,8 @@ static int lm_work_init(lm_work *w, const iloci_rnnpb_recognize_args *a) {
     w->Hs = w->pre + (size_t)R * Hp; w->Os = w->Hs + (size_t)L * R * Hp;
     w->dpre = w->Os + (size_t)L * R * Sp; w->dh = w->dpre + (size_t)P * R * Hp;
     w->dout = w->dh + (size_t)P * R * Hp; w->trial = w->dout + (size_t)P * R * Sp;
-    for (int j = 0; j < S; j++) {
-        for (int h = 0; h < H; h++) w->Ws[j * Hp + h] = a->w_in[j * H + h];
-        w->bo[j] = a->b_out[j];
-    }
-    for (int k = 0; k < P; k++)
-        for (int h = 0; h < H; h++) w->Wp[k * Hp + h] = a->w_in[(S + k) * H + h];
-    for (int h = 0; h < H; h++) {
-        w->bh[h] = a->b_hidden[h];
-        for (int j = 0; j < S; j++) w->Wo[h * Sp + j] = a->w_out[h * S + j];
-    }
-    for (int r = 0; r < R; r++)
-        for (int j = 0; j < D; j++) w->s0[r * Sp + j] = a->X[r * D + j];
+    pad_network(D, a->C, H, P, R, a->w_in, a->b_hidden, a->w_out, a->b_out, a->X, w->Ws,
+                w->s0);
     return 0;
 }
 

@@ -239,19 +239,8 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
     float *gWs = g, *gWp = gWs + nWs, *gbh = gWp + nWp, *gWo = gbh + Hp, *gbo = gWo + nWo;
     float *u = a->u;
 
-    for (int j = 0; j < S; j++) {
-        for (int h = 0; h < H; h++) Ws[j * Hp + h] = a->w_in[j * H + h];
-        bo[j] = a->b_out[j];
-        mix[j] = j < D ? alpha : 1.0f;
-    }
-    for (int k = 0; k < P; k++)
-        for (int h = 0; h < H; h++) Wp[k * Hp + h] = a->w_in[(S + k) * H + h];
-    for (int h = 0; h < H; h++) {
-        bh[h] = a->b_hidden[h];
-        for (int j = 0; j < S; j++) Wo[h * Sp + j] = a->w_out[h * S + j];
-    }
-    for (int r = 0; r < R; r++)
-        for (int j = 0; j < D; j++) s0[r * Sp + j] = X[r * D + j];
+    pad_network(D, a->C, H, P, R, a->w_in, a->b_hidden, a->w_out, a->b_out, X, w, s0);
+    for (int j = 0; j < S; j++) mix[j] = j < D ? alpha : 1.0f;
 
     float loss = 0.0f;
     int t = 1;
