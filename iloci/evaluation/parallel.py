@@ -151,13 +151,7 @@ def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], ba
     """One fold in an executor's worker; ``queue.put`` receives its progress messages."""
     from iloci.evaluation.evaluate import run_fold
     demos, pm = _worker_context(config_dict, shapes, specs)
-
-    def send(msg: dict) -> None:
-        if queue is not None:
-            queue.put(msg)
-
-    # a fold's clock starts when a worker takes it, not when it is queued
-    send({"kind": "fold_start", "fold": task.fold, "total": len(task.learn)})
+    send = _fold_started(task, queue)
     return run_fold(config_dict, task.fold, [demos[i] for i in task.learn],
                     [demos[i] for i in task.test], send=send, baseline=baseline,
                     plugin_manager=pm, memory_dir=task.memory_dir,
@@ -176,17 +170,25 @@ def _worker_context(config_dict: dict, shapes: list[str],
     return demos, pm
 
 
-def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
-                          specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
-    """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``."""
-    from iloci.evaluation.evaluate import learn_fold
-    demos, pm = _worker_context(config_dict, shapes, specs)
+def _fold_started(task: FoldTask, queue: Any) -> Callable[[dict], None]:
+    """A worker's sender of progress messages to ``queue`` (None: none), after "fold_start".
 
+    A fold's clock starts when a worker takes it, not when it is queued.
+    """
     def send(msg: dict) -> None:
         if queue is not None:
             queue.put(msg)
 
     send({"kind": "fold_start", "fold": task.fold, "total": len(task.learn)})
+    return send
+
+
+def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
+                          specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
+    """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``."""
+    from iloci.evaluation.evaluate import learn_fold
+    demos, pm = _worker_context(config_dict, shapes, specs)
+    send = _fold_started(task, queue)
     learned, agent = learn_fold(config_dict, task.fold, [demos[i] for i in task.learn],
                                 [demos[i] for i in task.test], send=send, baseline=baseline,
                                 plugin_manager=pm, memory_dir=task.memory_dir,
