@@ -319,8 +319,10 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
                 in = Os + (size_t)(s - 1) * R * Sp;
             }
             float *h = Hs + (size_t)s * R * Hp;
-            F(gemm)(R, Sp, Hp, in, Sp, Ws, pre, Hp, 0, h, EPI_TANH, NULL);
-            F(gemm)(R, Hp, Sp, h, Hp, Wo, bo, 0, 0, Os + (size_t)s * R * Sp, EPI_TANH, NULL);
+            /* the sums run over the S state and H hidden units only: the
+               padded ones are exactly zero (see the layout in _native.c) */
+            F(gemm)(R, S, Hp, in, Sp, Ws, pre, Hp, 0, h, EPI_TANH, NULL);
+            F(gemm)(R, H, Sp, h, Hp, Wo, bo, 0, 0, Os + (size_t)s * R * Sp, EPI_TANH, NULL);
         }
         /* loss = sum mw mean_D (y - x)^2; G = dL/do (whole rows: zero past D) */
         double lsum = 0.0;
@@ -351,8 +353,8 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
             if (s == L - 1)  /* no carry into the last step */
                 for (int i = 0; i < R * Sp; i++) go[i] *= 1.0f - o[i] * o[i];
             float *dz = DZ + (size_t)s * R * Hp;
-            F(gemm)(R, Sp, Hp, go, Sp, WoT, NULL, 0, 0, dz, EPI_DTANH, Hs + (size_t)s * R * Hp);
-            if (s > 0) F(gemm)(R, Hp, Sp, dz, Hp, WsTm, NULL, 0, 1, go - (size_t)R * Sp,
+            F(gemm)(R, S, Hp, go, Sp, WoT, NULL, 0, 0, dz, EPI_DTANH, Hs + (size_t)s * R * Hp);
+            if (s > 0) F(gemm)(R, H, Sp, dz, Hp, WsTm, NULL, 0, 1, go - (size_t)R * Sp,
                                EPI_DTANH, o - (size_t)R * Sp);
         }
         /* weight gradients: sums over all steps and rows, each part of g
