@@ -48,9 +48,9 @@ __all__ = [
 #: The component each section names when a config leaves its name out.
 DEFAULT_NAMES = {
     # torch-rnnpb: with AVX2 or AVX-512 its native training kernel is the
-    # fastest training step measured (CPU per paper-size step: AVX-512 0.58 ms,
-    # AVX2 0.99 ms, jax-rnnpb 1.38 ms; its portable C path 1.75 ms is slower
-    # than jax), and its recognition is faster than jax's everywhere
+    # fastest training step measured (CPU per paper-size step: AVX-512 0.47 ms,
+    # AVX2 0.57 ms, jax-rnnpb 1.46 ms; its portable C path, 1.34 ms, is about
+    # as fast as jax), and its recognition is faster than jax's everywhere
     # (benchmarks/results/rnnpb_speed.json, step_ms_by_kernel)
     "perceptual_model": "torch-rnnpb",
     "clusterer": "scipy",
