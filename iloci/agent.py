@@ -378,10 +378,42 @@ class Agent:
             raise NotFittedError("the robot has learned nothing yet: teach it at least one "
                                  "demonstration (Agent.learn / `iloci teach`) before "
                                  "recognizing.")
-        seqs = [self._encode(self.motion(d))[0] for d in items]
+        motions = [self.motion(d) for d in items]
+        seqs = [self._encode(m)[0] for m in motions]
         with self._lock:
-            out = self.learner.recognize(seqs, [d.key for d in items])
+            out = self.learner.recognize(seqs, [d.key for d in items],
+                                         tilted=self.tilted_readings(motions))
         return out[0] if single else out
+
+    def tilted_readings(self, motions: Sequence[Any]
+                        ) -> Callable[[int], list[tuple[float, np.ndarray]]]:
+        """The tilt search's readings of ``motions`` (``[learner] tilts``) for recognition.
+
+        Returns
+        -------
+        callable
+            ``f(b)``: ``(degrees, sequence)`` for each angle ``a`` of
+            ``tilts``, ``+a`` then ``-a``: motion ``b``'s pen path turned
+            by it (:func:`~iloci.sensorimotor.pipeline.tilted`, IK solved
+            again) and encoded. A turned path the arm cannot reach is left
+            out.
+        """
+        from iloci.errors import UnreachableTargetError
+        from iloci.sensorimotor.pipeline import tilted
+
+        angles = [s * float(a) for a in self.config.learner.tilts for s in (1.0, -1.0)]
+
+        def readings(b: int) -> list[tuple[float, np.ndarray]]:
+            out = []
+            for a in angles:
+                try:
+                    motion = tilted(motions[b], a, self.ik_solver, self.robot)
+                except UnreachableTargetError:
+                    continue
+                out.append((a, self._encode(motion)[0]))
+            return out
+
+        return readings
 
     def respond(self, concept: str):
         """Perform ``concept``: its entry of lowest generation error, as a Response.

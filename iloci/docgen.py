@@ -36,6 +36,7 @@ PAPER: dict[str, str] = {
     "learner.num_threshold": "Num_threshold = 3",
     "learner.similarity_threshold": "Similarity_threshold = 0.1",
     "learner.rehearse_from": '"regenerated" (no demonstration is kept)',
+    "learner.tilts": "none (each drawing is read as drawn)",
     "sensorimotor.steps": "numSteps + 1 (no value given)",
     "sensorimotor.smoothing_window": "smoothing (no method given)",
     "robot.name": "Nao V3.2 right arm",

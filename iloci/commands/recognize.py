@@ -39,10 +39,12 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps({"demo": r.demo, "concept": r.concept,
                               "confidence": r.confidence, "distance": r.distance,
                               "source": r.source, "sources": list(r.sources),
-                              "familiarity": r.familiarity, "unknown": r.unknown}))
+                              "familiarity": r.familiarity, "unknown": r.unknown,
+                              "tilt": r.tilt}))
         else:
             answer = (f"unknown (nearest concept {r.concept}, familiarity "
                       f"{r.familiarity:.2f})" if r.unknown else f"concept {r.concept}")
+            turned = f"; read turned by {r.tilt:+g} degrees" if r.tilt else ""
             print(f"{r.demo}: {answer} (confidence {r.confidence:.2f}, PB distance "
-                  f"{r.distance:.3f}; nearest entry stands for {r.source})")
+                  f"{r.distance:.3f}; nearest entry stands for {r.source}{turned})")
     return 0

@@ -49,6 +49,12 @@ from iloci.sensorimotor.frames import TeacherFrame
 __all__ = ["Answer", "Learner", "LearnOutcome", "Recognition", "Turn", "confidence",
            "familiarity", "ik_joint_limits", "novelty_scale", "perform"]
 
+#: A turned reading of the tilt search (``[learner] tilts``) is recognized
+#: only when its entry prediction error is below this fraction of the
+#: upright reading's, so the drawing as drawn wins near ties (measured on
+#: LASA's folds: docs/guide.md, "How a drawing is read").
+TILT_MARGIN = 0.9
+
 #: Actions the learner takes on a feedback (InteractionEvent.action).
 ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept", "confirm")
 
@@ -150,6 +156,11 @@ class Recognition:
     #: robot answers "I don't know" (``concept`` is still the nearest one).
     unknown: bool = False
     reproduction_error: float = float("nan")
+    #: Degrees the drawing was turned (counter-clockwise as the teacher
+    #: sees it) in the reading recognized: 0 for the drawing as drawn, else
+    #: the angle of ``[learner] tilts`` whose reading the memory reproduced
+    #: best (:meth:`Learner.recognize`).
+    tilt: float = 0.0
 
 
 def perform(memory: Memory, model: PerceptualModel, index: int, *,
@@ -609,7 +620,9 @@ class Learner:
 
     # -- inference phase -------------------------------------------------------------
     def recognize(self, sequences: Sequence[np.ndarray],
-                  keys: Sequence[str] | None = None) -> list[Recognition]:
+                  keys: Sequence[str] | None = None, *,
+                  tilted: Callable[[int], Sequence[tuple[float, np.ndarray]]] | None = None
+                  ) -> list[Recognition]:
         """Recognize a batch of encoded sequences (no feedback, memory unchanged).
 
         Parameters
@@ -617,11 +630,55 @@ class Learner:
         sequences : sequence of ndarray, each (T_i, D)
         keys : sequence of str, optional
             Demonstration keys, for the results.
+        tilted : callable, optional
+            The tilt search (``[learner] tilts``, ``tilt_beyond``):
+            ``tilted(b)`` gives ``(degrees, sequence)`` pairs, sequence
+            ``b`` turned by each angle of ``tilts`` and encoded
+            (:meth:`Agent.recognize <iloci.agent.Agent.recognize>` turns the
+            pen path with :func:`~iloci.sensorimotor.pipeline.tilted`). It
+            is called only for the sequences whose PB_obs lies further
+            than ``tilt_beyond`` from every PB_rec; of a sequence's
+            readings, the one with the lowest entry prediction error
+            (:meth:`entry_errors`, the best over the memory's entries) is
+            recognized, a turned one only when that error is below
+            :data:`TILT_MARGIN` times the upright reading's.
 
         Returns
         -------
         list of Recognition
+            With ``tilt``, the angle of the reading recognized.
         """
+        out = self._recognize(sequences, keys)
+        if tilted is None or not self.config.tilts:
+            return out
+        ask = [b for b, r in enumerate(out) if r.distance > self.config.tilt_beyond]
+        owners: list[tuple[int, float]] = []
+        turned: list[np.ndarray] = []
+        for b in ask:
+            for degrees, seq in tilted(b):
+                owners.append((b, float(degrees)))
+                turned.append(seq)
+        if not turned:
+            return out
+        seqs = list(sequences)
+        upright = self.entry_errors([seqs[b] for b in ask]).min(axis=1)
+        best = {b: (TILT_MARGIN * float(e), -1) for b, e in zip(ask, upright)}
+        for j, e in enumerate(self.entry_errors(turned).min(axis=1)):
+            b = owners[j][0]
+            if e < best[b][0]:
+                best[b] = (float(e), j)
+        chosen = sorted({j for _, j in best.values() if j >= 0})
+        if not chosen:
+            return out
+        recs = self._recognize([turned[j] for j in chosen], [out[owners[j][0]].demo
+                                                               for j in chosen])
+        for j, r in zip(chosen, recs):
+            out[owners[j][0]] = replace(r, tilt=owners[j][1])
+        return out
+
+    def _recognize(self, sequences: Sequence[np.ndarray],
+                   keys: Sequence[str] | None = None) -> list[Recognition]:
+        """:meth:`recognize` of each sequence as given (no tilt search)."""
         seqs = list(sequences)
         keys = list(keys) if keys is not None else [f"#{i}" for i in range(len(seqs))]
         if not seqs:

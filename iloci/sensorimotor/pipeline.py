@@ -18,10 +18,10 @@ import numpy as np
 from iloci.config import Config, SensorimotorConfig
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration, IKSolver
-from iloci.sensorimotor.preprocess import preprocess
+from iloci.sensorimotor.preprocess import fit_to_plane, preprocess
 from iloci.sensorimotor.robots import Robot, get_robot
 
-__all__ = ["Motion", "MotionCache", "preprocessed", "to_motion", "to_motions"]
+__all__ = ["Motion", "MotionCache", "preprocessed", "tilted", "to_motion", "to_motions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +142,59 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     assert times is not None  # Demonstration fills in times when none are given
     dt = float(times[-1] - times[0]) / (cfg.steps - 1)
     return Motion(demo.key, plane_points, targets, joint_path, dt)
+
+
+def tilted(motion: Motion, degrees: float, ik: IKSolver, robot: Robot | None = None) -> Motion:
+    """The motion of the same drawing turned by ``degrees`` in the drawing plane.
+
+    The pen path is rotated about the plane's centre (counter-clockwise as
+    the teacher sees it for ``degrees > 0``), fitted into the plane again as
+    any drawing is (:func:`~iloci.sensorimotor.preprocess.fit_to_plane`, so
+    a turned drawing fills the plane as an upright one would), and IK is
+    solved along it from the robot's ``q_home``. Resampling and smoothing
+    commute with a rotation, so this is the motion of the demonstration
+    turned before preprocessing, without reading it again. Recognition's
+    tilt search (``[learner] tilts``) uses it.
+
+    Parameters
+    ----------
+    motion : Motion
+        The drawing as read (:func:`to_motion`).
+    degrees : float
+        Angle (degrees); 0 returns ``motion`` itself.
+    ik : IKSolver
+    robot : Robot, optional
+        As for :func:`to_motion`.
+
+    Returns
+    -------
+    Motion
+        Same key and ``dt``.
+
+    Raises
+    ------
+    InvalidInputError
+        ``degrees`` is not a finite number.
+    UnreachableTargetError
+        The turned path cannot be reached.
+    """
+    try:
+        a = float(degrees)
+    except (TypeError, ValueError):
+        a = float("nan")
+    if not np.isfinite(a):
+        raise InvalidInputError(f"tilt must be a finite number of degrees, got {degrees!r}.")
+    if a == 0.0:
+        return motion
+    if robot is None:
+        robot = getattr(ik, "robot", None) or get_robot()
+    plane = robot.plane
+    c, s = np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a))
+    turned = (motion.plane_points - plane.center) @ np.array([[c, s], [-s, c]]) + plane.center
+    plane_points = fit_to_plane(turned, plane)
+    targets = plane.to_3d(plane_points)
+    joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
+    return Motion(motion.demo_key, plane_points, targets, joint_path, motion.dt)
 
 
 def to_motions(demos: Iterable[Demonstration], config: SensorimotorConfig | Config | None,

@@ -261,7 +261,7 @@ class Classroom:
             demo = self._demo(positions, times)
             r = await asyncio.to_thread(self.agent.recognize, demo)
         return {"concept": r.concept, "confidence": round(r.confidence, 4),
-                "distance": round(r.distance, 4), "entry": r.entry}
+                "distance": round(r.distance, 4), "entry": r.entry, "tilt": r.tilt}
 
     async def rename(self, body: Any) -> dict[str, Any]:
         if not isinstance(body, dict) or not isinstance(body.get("concept"), str) \
