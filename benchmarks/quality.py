@@ -44,8 +44,13 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results" / "quality.json"
 
 #: The settings this issue recommends (``[learner]`` keys), measured here as ``best``.
+#: The decision is the paper's PB distance: once recognition's steps ran in
+#: the native kernel, ``decision = "reproduction"`` scored below it with the
+#: oracle (99.41 against 99.73 % pooled over seeds 0-2, rows best and
+#: pb-decision of the earlier quality.json) and no better with the noisy
+#: teacher (95.97 against 96.07 %).
 BEST: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True,
-                                    "decision": "reproduction"}}
+                                    "decision": "pb_distance"}}
 
 #: The paper's learning phase: every setting of this issue off.
 PAPER: dict[str, Any] = {"learner": {"novelty_below": 0.0, "unknown_below": 0.0,
@@ -65,11 +70,11 @@ ROWS: dict[str, dict[str, Any]] = {
     "best": BEST,
     "paper": PAPER,
     "novelty-only": _with(BEST, {"learner": {"confirm_rewards": False}}),
-    "pb-decision": _with(BEST, {"learner": {"decision": "pb_distance"}}),
-    # the novelty answer's familiarity of the PB_obs error (before: of the best
-    # entry's reproduction error, the default)
-    "novelty-prediction": _with(BEST, {"learner": {"decision": "pb_distance",
-                                                   "familiarity": "prediction"}}),
+    # the decision this issue first recommended: each entry's reproduction error
+    "reproduction-decision": _with(BEST, {"learner": {"decision": "reproduction"}}),
+    # the novelty answer's familiarity of the PB_obs error (instead of the
+    # best entry's reproduction error, the default)
+    "novelty-prediction": _with(BEST, {"learner": {"familiarity": "prediction"}}),
     "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
     "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
     "paper-untaught": _with(PAPER, {"evaluation": {"untaught": 4}}),
@@ -81,22 +86,23 @@ ROWS: dict[str, dict[str, Any]] = {
     "confirm-exemplars": _with(BEST, {"learner": {"confirm_new_exemplars": True}}),
     "confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"confirm_new_exemplars": True},
                                                "teacher": {"name": "noisy", "p": 0.1}}),
-    # the noisy teacher with the PB-distance decision (the reproduction
-    # decision scores below it with the oracle since recognition's steps run
-    # in the native kernel), without and with confirmed new exemplars
-    "pb-noisy-0.1": _with(BEST, {"learner": {"decision": "pb_distance"},
-                                 "teacher": {"name": "noisy", "p": 0.1}}),
-    "pb-confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"decision": "pb_distance",
-                                                               "confirm_new_exemplars": True},
-                                                   "teacher": {"name": "noisy", "p": 0.1}}),
     "stream": _with(BEST, {"evaluation": {"protocol": "stream"}}),
     "paper-stream": _with(PAPER, {"evaluation": {"protocol": "stream"}}),
 }
+# the novelty answer asked (again) after K refused guesses: its cost with the
+# oracle, its effect with the noisy teacher
+for _k in (2, 3):
+    ROWS[f"novelty-after-{_k}"] = _with(BEST, {"learner": {"novelty_after": _k}})
+    ROWS[f"novelty-after-{_k}-noisy-0.1"] = _with(BEST, {"learner": {"novelty_after": _k},
+                                                        "teacher": {"name": "noisy", "p": 0.1}})
+    ROWS[f"novelty-after-{_k}-confirm-exemplars-noisy-0.1"] = _with(
+        BEST, {"learner": {"novelty_after": _k, "confirm_new_exemplars": True},
+               "teacher": {"name": "noisy", "p": 0.1}})
 
 #: Rows run by default, in order (the cheap, decisive ones first).
-DEFAULT_ROWS = ("best", "paper", "pb-decision", "novelty-prediction", "noisy-0.1", "untaught",
-                "paper-noisy-0.1", "noisy-0.05", "noisy-0.2", "reproduction-only", "novelty-only",
-                "stream", "paper-stream")
+DEFAULT_ROWS = ("best", "paper", "novelty-prediction", "noisy-0.1", "untaught",
+                "paper-noisy-0.1", "noisy-0.05", "noisy-0.2", "reproduction-decision",
+                "reproduction-only", "novelty-only", "stream", "paper-stream")
 
 
 def _merge(base: dict, changes: dict) -> dict:
@@ -404,16 +410,16 @@ def main(argv: list[str] | None = None) -> dict:
             targets["defaults_ccr_ge_dtw_every_seed"] = {
                 "value": {s: [per_seed[s], dtw_seed[s]] for s in per_seed}, "seeds": both,
                 "met": all(per_seed[s] >= dtw_seed[s] for s in per_seed)}
-    if "pb-decision" in runs and "paper" in runs:
-        # the novelty answer alone (with confirm_rewards), against the paper's
-        # protocol on the same seeds: nothing else differs
-        nov = {r["seed"]: summarize_folds([r]) for r in runs["pb-decision"]}
+    if "best" in runs and "paper" in runs:
+        # the settings of this issue against the paper's protocol on the same
+        # seeds (the decision is the same: PB distance)
+        nov = {r["seed"]: summarize_folds([r]) for r in runs["best"]}
         pap = {r["seed"]: summarize_folds([r]) for r in runs["paper"]}
         both = sorted(set(nov) & set(pap))
         if both:
             fb = [nov[s]["feedbacks_per_demo"]["mean"] for s in both]
             out["novelty"] = {
-                "row": "pb-decision", "against": "paper", "seeds": both,
+                "row": "best", "against": "paper", "seeds": both,
                 "feedbacks_per_demo": {str(s): f for s, f in zip(both, fb)},
                 "paper_feedbacks_per_demo": {str(s): pap[s]["feedbacks_per_demo"]["mean"]
                                              for s in both},
