@@ -98,6 +98,12 @@ for _k in (2, 3):
     ROWS[f"novelty-after-{_k}-confirm-exemplars-noisy-0.1"] = _with(
         BEST, {"learner": {"novelty_after": _k, "confirm_new_exemplars": True},
                "teacher": {"name": "noisy", "p": 0.1}})
+    _twice = {"novelty_after": _k, "confirm_new_exemplars": True,
+              "confirm_twice_after_novelty": True}
+    ROWS[f"novelty-after-{_k}-twice"] = _with(BEST, {"learner": _twice})
+    ROWS[f"novelty-after-{_k}-twice-noisy-0.1"] = _with(BEST, {"learner": _twice,
+                                                             "teacher": {"name": "noisy",
+                                                                         "p": 0.1}})
 
 #: Rows run by default, in order (the cheap, decisive ones first).
 DEFAULT_ROWS = ("best", "paper", "novelty-prediction", "noisy-0.1", "untaught",

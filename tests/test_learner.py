@@ -601,9 +601,38 @@ def test_oracle_and_console_teachers_answer_the_novelty_answer_asked_again(lasa)
     assert "(attempt 1)" in prompts[1] and "(attempt 3)" in prompts[3]
 
 
+@pytest.mark.parametrize("second", [-1, 1])
+def test_a_reward_after_the_novelty_answer_asked_again_is_confirmed_twice(lasa, second):
+    rec = Recorder()
+    agent = make_agent(rec, novelty_after=1, confirm_rewards=True,
+                       confirm_twice_after_novelty=True)
+    # Sine/0: a refused guess, "new?" refused, then the last guess: +1 and
+    # two confirmations (the second +1 or -1)
+    agent.teacher = ScriptedTeacher([-1, -1, -1, 1, 1, second])
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])
+    outcome = agent.learn(lasa["Sine/0"])
+    assert outcome.feedbacks == (-1, -1, 1, 1, second)
+    actions = [e.action for e in rec.interactions if e.demo == "Sine/0"]
+    assert actions[:4] == ["next_guess", "next_guess", "confirm", "confirm"]
+    if second == 1:
+        assert outcome.action in ("strengthen", "new_exemplar")
+        assert len(agent.memory.concepts()) == 2
+    else:  # the double slip is caught: a concept of its own
+        assert outcome.action == "new_concept" and len(agent.memory.concepts()) == 3
+    # without it, one confirmation is enough there
+    once = make_agent(novelty_after=1, confirm_rewards=True)
+    once.teacher = ScriptedTeacher([-1, -1, -1, 1, 1])
+    once.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert once.learn(lasa["Sine/0"]).feedbacks == (-1, -1, 1, 1)
+
+
 def test_novelty_after_is_checked():
     with pytest.raises(iloci.errors.ConfigError, match="novelty_after must be >= 0, got -1"):
         iloci.build(small_config(novelty_after=-1))
+    with pytest.raises(iloci.errors.ConfigError, match="confirm_twice_after_novelty needs "
+                                                       "novelty_after > 0"):
+        iloci.build(small_config(confirm_twice_after_novelty=True))
 
 
 def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa):

@@ -786,6 +786,8 @@ class Turn:
         self._fam = float("nan")   # the demonstration's familiarity, once computed
         self._refused = 0          # guesses refused since the turn or a novelty answer began
         self._novelty_again = learner.config.novelty_after > 0   # the re-offer is unused
+        self._confirmations = 0    # confirmations given for the current guess's reward
+        self._deep = False         # the novelty answer asked again was refused too
         if learner.config.novelty_below > 0:
             fam = self._familiarity()
             if fam < learner.config.novelty_below:
@@ -922,6 +924,10 @@ class Turn:
         self.feedbacks.append(-1)
         self._novel = False
         self._refused = 0
+        if not self._novelty_again and self.tried:
+            # asked after refused guesses and refused too ([learner]
+            # confirm_twice_after_novelty)
+            self._deep = True
         ev = InteractionEvent(demo=self.key, step=self.step, attempt=self.answer.attempt,
                               guessed=None, tried=tuple(self.tried), answered=None,
                               feedback=-1, action="next_guess",
@@ -937,6 +943,7 @@ class Turn:
             # the reward was not confirmed: the first "yes" stands recorded
             # as given, the "no" that denies it is this attempt's feedback
             self._confirming = False
+            self._confirmations = 0
         common, extra = self._common(answer, -1)
         ev = InteractionEvent(action="next_guess", extra=extra, **common)
         self.feedbacks.append(-1)
@@ -961,13 +968,19 @@ class Turn:
         common, extra = self._common(answer, 1)
         if self._confirming:
             self._confirming = False
-        elif ((learner.config.confirm_rewards and -1 in self.feedbacks)
-              or (learner.config.confirm_new_exemplars
-                  and self.distances[nearest] >= learner.config.similarity_threshold)):
-            # a reward after a "no" goes against the robot's own ranking, and
-            # one that makes a new exemplar widens a concept: a teacher's slip
-            # there would merge two concepts, so it is kept only when the
-            # teacher confirms it (asked once more)
+            self._confirmations += 1
+        config = learner.config
+        # a reward after a "no" goes against the robot's own ranking, and one
+        # that makes a new exemplar widens a concept: a teacher's slip there
+        # would merge two concepts, so it is kept only when the teacher
+        # confirms it (asked once more; twice far down the ranking, after the
+        # novelty answer asked again was refused)
+        required = (2 if self._deep and config.confirm_twice_after_novelty
+                    else 1 if ((config.confirm_rewards and -1 in self.feedbacks)
+                               or (config.confirm_new_exemplars
+                                   and self.distances[nearest] >= config.similarity_threshold))
+                    else 0)
+        if self._confirmations < required:
             ev = InteractionEvent(action="confirm", extra=extra, **common)
             self.feedbacks.append(1)
             self.events.append(ev)
