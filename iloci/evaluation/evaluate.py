@@ -247,6 +247,11 @@ def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], lis
     return plan
 
 
+def fold_memory_name(fold: int) -> str:
+    """File name of fold ``fold``'s saved agent in ``--memories`` (``fold-K.npz``)."""
+    return f"fold-{fold}.npz"
+
+
 def _concept(demo: Any) -> str:
     return demo.true_concept or demo.shape
 
@@ -432,7 +437,7 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
             pm.unregister(observer)
     wall = time.perf_counter() - t0
     if memory_dir:
-        agent.save(os.path.join(memory_dir, f"fold-{fold}.npz"))
+        agent.save(os.path.join(memory_dir, fold_memory_name(fold)))
     known = {d.key: d.true_concept for d in list(learn) + list(test) if d.true_concept}
     true = [d.true_concept or _true_concept(d.key, known) for d in test]
     mem = agent.memory

@@ -185,16 +185,20 @@ def _fold_started(task: FoldTask, queue: Any) -> Callable[[dict], None]:
 
 def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
                           specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
-    """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``."""
+    """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``.
+
+    ``agent_path`` is the fold's file in ``task.memory_dir`` when the
+    evaluation keeps memories (:func:`~iloci.evaluation.evaluate.fold_memory_name`),
+    else one in a temporary directory: the agent is saved once, there.
+    """
     from iloci.evaluation.evaluate import learn_fold
     demos, pm = _worker_context(config_dict, shapes, specs)
     send = _fold_started(task, queue)
     learned, agent = learn_fold(config_dict, task.fold, [demos[i] for i in task.learn],
                                 [demos[i] for i in task.test], send=send, baseline=baseline,
-                                plugin_manager=pm, memory_dir=task.memory_dir,
+                                plugin_manager=pm, memory_dir=None,
                                 motion_cache=_motion_cache(config_dict, specs))
-    if not os.path.exists(agent_path):  # memory_dir already holds it
-        agent.save(agent_path)
+    agent.save(agent_path)
     return learned
 
 
@@ -265,10 +269,10 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
     # recognizes the others' test sets while the other learns its third.
     import tempfile
 
-    from iloci.evaluation.evaluate import LearnedFold
+    from iloci.evaluation.evaluate import LearnedFold, fold_memory_name
     with tempfile.TemporaryDirectory(prefix="iloci-evaluate-") as tmp:
         def agent_path(task: FoldTask) -> str:
-            return os.path.join(task.memory_dir or tmp, f"fold-{task.fold}.npz")
+            return os.path.join(task.memory_dir or tmp, fold_memory_name(task.fold))
 
         by_fold = {task.fold: task for task in tasks}
         learned: dict[int, LearnedFold] = {}

@@ -218,6 +218,7 @@ static int solve_spd(int n, double M[LM_P_MAX][LM_P_MAX], const double *b, doubl
 #define VW 4
 #define SUFFIX portable
 #define K_UNROLL
+#define SFMA(a, b, c) ((a) * (b) + (c))
 #define GEMM_NB_ROWS 4, 3
 #define TN_NB_ROWS 4, 2
 #define TARGET
@@ -240,6 +241,7 @@ static int solve_spd(int n, double M[LM_P_MAX][LM_P_MAX], const double *b, doubl
 #define VW 8
 #define SUFFIX avx2
 #define K_UNROLL
+#define SFMA(a, b, c) __builtin_fmaf(a, b, c)
 #define GEMM_NB_ROWS 4, 3
 #define TN_NB_ROWS 2, 6
 #define TARGET __attribute__((target("avx2,fma")))
@@ -266,6 +268,7 @@ TARGET static inline __attribute__((always_inline)) __m256 recip_avx2(__m256 q) 
 #endif
 #define GEMM_NB_ROWS 4, 4
 #define TN_NB_ROWS 4, 4
+#define SFMA(a, b, c) __builtin_fmaf(a, b, c)
 #define TARGET __attribute__((target("avx512f,fma")))
 TARGET static inline __attribute__((always_inline)) __m512 recip_avx512(__m512 q) {
     __m512 r = _mm512_rcp14_ps(q);               /* 14 bits, one Newton step: full */

@@ -14,6 +14,7 @@
  *           them (otherwise a compare and a blend)
  *   SET1    the instruction set's broadcast of a float, where it has one
  *   K_UNROLL  a pragma unrolling the products' loop over K, or nothing
+ *   SFMA(a, b, c)  a b + c on floats, fused where the instruction set has FMA
  *
  * The arithmetic is GNU C vector extensions (GCC, Clang): the compiler maps
  * them to the target's registers, so the portable path is the same source
@@ -155,17 +156,19 @@ TARGET static void F(gemm)(int M, int K, int N, const float *A, int lda, const f
     if (N - col >= VW) GEMM_TILE(1, 4);
 }
 
-/* W[i0 .., :NB VW] += A[M, i0 ..]^T @ B[M, :NB VW] (weight gradients: a
+/* W[i0 .., :NB VW] (+)= A[M, i0 ..]^T @ B[M, :NB VW] (weight gradients: a
  * sum over all steps and rows) for the first K - K % IB rows of W; returns
- * how many. B and W point at the column block; ldn is their row stride. */
+ * how many. B and W point at the column block; ldn is their row stride.
+ * acc: add to W; otherwise overwrite it (the same sums as adding to zeros). */
 INL ptrdiff_t F(gemm_tn_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int IB,
                               const float *A, ptrdiff_t lda, const float *B, ptrdiff_t ldn,
-                              float *W) {
+                              int acc, float *W) {
     ptrdiff_t i0 = 0;
     for (; i0 + IB <= K; i0 += IB) {
         V c[16][4];
         for (int q = 0; q < IB; q++)
-            for (int v = 0; v < NB; v++) c[q][v] = LD(W + (i0 + q) * ldn + VW * v);
+            for (int v = 0; v < NB; v++)
+                c[q][v] = acc ? LD(W + (i0 + q) * ldn + VW * v) : F(splat)(0.0f);
         for (ptrdiff_t r = 0; r < M; r++) {
             V bv[4];
             for (int v = 0; v < NB; v++) bv[v] = LD(B + r * ldn + VW * v);
@@ -182,20 +185,67 @@ INL ptrdiff_t F(gemm_tn_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int 
 }
 
 #define GEMM_TN_TILE(NB, IB) do { \
-        ptrdiff_t done = F(gemm_tn_tile)(M, K, NB, IB, A, lda, B + col, N, W + col); \
+        ptrdiff_t done = F(gemm_tn_tile)(M, K, NB, IB, A, lda, B + col, N, acc, W + col); \
         if (done < K) \
-            F(gemm_tn_tile)(M, K - done, NB, 1, A + done, lda, B + col, N, \
+            F(gemm_tn_tile)(M, K - done, NB, 1, A + done, lda, B + col, N, acc, \
                             W + done * N + col); \
         col += (NB) * VW; \
     } while (0)
 
-/* W[K, N] += A[M, :K]^T @ B[M, N], N a multiple of VW. */
+/* W[K, N] (+)= A[M, :K]^T @ B[M, N], N a multiple of VW; acc as gemm_tn_tile. */
 TARGET static void F(gemm_tn)(int M, int K, int N, const float *A, int lda, const float *B,
-                              float *W) {
+                              int acc, float *W) {
     int col = 0;
     while (N - col >= TN_NB * VW) GEMM_TN_TILE(TN_NB, TN_ROWS);
     if (N - col >= 2 * VW) GEMM_TN_TILE(2, 4 * (1 + WIDE));
     if (N - col >= VW) GEMM_TN_TILE(1, 8 * (1 + WIDE));
+}
+
+/* dst[:N] = sum over i < M of src[i * lds, :N], N a multiple of VW, i in
+ * ascending order (the order of the scalar loop it replaces: same sums).
+ * Up to 8 vectors of columns at a time stay in registers (a scalar loop
+ * adding into dst kept one sum in memory, reloaded every row). */
+TARGET static void F(colsum)(ptrdiff_t M, int N, const float *src, ptrdiff_t lds, float *dst) {
+    int col = 0;
+    for (; N - col >= 8 * VW; col += 8 * VW) {
+        V c[8];
+        for (int v = 0; v < 8; v++) c[v] = F(splat)(0.0f);
+        for (ptrdiff_t i = 0; i < M; i++)
+            for (int v = 0; v < 8; v++) c[v] += LD(src + i * lds + col + v * VW);
+        for (int v = 0; v < 8; v++) ST(dst + col + v * VW, c[v]);
+    }
+    for (; N - col >= 4 * VW; col += 4 * VW) {
+        V c0 = F(splat)(0.0f), c1 = c0, c2 = c0, c3 = c0;
+        for (ptrdiff_t i = 0; i < M; i++) {
+            const float *x = src + i * lds + col;
+            c0 += LD(x); c1 += LD(x + VW); c2 += LD(x + 2 * VW); c3 += LD(x + 3 * VW);
+        }
+        ST(dst + col, c0); ST(dst + col + VW, c1);
+        ST(dst + col + 2 * VW, c2); ST(dst + col + 3 * VW, c3);
+    }
+    for (; col < N; col += VW) {
+        V c0 = F(splat)(0.0f);
+        for (ptrdiff_t i = 0; i < M; i++) c0 += LD(src + i * lds + col);
+        ST(dst + col, c0);
+    }
+}
+
+/* out[q] = sum over h < n of x_q[h] y_q[h] for 8 pairs of rows at once, h in
+ * ascending order (8 independent sums, so the adds overlap). SFMA(a, b, c)
+ * is a b + c as the scalar loop it replaces compiled it: one fused
+ * multiply-add where the instruction set has one (spelled out, since GCC
+ * would otherwise vectorize the products and add them one by one, unfused). */
+INL void F(dot8)(int n, const float *const x[8], const float *const y[8], float out[8]) {
+    float c0 = 0.0f, c1 = 0.0f, c2 = 0.0f, c3 = 0.0f, c4 = 0.0f, c5 = 0.0f, c6 = 0.0f,
+          c7 = 0.0f;
+    for (int h = 0; h < n; h++) {
+        c0 = SFMA(x[0][h], y[0][h], c0); c1 = SFMA(x[1][h], y[1][h], c1);
+        c2 = SFMA(x[2][h], y[2][h], c2); c3 = SFMA(x[3][h], y[3][h], c3);
+        c4 = SFMA(x[4][h], y[4][h], c4); c5 = SFMA(x[5][h], y[5][h], c5);
+        c6 = SFMA(x[6][h], y[6][h], c6); c7 = SFMA(x[7][h], y[7][h], c7);
+    }
+    out[0] = c0; out[1] = c1; out[2] = c2; out[3] = c3;
+    out[4] = c4; out[5] = c5; out[6] = c6; out[7] = c7;
 }
 
 /* Adam on n parameters, the gradient scaled by `scale` (the clipping). */
@@ -248,10 +298,11 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
         /* PB = bound tanh(u); pre = PB @ Wp + bh: the same every step */
         for (size_t i = 0; i < nU; i++) pb[i] = bound * tanhf(u[i]);
         for (int r = 0; r < R; r++)
-            for (int h = 0; h < Hp; h++) {
-                float acc = bh[h];
-                for (int k = 0; k < P; k++) acc += pb[r * P + k] * Wp[k * Hp + h];
-                pre[r * Hp + h] = acc;
+            for (int h = 0; h < Hp; h += VW) {
+                V acc = LD(bh + h);
+                for (int k = 0; k < P; k++)
+                    acc += F(splat)(pb[r * P + k]) * LD(Wp + k * Hp + h);
+                ST(pre + r * Hp + h, acc);
             }
         /* forward: s_0 = [x_0, 0]; s_t = o_{t-1} mix + (1 - alpha) [x_t, 0] */
         for (int s = 0; s < L; s++) {
@@ -271,12 +322,12 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
             F(gemm)(R, Sp, Hp, in, Sp, Ws, pre, Hp, 0, h, EPI_TANH, NULL);
             F(gemm)(R, Hp, Sp, h, Hp, Wo, bo, 0, 0, Os + (size_t)s * R * Sp, EPI_TANH, NULL);
         }
-        /* loss = sum mw mean_D (y - x)^2; G = dL/do */
+        /* loss = sum mw mean_D (y - x)^2; G = dL/do (whole rows: zero past D) */
         double lsum = 0.0;
-        memset(G, 0, LR * Sp * sizeof(float));
         for (size_t i = 0; i < LR; i++) {
             const float *o = Os + i * Sp, *x = X + (i + R) * D;
             float wgt = mw[i], part = 0.0f;
+            for (int j = 0; j < Sp; j += VW) ST(G + i * Sp + j, F(splat)(0.0f));
             for (int j = 0; j < D; j++) {
                 float d = o[j] - x[j];
                 part += d * d;
@@ -287,7 +338,8 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
         loss = (float)(lsum / D);
         if (a->loss_history) a->loss_history[t - 1] = loss;
         /* backward: go_t = (G_t + carry) (1 - o_t^2); dz_t = (go_t Wo^T) (1 - h_t^2);
-           carry into G_{t-1} = dz_t (mix Ws)^T, since s_t holds o_{t-1} mix */
+           carry into G_{t-1} = dz_t (mix Ws)^T, since s_t holds o_{t-1} mix; the
+           carry's product applies G_{t-1}'s (1 - o^2) as it stores it */
         for (int h = 0; h < Hp; h++)
             for (int j = 0; j < Sp; j++) {
                 WoT[j * Hp + h] = Wo[h * Sp + j];
@@ -296,40 +348,54 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
         for (int s = L - 1; s >= 0; s--) {
             float *go = G + (size_t)s * R * Sp;
             const float *o = Os + (size_t)s * R * Sp;
-            for (int i = 0; i < R * Sp; i++) go[i] *= 1.0f - o[i] * o[i];
+            if (s == L - 1)  /* no carry into the last step */
+                for (int i = 0; i < R * Sp; i++) go[i] *= 1.0f - o[i] * o[i];
             float *dz = DZ + (size_t)s * R * Hp;
             F(gemm)(R, Sp, Hp, go, Sp, WoT, NULL, 0, 0, dz, EPI_DTANH, Hs + (size_t)s * R * Hp);
             if (s > 0) F(gemm)(R, Hp, Sp, dz, Hp, WsTm, NULL, 0, 1, go - (size_t)R * Sp,
-                               EPI_NONE, NULL);
+                               EPI_DTANH, o - (size_t)R * Sp);
         }
-        /* weight gradients: sums over all steps and rows */
-        memset(g, 0, nW * sizeof(float));
-        memset(sdz, 0, (size_t)R * Hp * sizeof(float));
-        F(gemm_tn)((int)LR, Hp, Sp, Hs, Hp, G, gWo);
-        F(gemm_tn)(R, Sp, Hp, s0, Sp, DZ, gWs);
+        /* weight gradients: sums over all steps and rows, each part of g
+           written whole (no zeroing pass) */
+        F(gemm_tn)((int)LR, Hp, Sp, Hs, Hp, G, 0, gWo);
+        F(gemm_tn)(R, Sp, Hp, s0, Sp, DZ, 0, gWs);
         if (L > 1)
             F(gemm_tn)((int)(LR - R), Sp, Hp, IN ? IN + (size_t)R * Sp : Os, Sp,
-                       DZ + (size_t)R * Hp, gWs);
-        for (size_t i = 0; i < LR; i++)
-            for (int j = 0; j < Sp; j++) gbo[j] += G[i * Sp + j];
-        for (size_t i = 0; i < LR; i++)
-            for (int h = 0; h < Hp; h++) sdz[(i % R) * Hp + h] += DZ[i * Hp + h];
-        for (int r = 0; r < R; r++)
-            for (int h = 0; h < Hp; h++) {
-                gbh[h] += sdz[r * Hp + h];
-                for (int k = 0; k < P; k++) gWp[k * Hp + h] += pb[r * P + k] * sdz[r * Hp + h];
+                       DZ + (size_t)R * Hp, 1, gWs);
+        F(colsum)((ptrdiff_t)LR, Sp, G, Sp, gbo);
+        /* sdz[r] = sum over steps of dz[., r]; gbh = sum over rows of sdz;
+           gWp = PB^T sdz */
+        F(colsum)(L, R * Hp, DZ, (ptrdiff_t)R * Hp, sdz);
+        F(colsum)(R, Hp, sdz, Hp, gbh);
+        for (int k = 0; k < P; k++)
+            for (int h = 0; h < Hp; h += VW) {
+                V acc = F(splat)(0.0f);
+                for (int r = 0; r < R; r++)
+                    acc += F(splat)(pb[r * P + k]) * LD(sdz + (size_t)r * Hp + h);
+                ST(gWp + (size_t)k * Hp + h, acc);
             }
-        /* dL/du = (sdz Wp^T) bound (1 - tanh(u)^2) */
-        for (int r = 0; r < R; r++)
-            for (int k = 0; k < P; k++) {
-                float acc = 0.0f;
-                for (int h = 0; h < Hp; h++) acc += sdz[r * Hp + h] * Wp[k * Hp + h];
-                float th = tanhf(u[r * P + k]);
-                gu[r * P + k] = acc * bound * (1.0f - th * th);
+        /* dL/du = (sdz Wp^T) bound (1 - tanh(u)^2), 8 of the R P sums at a time */
+        for (int q0 = 0; q0 < R * P; q0 += 8) {
+            const float *x[8], *y[8];
+            float dots[8];
+            for (int c = 0; c < 8; c++) {
+                int q = q0 + c < R * P ? q0 + c : q0;  /* past the end: a copy, unused */
+                x[c] = sdz + (size_t)(q / P) * Hp;
+                y[c] = Wp + (size_t)(q % P) * Hp;
             }
-        /* clip the weight gradient's global norm, then Adam */
-        double sq = 0.0;
-        for (size_t i = 0; i < nW; i++) sq += (double)g[i] * g[i];
+            F(dot8)(Hp, x, y, dots);
+            for (int c = 0; c < 8 && q0 + c < R * P; c++) {
+                float th = tanhf(u[q0 + c]);
+                gu[q0 + c] = dots[c] * bound * (1.0f - th * th);
+            }
+        }
+        /* clip the weight gradient's global norm, then Adam; the squares
+           summed in 8 interleaved partial sums (nW is a multiple of 16) */
+        double sq8[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+        for (size_t i = 0; i < nW; i += 8)
+            for (int k = 0; k < 8; k++) sq8[k] += (double)g[i + k] * g[i + k];
+        double sq = ((sq8[0] + sq8[1]) + (sq8[2] + sq8[3]))
+                    + ((sq8[4] + sq8[5]) + (sq8[6] + sq8[7]));
         double scale = a->clip / (sqrt(sq) + 1e-12);
         if (scale > 1.0) scale = 1.0;
         double f = schedule_decay(a, t);
@@ -498,5 +564,6 @@ TARGET static int F(recognize)(iloci_rnnpb_recognize_args *a) {
 #undef VMAX
 #undef SET1
 #undef K_UNROLL
+#undef SFMA
 #undef GEMM_NB_ROWS
 #undef TN_NB_ROWS
