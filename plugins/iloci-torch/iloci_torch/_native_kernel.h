@@ -10,6 +10,7 @@
  *           one Newton step where the instruction set has one)
  *   WIDE    1 where there are 32 vector registers (AVX-512): larger tiles
  *   GEMM_NB_ROWS, TN_NB_ROWS  the register tiles (see _native.c)
+ *   TN_CHUNK  rows of the weight gradients' sums per pass over W's tiles
  *   VMIN, VMAX  the instruction set's element-wise min and max, where it has
  *           them (otherwise a compare and a blend)
  *   SET1    the instruction set's broadcast of a float, where it has one
@@ -192,13 +193,21 @@ INL ptrdiff_t F(gemm_tn_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int 
         col += (NB) * VW; \
     } while (0)
 
-/* W[K, N] (+)= A[M, :K]^T @ B[M, N], N a multiple of VW; acc as gemm_tn_tile. */
-TARGET static void F(gemm_tn)(int M, int K, int N, const float *A, int lda, const float *B,
-                              int acc, float *W) {
-    int col = 0;
-    while (N - col >= TN_NB * VW) GEMM_TN_TILE(TN_NB, TN_ROWS);
-    if (N - col >= 2 * VW) GEMM_TN_TILE(2, 4 * (1 + WIDE));
-    if (N - col >= VW) GEMM_TN_TILE(1, 8 * (1 + WIDE));
+/* W[K, N] (+)= A[M, :K]^T @ B[M, N], N a multiple of VW; acc as gemm_tn_tile.
+ * The rows go in chunks of TN_CHUNK: every tile of W passes over a chunk
+ * while it is in the L1 cache, instead of each tile streaming all M rows
+ * from L2 (each sum still runs over the rows in order: same results). */
+TARGET static void F(gemm_tn)(int M_all, int K, int N, const float *A_all, int lda,
+                              const float *B_all, int acc_all, float *W) {
+    for (int m0 = 0; m0 < M_all; m0 += TN_CHUNK) {
+        const int M = M_all - m0 < TN_CHUNK ? M_all - m0 : TN_CHUNK;
+        const float *A = A_all + (ptrdiff_t)m0 * lda, *B = B_all + (ptrdiff_t)m0 * N;
+        const int acc = acc_all || m0 > 0;
+        int col = 0;
+        while (N - col >= TN_NB * VW) GEMM_TN_TILE(TN_NB, TN_ROWS);
+        if (N - col >= 2 * VW) GEMM_TN_TILE(2, 4 * (1 + WIDE));
+        if (N - col >= VW) GEMM_TN_TILE(1, 8 * (1 + WIDE));
+    }
 }
 
 /* dst[:N] = sum over i < M of src[i * lds, :N], N a multiple of VW, i in
@@ -319,8 +328,10 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
                 in = Os + (size_t)(s - 1) * R * Sp;
             }
             float *h = Hs + (size_t)s * R * Hp;
-            F(gemm)(R, Sp, Hp, in, Sp, Ws, pre, Hp, 0, h, EPI_TANH, NULL);
-            F(gemm)(R, Hp, Sp, h, Hp, Wo, bo, 0, 0, Os + (size_t)s * R * Sp, EPI_TANH, NULL);
+            /* the sums run over the S state and H hidden units only: the
+               padded ones are exactly zero (see the layout in _native.c) */
+            F(gemm)(R, S, Hp, in, Sp, Ws, pre, Hp, 0, h, EPI_TANH, NULL);
+            F(gemm)(R, H, Sp, h, Hp, Wo, bo, 0, 0, Os + (size_t)s * R * Sp, EPI_TANH, NULL);
         }
         /* loss = sum mw mean_D (y - x)^2; G = dL/do (whole rows: zero past D) */
         double lsum = 0.0;
@@ -351,8 +362,8 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
             if (s == L - 1)  /* no carry into the last step */
                 for (int i = 0; i < R * Sp; i++) go[i] *= 1.0f - o[i] * o[i];
             float *dz = DZ + (size_t)s * R * Hp;
-            F(gemm)(R, Sp, Hp, go, Sp, WoT, NULL, 0, 0, dz, EPI_DTANH, Hs + (size_t)s * R * Hp);
-            if (s > 0) F(gemm)(R, Hp, Sp, dz, Hp, WsTm, NULL, 0, 1, go - (size_t)R * Sp,
+            F(gemm)(R, S, Hp, go, Sp, WoT, NULL, 0, 0, dz, EPI_DTANH, Hs + (size_t)s * R * Hp);
+            if (s > 0) F(gemm)(R, H, Sp, dz, Hp, WsTm, NULL, 0, 1, go - (size_t)R * Sp,
                                EPI_DTANH, o - (size_t)R * Sp);
         }
         /* weight gradients: sums over all steps and rows, each part of g
@@ -567,3 +578,4 @@ TARGET static int F(recognize)(iloci_rnnpb_recognize_args *a) {
 #undef SFMA
 #undef GEMM_NB_ROWS
 #undef TN_NB_ROWS
+#undef TN_CHUNK
