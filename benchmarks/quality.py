@@ -43,9 +43,27 @@ import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "quality.json"
 
-#: The settings this issue recommends (``[learner]`` keys), measured here as ``best``.
-BEST: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True,
-                                    "decision": "reproduction"}}
+#: The novelty answer with confirmed rewards and the paper's PB-distance
+#: decision: what this issue recommended before a teacher who errs was
+#: made robust (rows ``pb-*``). The decision is the PB distance: once
+#: recognition's steps ran in the native kernel, ``decision =
+#: "reproduction"`` scored below it with the oracle (99.41 against 99.73 %
+#: pooled over seeds 0-2) and no better with the noisy teacher at p = 0.1
+#: (95.97 against 96.07 %), measured on main 87b65f2 / 6370d09.
+BASE: dict[str, Any] = {"learner": {"novelty_below": 0.8, "confirm_rewards": True,
+                                    "decision": "pb_distance"}}
+
+#: The settings this issue recommends (``[learner]`` keys), measured here as
+#: ``best``: the base above, the novelty answer asked again after 2 refused
+#: guesses, rewards that make a new exemplar confirmed, and a reward after
+#: the novelty answer asked again was refused confirmed twice. With the
+#: noisy teacher at p = 0.1 each raised the CCR on seeds 0-2 (rows
+#: ``pb-noisy-0.1``, ``novelty-after-2-noisy-0.1``,
+#: ``novelty-after-2-confirm-exemplars-noisy-0.1``, ``noisy-0.1``); with
+#: the oracle none changed it (docs/method.md).
+BEST: dict[str, Any] = {"learner": {**BASE["learner"], "novelty_after": 2,
+                                    "confirm_new_exemplars": True,
+                                    "confirm_twice_after_novelty": True}}
 
 #: The paper's learning phase: every setting of this issue off.
 PAPER: dict[str, Any] = {"learner": {"novelty_below": 0.0, "unknown_below": 0.0,
@@ -60,43 +78,50 @@ def _with(*parts: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+NOISY_01 = {"teacher": {"name": "noisy", "p": 0.1}}
+
 #: row name -> changes on top of the base config.
 ROWS: dict[str, dict[str, Any]] = {
     "best": BEST,
     "paper": PAPER,
-    "novelty-only": _with(BEST, {"learner": {"confirm_rewards": False}}),
-    "pb-decision": _with(BEST, {"learner": {"decision": "pb_distance"}}),
-    # the novelty answer's familiarity of the PB_obs error (before: of the best
-    # entry's reproduction error, the default)
-    "novelty-prediction": _with(BEST, {"learner": {"decision": "pb_distance",
-                                                   "familiarity": "prediction"}}),
-    "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
     "untaught": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {"unknown_below": 0.8}}),
     "paper-untaught": _with(PAPER, {"evaluation": {"untaught": 4}}),
     "noisy-0.05": _with(BEST, {"teacher": {"name": "noisy", "p": 0.05}}),
-    "noisy-0.1": _with(BEST, {"teacher": {"name": "noisy", "p": 0.1}}),
+    "noisy-0.1": _with(BEST, NOISY_01),
     "noisy-0.2": _with(BEST, {"teacher": {"name": "noisy", "p": 0.2}}),
-    "paper-noisy-0.1": _with(PAPER, {"teacher": {"name": "noisy", "p": 0.1}}),
-    # a reward that makes a new exemplar is confirmed too (oracle: its cost)
-    "confirm-exemplars": _with(BEST, {"learner": {"confirm_new_exemplars": True}}),
-    "confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"confirm_new_exemplars": True},
-                                               "teacher": {"name": "noisy", "p": 0.1}}),
-    # the noisy teacher with the PB-distance decision (the reproduction
-    # decision scores below it with the oracle since recognition's steps run
-    # in the native kernel), without and with confirmed new exemplars
-    "pb-noisy-0.1": _with(BEST, {"learner": {"decision": "pb_distance"},
-                                 "teacher": {"name": "noisy", "p": 0.1}}),
-    "pb-confirm-exemplars-noisy-0.1": _with(BEST, {"learner": {"decision": "pb_distance",
-                                                               "confirm_new_exemplars": True},
-                                                   "teacher": {"name": "noisy", "p": 0.1}}),
+    "paper-noisy-0.1": _with(PAPER, NOISY_01),
     "stream": _with(BEST, {"evaluation": {"protocol": "stream"}}),
     "paper-stream": _with(PAPER, {"evaluation": {"protocol": "stream"}}),
+    # ablation, each with the oracle (its cost) and the noisy teacher: the
+    # base alone, then what each setting of BEST adds to it
+    "pb-decision": BASE,
+    "pb-noisy-0.1": _with(BASE, NOISY_01),
+    "novelty-only": _with(BASE, {"learner": {"confirm_rewards": False}}),
+    # the novelty answer's familiarity of the PB_obs error (instead of the
+    # best entry's reproduction error, the default)
+    "novelty-prediction": _with(BASE, {"learner": {"familiarity": "prediction"}}),
+    "reproduction-decision": _with(BASE, {"learner": {"decision": "reproduction"}}),
+    "reproduction-only": _with(PAPER, {"learner": {"decision": "reproduction"}}),
+    # a reward that makes a new exemplar is confirmed too
+    "confirm-exemplars": _with(BASE, {"learner": {"confirm_new_exemplars": True}}),
+    "pb-confirm-exemplars-noisy-0.1": _with(BASE, {"learner": {"confirm_new_exemplars": True}},
+                                            NOISY_01),
+    # the novelty answer asked again after 2 refused guesses
+    "novelty-after-2": _with(BASE, {"learner": {"novelty_after": 2}}),
+    "novelty-after-2-noisy-0.1": _with(BASE, {"learner": {"novelty_after": 2}}, NOISY_01),
+    "novelty-after-2-confirm-exemplars-noisy-0.1": _with(
+        BASE, {"learner": {"novelty_after": 2, "confirm_new_exemplars": True}}, NOISY_01),
+    # BEST but a reward after the novelty answer asked again is confirmed once
+    "confirm-once": _with(BEST, {"learner": {"confirm_twice_after_novelty": False}}),
 }
 
 #: Rows run by default, in order (the cheap, decisive ones first).
-DEFAULT_ROWS = ("best", "paper", "pb-decision", "novelty-prediction", "noisy-0.1", "untaught",
-                "paper-noisy-0.1", "noisy-0.05", "noisy-0.2", "reproduction-only", "novelty-only",
-                "stream", "paper-stream")
+DEFAULT_ROWS = ("best", "paper", "noisy-0.1", "untaught", "paper-noisy-0.1", "noisy-0.05",
+                "noisy-0.2", "stream", "pb-decision", "pb-noisy-0.1", "confirm-exemplars",
+                "pb-confirm-exemplars-noisy-0.1", "novelty-after-2", "novelty-after-2-noisy-0.1",
+                "novelty-after-2-confirm-exemplars-noisy-0.1", "confirm-once",
+                "novelty-prediction", "novelty-only", "reproduction-decision",
+                "reproduction-only", "paper-stream")
 
 
 def _merge(base: dict, changes: dict) -> dict:
@@ -404,16 +429,16 @@ def main(argv: list[str] | None = None) -> dict:
             targets["defaults_ccr_ge_dtw_every_seed"] = {
                 "value": {s: [per_seed[s], dtw_seed[s]] for s in per_seed}, "seeds": both,
                 "met": all(per_seed[s] >= dtw_seed[s] for s in per_seed)}
-    if "pb-decision" in runs and "paper" in runs:
-        # the novelty answer alone (with confirm_rewards), against the paper's
-        # protocol on the same seeds: nothing else differs
-        nov = {r["seed"]: summarize_folds([r]) for r in runs["pb-decision"]}
+    if "best" in runs and "paper" in runs:
+        # the settings of this issue against the paper's protocol on the same
+        # seeds (the decision is the same: PB distance)
+        nov = {r["seed"]: summarize_folds([r]) for r in runs["best"]}
         pap = {r["seed"]: summarize_folds([r]) for r in runs["paper"]}
         both = sorted(set(nov) & set(pap))
         if both:
             fb = [nov[s]["feedbacks_per_demo"]["mean"] for s in both]
             out["novelty"] = {
-                "row": "pb-decision", "against": "paper", "seeds": both,
+                "row": "best", "against": "paper", "seeds": both,
                 "feedbacks_per_demo": {str(s): f for s, f in zip(both, fb)},
                 "paper_feedbacks_per_demo": {str(s): pap[s]["feedbacks_per_demo"]["mean"]
                                              for s in both},

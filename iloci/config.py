@@ -141,6 +141,25 @@ class LearnerConfig:
     #: 0 / 1 / 2 against 98.22 / 94.64 / 95.75 % without it (before
     #: recognition's native Levenberg-Marquardt steps).
     confirm_new_exemplars: bool = False
+    #: After this many refused guesses in a row, the robot offers the
+    #: novelty answer (again, when it was refused before them) instead of
+    #: walking on through every concept it knows: once per demonstration.
+    #: The "no"s go against a refused novelty answer (or a familiarity that
+    #: looked high), so the refusal is re-examined; a teacher who errs then
+    #: meets short guess chains, in which a wrong "yes" and a wrong
+    #: confirmation in a row (p^2 per wrong guess) rarely merge two concepts.
+    #: The teacher must understand the novelty answer. 0: never (the
+    #: paper's protocol). See docs/method.md for the measured effect.
+    novelty_after: int = 0
+    #: With ``novelty_after``: a reward for a guess that comes after the
+    #: novelty answer asked (again) after refused guesses was refused too is
+    #: kept only when the teacher confirms it twice. The teacher has then
+    #: said "not new" and "no" to the robot's best guesses, so a "yes" far
+    #: down its ranking is the likeliest place for a slip; a demonstration
+    #: whose every guess is refused founds a concept of its own (a split
+    #: costs a correct answer less often than a merge). Off: confirmed once
+    #: (``confirm_rewards``) or not at all.
+    confirm_twice_after_novelty: bool = False
     #: What ranks the robot's concepts for a demonstration, in recognition
     #: and in the order of its guesses: ``"pb_distance"`` (the paper: the
     #: concept of the PB_rec nearest to PB_obs) or ``"reproduction"`` (the
@@ -196,6 +215,11 @@ class LearnerConfig:
         for name in ("unknown_below", "novelty_below"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+        if self.novelty_after < 0:
+            raise ValueError(f"novelty_after must be >= 0, got {self.novelty_after}")
+        if self.confirm_twice_after_novelty and self.novelty_after == 0:
+            raise ValueError("confirm_twice_after_novelty needs novelty_after > 0 (the "
+                             "novelty answer asked again after refused guesses)")
         if self.k_cutoff < 0:
             raise ValueError(f"k_cutoff must be >= 0, got {self.k_cutoff}")
         if self.num_threshold < 1:

@@ -32,8 +32,12 @@ class InteractionEvent:
     action : str
         What the learner did: ``"strengthen"``, ``"new_exemplar"``,
         ``"next_guess"``, ``"new_concept"``, or ``"confirm"`` (a reward
-        after a "no", asked once more with ``[learner] confirm_rewards``).
-        ``extra["novel"]`` is true for the novelty answer.
+        asked once more: after a "no" with ``[learner] confirm_rewards``,
+        one that would make a new exemplar with ``confirm_new_exemplars``;
+        twice after the novelty answer asked again was refused, with
+        ``confirm_twice_after_novelty``). ``extra["novel"]`` is true for
+        the novelty answer (asked first, or again after refused guesses
+        with ``novelty_after``).
     distance : float
         PB distance between the demonstration and the answering entry.
     """

@@ -507,6 +507,134 @@ def test_a_reward_that_makes_a_new_exemplar_is_confirmed_first(lasa, confirmatio
     assert plain.learn(lasa["GShape/1"]).feedbacks == (1,)
 
 
+def test_refused_guesses_bring_the_novelty_answer_back_once(lasa):
+    # [learner] novelty_after = 2 without novelty_below: the novelty answer is
+    # first offered after two refused guesses, and only while a guess is left
+    rec = Recorder()
+    agent = make_agent(rec, novelty_after=2)
+    teacher = ScriptedTeacher([-1, -1, -1, -1, -1, 1])
+    agent.teacher = teacher
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])
+    # two refused guesses and no concept left to guess: founded, nothing asked
+    third = agent.learn(lasa["Sine/0"])
+    assert third.feedbacks == (-1, -1) and third.action == "new_concept"
+    assert not any(r.novel for r in teacher.responses)
+    fourth = agent.learn(lasa["GShape/1"])
+    assert fourth.feedbacks == (-1, -1, 1)
+    assert (fourth.action, fourth.concept) == ("new_concept", "c4")
+    novel = teacher.responses[-1]
+    assert novel.novel and novel.attempt == 3 and novel.concept == "c4"
+    assert [r.attempt for r in teacher.responses[-3:-1]] == [1, 2]
+    assert rec.interactions[-1].extra["novel"] is True
+
+
+def test_a_refused_novelty_answer_is_offered_again_after_refused_guesses(lasa):
+    # every demonstration looks new (novelty_below 1); novelty_after 1: after
+    # the refusal and one refused guess it is asked again, then never more
+    rec = Recorder()
+    agent = make_agent(rec, novelty_below=1.0, novelty_after=1)
+    teacher = ScriptedTeacher([-1, 1] + [-1] * 5)
+    agent.teacher = teacher
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])   # one concept: nothing to calibrate on, a guess
+    assert agent.learn(lasa["Sine/0"]).feedbacks == (1,)
+    asked = len(teacher.responses)
+    outcome = agent.learn(lasa["GShape/1"])
+    assert outcome.feedbacks == (-1,) * 5 and outcome.action == "new_concept"
+    responses = teacher.responses[asked:]
+    assert [r.novel for r in responses] == [True, False, True, False, False]
+    assert [r.attempt for r in responses] == [1, 2, 3, 4, 5]
+    # the same familiarity both times; the guesses are three different concepts
+    assert responses[0].extra["familiarity"] == responses[2].extra["familiarity"]
+    assert len({r.concept for r in responses if not r.novel}) == 3
+    events = [e for e in rec.interactions if e.demo == "GShape/1"]
+    assert [e.attempt for e in events if e.extra.get("novel")] == [1, 3]
+    assert events[2].tried == (responses[1].concept,)
+
+
+def test_oracle_and_console_teachers_answer_the_novelty_answer_asked_again(lasa):
+    from iloci.teachers import ConsoleTeacher, OracleTeacher
+
+    class Oracle(OracleTeacher):
+        def __init__(self) -> None:
+            super().__init__()
+            self.asked: list[tuple[str, Response, int]] = []
+
+        def feedback(self, demo, response):
+            value = super().feedback(demo, response)
+            self.asked.append((demo.key, response, value))
+            return value
+
+    # novelty_after 1 and no first novelty answer: every wrong first guess
+    # brings the novelty answer; the oracle must found each shape once and
+    # never merge or split one
+    agent = make_agent(novelty_after=1)
+    oracle = Oracle()
+    agent.teacher = oracle
+    keys = [f"{s}/{i}" for i in range(3) for s in ("GShape", "Angle", "Sine")]
+    agent.teach([lasa[k] for k in keys])
+    by_concept: dict[str, set[str]] = {}
+    for e in agent.memory.entries:
+        by_concept.setdefault(e.concept, set()).update(k.split("/")[0] for k in e.sources)
+    assert sorted(map(sorted, by_concept.values())) == [["Angle"], ["GShape"], ["Sine"]]
+    novel = [(k, r, v) for k, r, v in oracle.asked if r.novel]
+    assert novel and all(r.attempt == 2 for _, r, _ in novel)
+    # "yes" exactly when the memory held no demonstration of the shape
+    for key, response, value in novel:
+        shape = key.split("/")[0]
+        assert (value == 1) == all(not k.startswith(shape + "/") for k in response.sources)
+    # a person at the console is asked whether it is new, at that attempt
+    prompts: list[str] = []
+    answers = iter(["n", "y"])
+    console = make_agent(novelty_after=1)
+    console.teacher = ConsoleTeacher("", ask=lambda text: prompts.append(text) or next(answers))
+    console.learn(lasa["GShape/0"])
+    assert console.learn(lasa["Angle/0"]).action == "new_concept"
+    assert "Is that right?" in prompts[0] and len(prompts) == 1
+    console.teacher = ConsoleTeacher("", ask=lambda text: prompts.append(text) or "n")
+    # Sine/0 with two concepts: a refused guess, then "is it new?" (refused),
+    # then the last guess refused: a new concept
+    outcome = console.learn(lasa["Sine/0"])
+    assert outcome.feedbacks == (-1, -1, -1) and outcome.action == "new_concept"
+    assert ["new concept" in t for t in prompts[1:]] == [False, True, False]
+    assert "(attempt 1)" in prompts[1] and "(attempt 3)" in prompts[3]
+
+
+@pytest.mark.parametrize("second", [-1, 1])
+def test_a_reward_after_the_novelty_answer_asked_again_is_confirmed_twice(lasa, second):
+    rec = Recorder()
+    agent = make_agent(rec, novelty_after=1, confirm_rewards=True,
+                       confirm_twice_after_novelty=True)
+    # Sine/0: a refused guess, "new?" refused, then the last guess: +1 and
+    # two confirmations (the second +1 or -1)
+    agent.teacher = ScriptedTeacher([-1, -1, -1, 1, 1, second])
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])
+    outcome = agent.learn(lasa["Sine/0"])
+    assert outcome.feedbacks == (-1, -1, 1, 1, second)
+    actions = [e.action for e in rec.interactions if e.demo == "Sine/0"]
+    assert actions[:4] == ["next_guess", "next_guess", "confirm", "confirm"]
+    if second == 1:
+        assert outcome.action in ("strengthen", "new_exemplar")
+        assert len(agent.memory.concepts()) == 2
+    else:  # the double slip is caught: a concept of its own
+        assert outcome.action == "new_concept" and len(agent.memory.concepts()) == 3
+    # without it, one confirmation is enough there
+    once = make_agent(novelty_after=1, confirm_rewards=True)
+    once.teacher = ScriptedTeacher([-1, -1, -1, 1, 1])
+    once.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert once.learn(lasa["Sine/0"]).feedbacks == (-1, -1, 1, 1)
+
+
+def test_novelty_after_is_checked():
+    with pytest.raises(iloci.errors.ConfigError, match="novelty_after must be >= 0, got -1"):
+        iloci.build(small_config(novelty_after=-1))
+    with pytest.raises(iloci.errors.ConfigError, match="confirm_twice_after_novelty needs "
+                                                       "novelty_after > 0"):
+        iloci.build(small_config(confirm_twice_after_novelty=True))
+
+
 def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa):
     agent = make_agent(decision="reproduction")
     agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])

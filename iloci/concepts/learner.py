@@ -840,21 +840,33 @@ class Turn:
                         if learner.config.decision == "reproduction" else self.distances)
         self._novel = False        # the current answer is the novelty answer
         self._confirming = False   # the current answer asks to confirm a reward after a no
+        self._fam = float("nan")   # the demonstration's familiarity, once computed
+        self._refused = 0          # guesses refused since the turn or a novelty answer began
+        self._novelty_again = learner.config.novelty_after > 0   # the re-offer is unused
+        self._confirmations = 0    # confirmations given for the current guess's reward
+        self._deep = False         # the novelty answer asked again was refused too
         if learner.config.novelty_below > 0:
-            # [learner] familiarity: is it like an entry the robot knows
-            # (reproduction), or can the network reproduce it at all (prediction)
+            fam = self._familiarity()
+            if fam < learner.config.novelty_below:
+                self._step(self._novelty)
+                return
+        self._step(self._next)
+
+    def _familiarity(self) -> float:
+        """The demonstration's familiarity (``[learner] familiarity``), computed once."""
+        if np.isnan(self._fam):
+            learner, seq = self.learner, self.sequence
+            # is it like an entry the robot knows (reproduction), or can the
+            # network reproduce it at all (prediction)
             if learner.config.familiarity == "reproduction":
                 error = float(np.min(self.ranking if learner.config.decision == "reproduction"
                                      else learner.entry_errors([seq])[0]))
             else:
                 error = float(np.asarray(learner.model.prediction_error(
                     [seq], self.pb_obs[None]))[0])
-            fam = float(familiarity(error, novelty_scale(learner.model, mem)))
-            if fam < learner.config.novelty_below:
-                self._fam = fam
-                self._step(self._novelty)
-                return
-        self._step(self._next)
+            self._fam = float(familiarity(error, novelty_scale(learner.model,
+                                                               learner.memory)))
+        return self._fam
 
     @property
     def key(self) -> str:
@@ -942,15 +954,17 @@ class Turn:
         return common, extra
 
     def _novelty(self) -> Answer:
-        """The novelty answer ([learner] novelty_below): the demonstration imitated back."""
-        response = self.learner.respond_novel(self.sequence, self.start, self.dt, 1,
-                                              self._fam, self.frame)
+        """The novelty answer ([learner] novelty_below, novelty_after): the
+        demonstration imitated back."""
+        attempt = len(self.feedbacks) + 1
+        response = self.learner.respond_novel(self.sequence, self.start, self.dt, attempt,
+                                              self._familiarity(), self.frame)
         drawing = (response.teacher_drawing if response.teacher_drawing is not None
                    else response.drawing)
         joints = np.asarray(response.joint_path, dtype=np.float64)
         self._novel = True
         self.answer = Answer(demo=self.key, concept=response.concept, confidence=float("nan"),
-                             attempt=1, drawing=np.asarray(drawing, dtype=np.float64),
+                             attempt=attempt, drawing=np.asarray(drawing, dtype=np.float64),
                              joint_path=joints, dt=self.dt, start_posture=joints[0].copy(),
                              response=response, entry=-1, distance=float("nan"))
         return self.answer
@@ -963,10 +977,17 @@ class Turn:
 
     def _novel_no(self) -> Answer | LearnOutcome:
         """"No": back to guessing among the known concepts."""
+        assert self.answer is not None
         self.feedbacks.append(-1)
         self._novel = False
-        ev = InteractionEvent(demo=self.key, step=self.step, attempt=1, guessed=None,
-                              tried=(), answered=None, feedback=-1, action="next_guess",
+        self._refused = 0
+        if not self._novelty_again and self.tried:
+            # asked after refused guesses and refused too ([learner]
+            # confirm_twice_after_novelty)
+            self._deep = True
+        ev = InteractionEvent(demo=self.key, step=self.step, attempt=self.answer.attempt,
+                              guessed=None, tried=tuple(self.tried), answered=None,
+                              feedback=-1, action="next_guess",
                               extra={"novel": True, "familiarity": self._fam})
         self.events.append(ev)
         self.learner._emit_interaction(ev)
@@ -979,12 +1000,21 @@ class Turn:
             # the reward was not confirmed: the first "yes" stands recorded
             # as given, the "no" that denies it is this attempt's feedback
             self._confirming = False
+            self._confirmations = 0
         common, extra = self._common(answer, -1)
         ev = InteractionEvent(action="next_guess", extra=extra, **common)
         self.feedbacks.append(-1)
         self.events.append(ev)
         self.tried.append(answer.concept)
         self.learner._emit_interaction(ev)
+        self._refused += 1
+        if (self._novelty_again and self._refused >= self.learner.config.novelty_after
+                and any(c not in self.tried for c in self.labels)):
+            # [learner] novelty_after: the "no"s go against the refused
+            # novelty answer (or the familiarity that kept it back): asked
+            # (again) before the next guess, once per demonstration
+            self._novelty_again = False
+            return self._novelty()
         return self._next()
 
     def _reward(self) -> Answer | LearnOutcome:
@@ -995,13 +1025,19 @@ class Turn:
         common, extra = self._common(answer, 1)
         if self._confirming:
             self._confirming = False
-        elif ((learner.config.confirm_rewards and -1 in self.feedbacks)
-              or (learner.config.confirm_new_exemplars
-                  and self.distances[nearest] >= learner.config.similarity_threshold)):
-            # a reward after a "no" goes against the robot's own ranking, and
-            # one that makes a new exemplar widens a concept: a teacher's slip
-            # there would merge two concepts, so it is kept only when the
-            # teacher confirms it (asked once more)
+            self._confirmations += 1
+        config = learner.config
+        # a reward after a "no" goes against the robot's own ranking, and one
+        # that makes a new exemplar widens a concept: a teacher's slip there
+        # would merge two concepts, so it is kept only when the teacher
+        # confirms it (asked once more; twice far down the ranking, after the
+        # novelty answer asked again was refused)
+        required = (2 if self._deep and config.confirm_twice_after_novelty
+                    else 1 if ((config.confirm_rewards and -1 in self.feedbacks)
+                               or (config.confirm_new_exemplars
+                                   and self.distances[nearest] >= config.similarity_threshold))
+                    else 0)
+        if self._confirmations < required:
             ev = InteractionEvent(action="confirm", extra=extra, **common)
             self.feedbacks.append(1)
             self.events.append(ev)
