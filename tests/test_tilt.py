@@ -16,8 +16,10 @@ from iloci.config import ConfigError, load_config
 from iloci.data import load_lasa
 from iloci.errors import InvalidInputError
 
-pytest.importorskip("torch")
-pytest.importorskip("pinocchio")
+# the default config's back ends: torch-rnnpb, the scipy clusterer, Pinocchio IK
+pytest.importorskip("iloci_torch")
+pytest.importorskip("iloci_scipy")
+pytest.importorskip("iloci_pinocchio")
 
 
 def _turned(demo, degrees):
