@@ -36,8 +36,11 @@ Writes ``benchmarks/results/rnnpb.json``::
                          the native kernel per instruction set (``avx512``,
                          ``avx2``, ``portable``; forced with ILOCI_RNNPB_ISA),
                          ``torch_ops``, jax-rnnpb (``jax``) and ``naive``,
-                         interleaved round by round
-                         so load on the machine hits them alike; ``wall`` and
+                         interleaved round by round (each round starting at
+                         another kernel) so load on the machine hits them alike;
+                         ``per_round_ratio_to_avx2``: the median over rounds of
+                         each round's ratio to the AVX2 step, what the ratio
+                         targets use; ``wall`` and
                          ``cpu`` (the process's CPU time, all threads: what the step costs when
                          other processes share the cores)
     recognize_one_ms     recognizing one demonstration against a memory of 25
@@ -47,6 +50,14 @@ Writes ``benchmarks/results/rnnpb.json``::
                          model), ``total``; wall and (``_cpu``) process CPU time;
                          medians over the 145 or 146 test demonstrations,
                          torch-rnnpb
+    agent_recognize_one_ms  trajectory in, concept out: ``Agent.recognize`` of
+                         one test demonstration by a default-config agent taught
+                         fold 0's learning set (``entries`` in its memory), the
+                         tilt search included; ``as_recorded`` and
+                         ``rotated_15`` (each turned by 15 degrees, where the
+                         search runs more often: ``searched``,
+                         ``answered_turned``); median wall and CPU ms, 90th
+                         percentile of wall
     targets              the issues' targets and whether this run met them
                          (wall-time medians); ``targets_cpu_time``: issue 16's speed
                          targets against process CPU time
@@ -239,7 +250,8 @@ def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
     threads = torch.get_num_threads()
     try:
         for r in range(rounds + 1):                # round 0 warms up, not counted
-            for k in kernels:
+            # each round starts at another kernel: none always runs first
+            for k in kernels[r % len(kernels):] + kernels[:r % len(kernels)]:
                 if k in ISAS:
                     os.environ[ISA_ENV] = k
                 n = 2 if r == 0 else epochs
@@ -264,7 +276,57 @@ def step_ms_by_kernel(seqs, rounds: int, epochs: int, naive_calls: int) -> dict:
             os.environ.pop(ISA_ENV, None)
         else:
             os.environ[ISA_ENV] = before
-    return {k: {m: statistics.median(v) for m, v in d.items()} for k, d in out.items()}
+    medians = {k: {m: statistics.median(v) for m, v in d.items()} for k, d in out.items()}
+    if "avx2" in out:
+        # ratios of one round's times, then their median: a change of load
+        # between rounds cancels out of each ratio
+        for k, d in out.items():
+            medians[k]["per_round_ratio_to_avx2"] = {
+                m: statistics.median(a / b for a, b in zip(d[m], out["avx2"][m]))
+                for m in ("wall", "cpu")}
+    return medians
+
+
+def agent_recognize_one_ms(demos, learn, test, rotated_degrees: float = 15.0) -> dict:
+    """Median ms for ``Agent.recognize`` of one trajectory: trajectory in, concept out.
+
+    A default-config agent (torch-rnnpb, oracle teacher) is taught the
+    fold's learning demonstrations; then each test demonstration is
+    recognized alone, converted anew (no motion cache), through whatever
+    recognition does by default, the tilt search included. Twice: as
+    recorded, and turned by ``rotated_degrees`` (``iloci.evaluation.perturb.rotate``,
+    the robustness suite's rotation), where the tilt search runs more often.
+    ``searched`` is the share of demonstrations read turned as well
+    (PB_obs beyond ``tilt_beyond``), ``answered_turned`` those whose turned
+    reading answered.
+    """
+    import iloci
+    from iloci.evaluation.perturb import rotate
+
+    agent = iloci.build({"perceptual_model": {"name": "torch-rnnpb"}})
+    agent.teach([demos[i] for i in learn])
+    cfg = agent.config.learner
+    rng = np.random.default_rng(0)
+    sets = {"as_recorded": [demos[i] for i in test],
+            f"rotated_{rotated_degrees:g}": [rotate(demos[i], rotated_degrees, rng)
+                                             for i in test]}
+    out: dict = {"entries": len(agent.memory.entries), "demonstrations": len(test)}
+    for name, items in sets.items():
+        wall, cpu, searched, turned = [], [], 0, 0
+        for d in items:
+            w0, c0 = time.perf_counter(), time.process_time()
+            rec = agent.recognize(d)
+            wall.append((time.perf_counter() - w0) * 1e3)
+            cpu.append((time.process_time() - c0) * 1e3)
+            # read turned as well: the upright reading was beyond the gate
+            # (an answer from a turned reading implies it)
+            searched += rec.tilt != 0.0 or (bool(cfg.tilts) and rec.distance > cfg.tilt_beyond)
+            turned += rec.tilt != 0.0
+        out[name] = {"wall": statistics.median(wall), "cpu": statistics.median(cpu),
+                     "wall_p90": float(np.percentile(wall, 90)),
+                     "searched": searched / len(items),
+                     "answered_turned": turned / len(items)}
+    return out
 
 
 def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:
@@ -302,21 +364,28 @@ def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:
             **{k: statistics.median(v) for k, v in out.items()}}
 
 
-def speed_targets(by_kernel: dict, rec_one: dict, clock: str = "wall") -> dict:
+def speed_targets(by_kernel: dict, rec_one: dict, rec_agent: dict,
+                  clock: str = "wall") -> dict:
     """Issue 16's speed targets against one run's figures (medians).
 
-    ``clock="cpu"``: the same against process CPU time, what the targets
-    mean on a machine whose cores other processes share.
+    The ratio targets take the median of the per-round ratios
+    (``per_round_ratio_to_avx2``); recognizing one demonstration is the
+    agent's (``agent_recognize_one_ms``, as recorded), trajectory in,
+    concept out. ``clock="cpu"``: the same against process CPU time, what
+    the targets mean on a machine whose cores other processes share.
     """
-    wall = {k: v[clock] for k, v in by_kernel.items()}
+    t = {k: v[clock] for k, v in by_kernel.items()}
     out = {}
-    if "avx2" in wall:
-        out["avx2_le_0.8ms"] = wall["avx2"] <= 0.8
-        out["avx2_ge_10x_naive"] = wall["naive"] / wall["avx2"] >= 10.0
-        out["portable_within_2.5x_avx2"] = wall["portable"] / wall["avx2"] <= 2.5
-    if "avx512" in wall:
-        out["avx512_le_0.42ms"] = wall["avx512"] <= 0.42
-    out["recognize_one_le_20ms"] = rec_one["total" if clock == "wall" else "total_cpu"] <= 20.0
+    if "avx2" in t:
+        ratio = {k: v["per_round_ratio_to_avx2"][clock] for k, v in by_kernel.items()}
+        out["avx2_le_0.8ms"] = t["avx2"] <= 0.8
+        out["avx2_ge_10x_naive"] = ratio["naive"] >= 10.0
+        out["portable_within_2.5x_avx2"] = ratio["portable"] <= 2.5
+    if "avx512" in t:
+        out["avx512_le_0.42ms"] = t["avx512"] <= 0.42
+    out["recognize_one_le_20ms"] = rec_agent["as_recorded"][clock] <= 20.0
+    out["recognize_one_model_only_le_20ms"] = \
+        rec_one["total" if clock == "wall" else "total_cpu"] <= 20.0
     return out
 
 
@@ -418,6 +487,9 @@ def main(argv=None) -> dict:
     print("recognizing one demonstration against 25 entries ...", flush=True)
     rec_one = recognize_one_ms(demos, motions, learn, test)
     print("  ", rec_one, flush=True)
+    print("Agent.recognize of one trajectory (default config, fold 0's memory) ...", flush=True)
+    rec_agent = agent_recognize_one_ms(demos, learn, test)
+    print("  ", rec_agent, flush=True)
     if args.speed:
         wall = {k: v["wall"] for k, v in by_kernel.items()}
         result = {
@@ -430,8 +502,9 @@ def main(argv=None) -> dict:
             "step_ms_by_kernel": by_kernel,
             "speedup_vs_naive": {k: wall["naive"] / v for k, v in wall.items() if k != "naive"},
             "recognize_one_ms": rec_one,
-            "targets": speed_targets(by_kernel, rec_one),
-            "targets_cpu_time": speed_targets(by_kernel, rec_one, "cpu"),
+            "agent_recognize_one_ms": rec_agent,
+            "targets": speed_targets(by_kernel, rec_one, rec_agent),
+            "targets_cpu_time": speed_targets(by_kernel, rec_one, rec_agent, "cpu"),
             "seconds": time.perf_counter() - t_start,
         }
         from iloci.evaluation.report import write_json_atomic
@@ -504,6 +577,7 @@ def main(argv=None) -> dict:
         "torch_ops_step_ms": torch_ops_ms,
         "step_ms_by_kernel": by_kernel,
         "recognize_one_ms": rec_one,
+        "agent_recognize_one_ms": rec_agent,
         "speedup_vs_naive": speedup,
         "recognize_146_s": rec,
         "recognize_146_first_call_s": rec_first,
@@ -517,9 +591,9 @@ def main(argv=None) -> dict:
             "torch_ge_4x_naive": speedup["torch"] >= 4.0,
             "recognize_146_le_1s": {b: rec[b] <= 1.0 for b in backends},
             "offline_ccr_mean_ge_90pct": {b: ccr[b]["mean"] >= 0.9 for b in backends},
-            **speed_targets(by_kernel, rec_one),
+            **speed_targets(by_kernel, rec_one, rec_agent),
         },
-        "targets_cpu_time": speed_targets(by_kernel, rec_one, "cpu"),
+        "targets_cpu_time": speed_targets(by_kernel, rec_one, rec_agent, "cpu"),
         "seconds": time.perf_counter() - t_start,
     }
     write(result)
