@@ -370,8 +370,42 @@ def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
     return True, value
 
 
+_PLURAL = {bool: "true/false values", int: "integers", float: "numbers", str: "strings"}
+_SINGULAR = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
+
+
 def _type_name(tp: Any) -> str:
+    """A type as a TOML user reads it: ``tuple[float, ...]`` -> "a list of numbers"."""
+    if tp in _SINGULAR:
+        return _SINGULAR[tp]
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is typing.Union or isinstance(tp, types.UnionType):
+        return " or ".join(_type_name(a) for a in args if a is not type(None))
+    if origin in (tuple, list) or tp in (tuple, list):
+        if args and not (len(args) == 2 and args[1] is Ellipsis) and origin is tuple:
+            if len(set(args)) == 1 and args[0] in _PLURAL:
+                return f"a list of {len(args)} {_PLURAL[args[0]]}"
+            return f"a list of {len(args)} values"
+        if args and args[0] in _PLURAL:
+            return f"a list of {_PLURAL[args[0]]}"
+        return "a list"
+    if origin is dict or tp is dict:
+        return "a table"
     return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _value_kind(value: Any) -> str:
+    """What a TOML value is, in :func:`_type_name`'s words."""
+    for tp in (bool, int, float, str):
+        if isinstance(value, tp):
+            return _SINGULAR[tp]
+    if isinstance(value, (list, tuple)):
+        kinds = sorted({next((_PLURAL[tp] for tp in (bool, int, float, str)
+                              if isinstance(v, tp)), "other values") for v in value})
+        return "a list" + (f" of {' and '.join(kinds)}" if kinds else ", empty")
+    if isinstance(value, Mapping):
+        return "a table"
+    return type(value).__name__
 
 
 def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
@@ -397,7 +431,7 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
         if not ok:
             raise ConfigError(
                 f"{section}.{key} must be {_type_name(hints.get(key))}, got "
-                f"{value!r} ({type(value).__name__}).", source=source, key=f"{section}.{key}")
+                f"{value!r} ({_value_kind(value)}).", source=source, key=f"{section}.{key}")
         if not _all_finite(coerced):
             raise ConfigError(
                 f"{section}.{key} must be a finite number, got {value!r}: TOML spells "
