@@ -117,6 +117,42 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
         assert state["demonstrations_seen"] == 3
 
 
+def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
+    """[learner] novelty_below / unknown_below served: the novelty answer is
+    marked ``novel`` with a null confidence (JSON has no NaN; it was a 500),
+    and "yes" founds the concept it named; recognition says ``unknown``."""
+    shapes = ["GShape", "Angle", "Sine", "Leaf_1", "Snake", "Worm"]
+    lasa = {d.key: d for d in load_lasa(shapes)}
+    cfg = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.8,
+                                 "unknown_below": 0.8, "confirm_rewards": True}}
+    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False)
+    novel = None
+    with TestClient(create_app(classroom)) as client:
+        for shape in shapes:
+            r = client.post("/api/observe", json={"points": stroke(lasa[f"{shape}/0"])})
+            assert r.status_code == 200, r.text
+            while "answer" in r.json():
+                answer = r.json()["answer"]
+                assert isinstance(answer["novel"], bool)
+                if answer["novel"]:
+                    assert answer["confidence"] is None
+                    novel = answer
+                    r = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1})
+                    outcome = r.json()["outcome"]
+                    assert (outcome["action"], outcome["concept"]) == ("new_concept",
+                                                                       answer["concept"])
+                    break
+                assert 0 <= answer["confidence"] <= 1
+                r = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1})
+                assert r.status_code == 200, r.text
+            assert client.get("/api/state").status_code == 200
+        assert novel is not None, "no novelty answer in six new shapes"
+        got = client.post("/api/recognize", json={"points": stroke(lasa["GShape/1"])})
+        assert got.status_code == 200, got.text
+        rec = got.json()
+        assert isinstance(rec["unknown"], bool) and 0 <= rec["familiarity"] <= 1
+
+
 def test_feedback_refused_without_a_matching_guess(served, lasa):
     client, _, memory = served
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})

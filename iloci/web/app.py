@@ -111,6 +111,12 @@ def parse_points(body: Any) -> tuple[np.ndarray, np.ndarray]:
     return a[:, :2], a[:, 2]
 
 
+def _number(value: float, digits: int = 4) -> float | None:
+    """``value`` rounded, or None where it is not a finite number (JSON has no NaN)."""
+    value = float(value)
+    return round(value, digits) if math.isfinite(value) else None
+
+
 def _polyline(points: np.ndarray) -> list[list[float]]:
     return [[round(float(x), 4), round(float(y), 4)] for x, y in np.asarray(points)]
 
@@ -160,8 +166,11 @@ class Classroom:
 
     def answer_json(self, answer: Any) -> dict[str, Any]:
         r = answer.response
-        out = {"turn": self.turn_id, "concept": answer.concept,
-               "confidence": round(answer.confidence, 4), "attempt": answer.attempt,
+        # a novelty answer ([learner] novelty_below, novelty_after) names the
+        # concept it would found and has no confidence (NaN): null in JSON,
+        # which has no NaN
+        out = {"turn": self.turn_id, "concept": answer.concept, "novel": bool(r.novel),
+               "confidence": _number(answer.confidence), "attempt": answer.attempt,
                "drawing": _polyline(answer.drawing), "dt": answer.dt,
                "joint_path": [[round(float(v), 5) for v in row] for row in answer.joint_path],
                "start_posture": [float(v) for v in answer.start_posture],
@@ -260,8 +269,9 @@ class Classroom:
         async with self.lock:
             demo = self._demo(positions, times)
             r = await asyncio.to_thread(self.agent.recognize, demo)
-        return {"concept": r.concept, "confidence": round(r.confidence, 4),
-                "distance": round(r.distance, 4), "entry": r.entry, "tilt": r.tilt}
+        return {"concept": r.concept, "confidence": _number(r.confidence),
+                "distance": _number(r.distance), "entry": r.entry, "tilt": r.tilt,
+                "unknown": bool(r.unknown), "familiarity": _number(r.familiarity)}
 
     async def rename(self, body: Any) -> dict[str, Any]:
         if not isinstance(body, dict) or not isinstance(body.get("concept"), str) \

@@ -157,7 +157,12 @@ function animateAnswer(answer) {
 function showAnswer(answer) {
   pending = answer;
   animateAnswer(answer);
-  $("guess").textContent = `Is it "${answer.concept}"? (confidence ${answer.confidence.toFixed(2)}, ` +
+  // the novelty answer: nothing the robot knows is like the drawing, it
+  // drew it back as it saw it and asks whether it is a new concept
+  $("guess").textContent = answer.novel ?
+    `Something new? The robot knows nothing like it and drew it back as it saw it: ` +
+    `is it a new concept ("${answer.concept}")? (attempt ${answer.attempt})` :
+    `Is it "${answer.concept}"? (confidence ${answer.confidence.toFixed(2)}, ` +
     `attempt ${answer.attempt})`;
   $("judge").hidden = false;
   if (answer.arm) { $("arm").src = answer.arm; $("arm").hidden = false; }
@@ -222,7 +227,10 @@ async function recognize() {
     const r = await api("/api/recognize", {points: stroke});
     clearAnswer();
     say("");
-    $("guess").textContent = `Recognized: "${r.concept}" (confidence ${r.confidence.toFixed(2)}); nothing learned.`;
+    $("guess").textContent = r.unknown ?
+      `Unknown: like nothing it was taught (nearest "${r.concept}", familiarity ` +
+      `${r.familiarity.toFixed(2)}); nothing learned.` :
+      `Recognized: "${r.concept}" (confidence ${r.confidence.toFixed(2)}); nothing learned.`;
   } catch (err) { say(""); showError(err.message); }
 }
 
