@@ -648,7 +648,9 @@ class Learner:
         list of Recognition
             With ``tilt``, the angle of the reading recognized.
         """
-        out = self._recognize(sequences, keys)
+        # the memory's calibration, once for the readings as drawn and turned
+        scale = novelty_scale(self.model, self.memory)
+        out = self._recognize(sequences, keys, scale)
         if tilted is None or not self.config.tilts:
             return out
         ask = [b for b, r in enumerate(out) if r.distance > self.config.tilt_beyond]
@@ -670,15 +672,16 @@ class Learner:
         chosen = sorted({j for _, j in best.values() if j >= 0})
         if not chosen:
             return out
-        recs = self._recognize([turned[j] for j in chosen], [out[owners[j][0]].demo
-                                                               for j in chosen])
+        recs = self._recognize([turned[j] for j in chosen],
+                               [out[owners[j][0]].demo for j in chosen], scale)
         for j, r in zip(chosen, recs):
             out[owners[j][0]] = replace(r, tilt=owners[j][1])
         return out
 
-    def _recognize(self, sequences: Sequence[np.ndarray],
-                   keys: Sequence[str] | None = None) -> list[Recognition]:
-        """:meth:`recognize` of each sequence as given (no tilt search)."""
+    def _recognize(self, sequences: Sequence[np.ndarray], keys: Sequence[str] | None,
+                   scale: float) -> list[Recognition]:
+        """:meth:`recognize` of each sequence as given (no tilt search);
+        ``scale``: :func:`novelty_scale` of the memory."""
         seqs = list(sequences)
         keys = list(keys) if keys is not None else [f"#{i}" for i in range(len(seqs))]
         if not seqs:
@@ -702,8 +705,7 @@ class Learner:
         # it never learned.
         rep = (entry_errors.min(axis=1) if entry_errors is not None
                else np.full(len(seqs), np.nan))
-        fam = familiarity(rep if entry_errors is not None and reproduction else errors,
-                          novelty_scale(self.model, self.memory))
+        fam = familiarity(rep if entry_errors is not None and reproduction else errors, scale)
         below = self.config.unknown_below
         out = []
         for b, i in enumerate(nearest):

@@ -133,15 +133,24 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     InvalidDemonstrationError, UnreachableTargetError
     """
     cfg = _sensorimotor(config)
-    if robot is None:
-        robot = getattr(ik, "robot", None) or get_robot()
-    plane_points = preprocessed(demo, cfg, robot)
-    targets = robot.plane.to_3d(plane_points)
-    joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
+    robot = _robot(ik, robot)
     times = demo.times
     assert times is not None  # Demonstration fills in times when none are given
     dt = float(times[-1] - times[0]) / (cfg.steps - 1)
-    return Motion(demo.key, plane_points, targets, joint_path, dt)
+    return _solved(demo.key, preprocessed(demo, cfg, robot), dt, ik, robot)
+
+
+def _robot(ik: IKSolver, robot: Robot | None) -> Robot:
+    """``robot``, else the IK solver's ``robot`` attribute, else the Nao preset."""
+    return robot if robot is not None else getattr(ik, "robot", None) or get_robot()
+
+
+def _solved(key: str, plane_points: np.ndarray, dt: float, ik: IKSolver,
+            robot: Robot) -> Motion:
+    """The motion along ``plane_points``: IK solved from the robot's ``q_home``."""
+    targets = robot.plane.to_3d(plane_points)
+    joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
+    return Motion(key, plane_points, targets, joint_path, dt)
 
 
 def tilted(motion: Motion, degrees: float, ik: IKSolver, robot: Robot | None = None) -> Motion:
@@ -186,15 +195,11 @@ def tilted(motion: Motion, degrees: float, ik: IKSolver, robot: Robot | None = N
         raise InvalidInputError(f"tilt must be a finite number of degrees, got {degrees!r}.")
     if a == 0.0:
         return motion
-    if robot is None:
-        robot = getattr(ik, "robot", None) or get_robot()
+    robot = _robot(ik, robot)
     plane = robot.plane
     c, s = np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a))
     turned = (motion.plane_points - plane.center) @ np.array([[c, s], [-s, c]]) + plane.center
-    plane_points = fit_to_plane(turned, plane)
-    targets = plane.to_3d(plane_points)
-    joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
-    return Motion(motion.demo_key, plane_points, targets, joint_path, motion.dt)
+    return _solved(motion.demo_key, fit_to_plane(turned, plane), motion.dt, ik, robot)
 
 
 def to_motions(demos: Iterable[Demonstration], config: SensorimotorConfig | Config | None,
