@@ -394,14 +394,18 @@ def _type_name(tp: Any) -> str:
     return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
 
 
+def _scalar(value: Any) -> type | None:
+    """The TOML scalar type of ``value`` (bool before int: a bool is an int), or None."""
+    return next((tp for tp in _SINGULAR if isinstance(value, tp)), None)
+
+
 def _value_kind(value: Any) -> str:
     """What a TOML value is, in :func:`_type_name`'s words."""
-    for tp in (bool, int, float, str):
-        if isinstance(value, tp):
-            return _SINGULAR[tp]
+    tp = _scalar(value)
+    if tp is not None:
+        return _SINGULAR[tp]
     if isinstance(value, (list, tuple)):
-        kinds = sorted({next((_PLURAL[tp] for tp in (bool, int, float, str)
-                              if isinstance(v, tp)), "other values") for v in value})
+        kinds = sorted({_PLURAL.get(_scalar(v) or object, "other values") for v in value})
         return "a list" + (f" of {' and '.join(kinds)}" if kinds else ", empty")
     if isinstance(value, Mapping):
         return "a table"
