@@ -208,12 +208,12 @@ class LearnerConfig:
         if self.rehearse_from not in ("regenerated", "demonstrations"):
             raise ValueError("rehearse_from must be 'regenerated' or 'demonstrations', got "
                              f"{self.rehearse_from!r}")
-        if self.familiarity not in ("reproduction", "prediction"):
-            raise ValueError("familiarity must be 'reproduction' or 'prediction', got "
-                             f"{self.familiarity!r}")
-        if self.decision not in ("pb_distance", "reproduction"):
-            raise ValueError("decision must be 'pb_distance' or 'reproduction', got "
-                             f"{self.decision!r}")
+        if self.familiarity not in ("reproduction", "prediction", "regeneration"):
+            raise ValueError("familiarity must be 'reproduction', 'prediction' or "
+                             f"'regeneration', got {self.familiarity!r}")
+        if self.decision not in ("pb_distance", "reproduction", "regeneration"):
+            raise ValueError("decision must be 'pb_distance', 'reproduction' or "
+                             f"'regeneration', got {self.decision!r}")
         for name in ("unknown_below", "novelty_below"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")

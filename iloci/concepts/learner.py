@@ -47,7 +47,8 @@ from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Respons
 from iloci.sensorimotor.frames import TeacherFrame
 
 __all__ = ["Answer", "Learner", "LearnOutcome", "Recognition", "Turn", "confidence",
-           "familiarity", "ik_joint_limits", "novelty_scale", "perform"]
+           "familiarity", "ik_joint_limits", "novelty_scale", "pattern_distances", "perform",
+           "regenerated_patterns", "regeneration_scale"]
 
 #: A turned reading of the tilt search (``[learner] tilts``) is recognized
 #: only when its entry prediction error is below this fraction of the
@@ -278,6 +279,100 @@ def novelty_scale(model: PerceptualModel, memory: Memory) -> float:
     return float(np.median(errors)) if errors.size else float("nan")
 
 
+def regenerated_patterns(model: PerceptualModel, memory: Memory) -> list[np.ndarray]:
+    """Every entry's pattern as the network regenerates it: closed-loop from its PB and initialInfo.
+
+    Unlike :func:`iloci.concepts.rehearsal.regenerate`, never the entry's
+    kept demonstration: this is what the robot's network itself makes of
+    each entry (what it would perform), the ground of ``[learner] decision
+    = "regeneration"``.
+
+    Returns
+    -------
+    list of ndarray, each (numSteps_i, D)
+        Encoded units, one per entry of ``memory`` (empty for an empty memory).
+    """
+    entries = memory.entries
+    if not entries:
+        return []
+    made = model.generate(memory.pbs, _stack_rows([e.initial_input for e in entries]),
+                          [e.num_steps for e in entries])
+    return [np.asarray(g, dtype=np.float64) for g in made]
+
+
+def _stack_rows(rows: Sequence[np.ndarray]) -> np.ndarray:
+    return np.asarray(np.stack([np.asarray(r, dtype=np.float64) for r in rows]),
+                      dtype=np.float64)
+
+
+def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
+    """``pattern`` (T, D) linearly resampled in time to ``steps`` rows (itself when T = steps)."""
+    if len(pattern) == steps:
+        return pattern
+    t = np.linspace(0.0, 1.0, len(pattern))
+    u = np.linspace(0.0, 1.0, steps)
+    return np.stack([np.interp(u, t, pattern[:, j]) for j in range(pattern.shape[1])], axis=1)
+
+
+def pattern_distances(sequences: Sequence[np.ndarray],
+                      patterns: Sequence[np.ndarray]) -> np.ndarray:
+    """Mean squared difference of each encoded sequence to each regenerated pattern, (B, M).
+
+    Step by step over the sequence's rows and every feature (encoded
+    units; pen displacement and joint displacements alike); a pattern of
+    another length is first resampled linearly in time to the sequence's.
+    Both sides come from the same preprocessing (arc-length resampling to
+    ``[sensorimotor] steps`` points), so step ``t`` is the same fraction of
+    the path's length in both.
+
+    Parameters
+    ----------
+    sequences : sequence of ndarray, each (T_b, D)
+    patterns : sequence of ndarray, each (T_m, D)
+
+    Returns
+    -------
+    ndarray, shape (B, M)
+    """
+    seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
+    pats = [np.asarray(p, dtype=np.float64) for p in patterns]
+    out = np.zeros((len(seqs), len(pats)), dtype=np.float64)
+    if not pats:
+        return out
+    by_len: dict[int, list[int]] = {}
+    for b, s in enumerate(seqs):
+        by_len.setdefault(len(s), []).append(b)
+    for n, rows in by_len.items():
+        S = np.stack([seqs[b] for b in rows])                        # (b, T, D)
+        P = np.stack([_on_steps(p, n) for p in pats])                # (M, T, D)
+        out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
+    return out
+
+
+def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str]) -> float:
+    """The memory's own scale for "unlike everything it knows", on regenerated patterns.
+
+    For each entry, :func:`pattern_distances` from its regenerated pattern to
+    the nearest regenerated pattern of an entry of *another* concept (how
+    far apart two known concepts lie); the median over entries. The
+    project's calibration (the paper has none), the counterpart of
+    :func:`novelty_scale` for ``[learner] familiarity = "regeneration"``.
+
+    Returns
+    -------
+    float
+        Mean squared difference, encoded units; NaN with fewer than two concepts.
+    """
+    lab = np.asarray(list(labels))
+    if len(set(lab.tolist())) < 2:
+        return float("nan")
+    pats = list(patterns)
+    d = np.stack([pattern_distances([p], pats)[0] for p in pats])
+    other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
+    other = other[np.isfinite(other)]
+    return float(np.median(other)) if other.size else float("nan")
+
+
 def familiarity(error: np.ndarray | float, scale: float) -> np.ndarray:
     """``scale / (scale + error)``: near 1 for what the network reproduces, 0.5 at the scale.
 
@@ -482,6 +577,28 @@ class Learner:
                             dtype=np.float64)
         return errors.reshape(len(seqs), m)
 
+    def regeneration_distances(self, sequences: Sequence[np.ndarray],
+                               patterns: Sequence[np.ndarray] | None = None) -> np.ndarray:
+        """How far each sequence lies from each entry's regenerated pattern, shape (B, M).
+
+        :func:`pattern_distances` of the sequences to the memory's
+        :func:`regenerated_patterns` (``patterns`` when given, e.g. computed
+        once for several calls): ``[learner] decision = "regeneration"``
+        answers with the entry of the lowest one.
+        """
+        pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
+        return pattern_distances(sequences, pats)
+
+    def _tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
+        """Per sequence, how well the memory reproduces it: the tilt search's criterion.
+
+        The best over entries of the quantity ``[learner] decision`` ranks
+        by (regeneration distance, else the entry prediction error).
+        """
+        if self.config.decision == "regeneration":
+            return self.regeneration_distances(sequences).min(axis=1)
+        return self.entry_errors(sequences).min(axis=1)
+
     def respond(self, index: int, attempt: int = 1,
                 frame: TeacherFrame | None = None) -> Response:
         """The robot's answer: entry ``index`` performed (see :func:`perform`).
@@ -663,9 +780,9 @@ class Learner:
         if not turned:
             return out
         seqs = list(sequences)
-        upright = self.entry_errors([seqs[b] for b in ask]).min(axis=1)
+        upright = self._tilt_scores([seqs[b] for b in ask])
         best = {b: (TILT_MARGIN * float(e), -1) for b, e in zip(ask, upright)}
-        for j, e in enumerate(self.entry_errors(turned).min(axis=1)):
+        for j, e in enumerate(self._tilt_scores(turned)):
             b = owners[j][0]
             if e < best[b][0]:
                 best[b] = (float(e), j)
@@ -694,9 +811,15 @@ class Learner:
         reproduction = self.config.familiarity == "reproduction"
         entry_errors = (self.entry_errors(seqs) if self.config.decision == "reproduction"
                         or (self.config.unknown_below > 0 and reproduction) else None)
-        ranking = (entry_errors if entry_errors is not None
-                   and self.config.decision == "reproduction" else dist)
-        nearest, conf = confidence(ranking, labels)
+        regen = None
+        if "regeneration" in (self.config.decision, self.config.familiarity):
+            patterns = regenerated_patterns(self.model, self.memory)
+            regen = pattern_distances(seqs, patterns)
+            if self.config.familiarity == "regeneration":
+                scale = regeneration_scale(patterns, labels)
+        ranking = {"reproduction": entry_errors, "regeneration": regen}.get(
+            self.config.decision)
+        nearest, conf = confidence(dist if ranking is None else ranking, labels)
         # "unknown" asks whether anything the robot knows reproduces the
         # demonstration (its best entry's error), on the scale at which one
         # known concept reproduces its neighbour (novelty_scale): the same
@@ -705,7 +828,11 @@ class Learner:
         # it never learned.
         rep = (entry_errors.min(axis=1) if entry_errors is not None
                else np.full(len(seqs), np.nan))
-        fam = familiarity(rep if entry_errors is not None and reproduction else errors, scale)
+        if regen is not None and self.config.familiarity == "regeneration":
+            fam = familiarity(regen.min(axis=1), scale)
+        else:
+            fam = familiarity(rep if entry_errors is not None and reproduction else errors,
+                              scale)
         below = self.config.unknown_below
         out = []
         for b, i in enumerate(nearest):
@@ -838,8 +965,10 @@ class Turn:
         self.labels = mem.concept_labels
         # what orders the guesses: PB distance (the paper) or how well each
         # entry's PB reproduces the demonstration ([learner] decision)
-        self.ranking = (learner.entry_errors([seq])[0]
-                        if learner.config.decision == "reproduction" else self.distances)
+        decision = learner.config.decision
+        self.ranking = (learner.entry_errors([seq])[0] if decision == "reproduction"
+                        else learner.regeneration_distances([seq])[0]
+                        if decision == "regeneration" else self.distances)
         self._novel = False        # the current answer is the novelty answer
         self._confirming = False   # the current answer asks to confirm a reward after a no
         self._fam = float("nan")   # the demonstration's familiarity, once computed
@@ -860,6 +989,12 @@ class Turn:
             learner, seq = self.learner, self.sequence
             # is it like an entry the robot knows (reproduction), or can the
             # network reproduce it at all (prediction)
+            if learner.config.familiarity == "regeneration":
+                patterns = regenerated_patterns(learner.model, learner.memory)
+                self._fam = float(familiarity(
+                    float(np.min(learner.regeneration_distances([seq], patterns)[0])),
+                    regeneration_scale(patterns, learner.memory.concept_labels)))
+                return self._fam
             if learner.config.familiarity == "reproduction":
                 error = float(np.min(self.ranking if learner.config.decision == "reproduction"
                                      else learner.entry_errors([seq])[0]))
