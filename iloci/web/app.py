@@ -473,6 +473,8 @@ class Classroom:
                 out["notice"] = ("The memory changed since this guess (another tab taught, or "
                                  "a concept was renamed or forgotten): the robot looked at your "
                                  "drawing again.")
+                if "answer" in out:
+                    out["answer"]["notice"] = out["notice"]
                 return out
             turn = rec.turn
             learner = turn.learner

@@ -375,7 +375,7 @@ function renderMemory(memory) {
     forget.title = `forget the concept ${concept.name} (undo brings it back)`;
     forget.addEventListener("click", () => control("/api/forget", {concept: concept.name},
       () => `Forgot "${concept.name}". (Undo brings it back.)`));
-    form.appendChild(forget);
+    name.appendChild(forget);
     const thumbs = document.createElement("div");
     thumbs.className = "thumbs";
     for (const entry of concept.entries) {
