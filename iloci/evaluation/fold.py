@@ -156,7 +156,9 @@ class LearnedFold:
         if len(recs) != len(self.true):
             raise InvalidInputError(f"fold {res.fold}: {len(recs)} recognitions for "
                                     f"{len(self.true)} test demonstrations.")
-        base = self.baseline_predicted or [None] * len(recs)
+        base: list[str | None] = [None] * len(recs)
+        if self.baseline_predicted is not None:
+            base = list(self.baseline_predicted)
         answers = tuple(
             Answer(key=key, true_concept=true, taught=taught,
                    # a robot concept without a true name keeps its robot label: never correct
@@ -170,7 +172,7 @@ class LearnedFold:
                    familiarity=float(r.familiarity), unknown=bool(r.unknown),
                    baseline_predicted=b)
             for key, true, taught, r, b in zip(self.test, self.true, self.taught, recs, base))
-        pb = ([], [], [])
+        pb: tuple[list[list[float]], list[str], list[str]] = ([], [], [])
         if self.details:
             pb = ([[float(x) for x in r.pb_obs] for r in recs], list(self.true),
                   ["test"] * len(recs))
