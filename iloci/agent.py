@@ -308,7 +308,9 @@ class Agent:
             An observer hook raised after the demonstration was learned
             (its ``outcome`` says how); do not teach it again.
         """
+        from iloci.concepts.learner import show_to_teacher
         from iloci.interfaces import check_feedback
+        show_to_teacher(self.teacher, demo)
         turn = self.observe(demo, motion)
         while turn.answer is not None:
             value = self.teacher.feedback(demo, turn.answer.response)
