@@ -160,7 +160,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--fresh", action="store_true", help="ignore cached results")
     ap.add_argument("--export", metavar="DIR", default=None,
                     help="where the UNIPEN digits are exported as CSV files "
-                    "(default: a folder beside the cache)")
+                    "(default: $ILOCI_CACHE_DIR or ~/.cache/iloci, /unipen-digits)")
     args = ap.parse_args(argv)
 
     from iloci.config import load_config
@@ -173,7 +173,9 @@ def main(argv: list[str] | None = None) -> dict:
     if any(d.startswith("unipen") for d in wanted):
         if not args.unipen:
             ap.error("--unipen PATH is needed for the UNIPEN data sets (or --datasets lasa)")
-        unipen_dir = Path(args.export or CACHE / "unipen-digits")
+        cache_root = os.environ.get("ILOCI_CACHE_DIR") or os.path.join(
+            os.path.expanduser("~"), ".cache", "iloci")
+        unipen_dir = Path(args.export or Path(cache_root) / "unipen-digits")
         unipen_info = export_unipen(args.unipen, unipen_dir)
     load_before = os.getloadavg()
     rows = [run_one(d, s, config, args.jobs, unipen_dir, args.fresh)
