@@ -12,10 +12,10 @@ Plugins write ``from iloci import hookimpl``.
 from __future__ import annotations
 
 from iloci._version import __version__
-from iloci.agent import Agent, build
+from iloci.agent import Agent, build, preload
 from iloci.config import Config, load_config
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration
 
 __all__ = ["Agent", "Config", "Demonstration", "build", "hookimpl", "load_config",
-           "__version__"]
+           "preload", "__version__"]
