@@ -387,11 +387,20 @@ class DataConfig:
     dataset: str = "lasa"
     #: LASA shapes to use; empty means all 26 single-pattern shapes.
     shapes: tuple[str, ...] = ()
+    #: A data set of your own for ``iloci evaluate`` instead of LASA: a
+    #: folder with a sub-folder of trajectory files per concept (optionally
+    #: a sub-folder per writer in each), or a manifest (``.csv``/``.json``:
+    #: file, concept[, writer, session]); see docs/guide.md, "Your own
+    #: shapes". A relative path is read from the current folder. Empty: LASA.
+    path: str = ""
 
     def validate(self) -> None:
         if self.dataset != "lasa":
-            raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; load your "
-                             "own trajectories with iloci.data.load_trajectory")
+            raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; evaluate your "
+                             "own trajectories with [data] path (or --data PATH)")
+        if self.path and self.shapes:
+            raise ValueError("shapes picks LASA shapes; it cannot be combined with path "
+                             "(your own data set)")
         from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
         known = LASA_SHAPES + MULTI_MODEL_SHAPES
         for shape in self.shapes:
@@ -436,8 +445,14 @@ class EvaluationConfig:
     order: str = "shuffled"
     #: Also recognize every fold's test set under the perturbations of
     #: :mod:`iloci.evaluation.perturb` (pace, sampling, rests, jitter,
-    #: rotation, stretch, scale), iloci beside DTW 1-NN.
+    #: rotation, stretch, scale), iloci beside the baselines.
     robustness: bool = False
+    #: How the folds are made: ``"concepts"`` (the paper's: each concept's
+    #: samples dealt into ``folds`` parts, fold ``k`` learns part ``k``) or
+    #: ``"writers"`` (the writers of ``[data] path`` dealt into ``folds``
+    #: groups, fold ``k`` learns from group ``k``'s samples and recognizes
+    #: the other writers', never seen).
+    split: str = "concepts"
 
     def validate(self) -> None:
         if self.protocol not in ("folds", "stream"):
@@ -456,6 +471,8 @@ class EvaluationConfig:
             raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
         if self.order not in ("shuffled", "blocked"):
             raise ValueError(f"order must be 'shuffled' or 'blocked', got {self.order!r}")
+        if self.split not in ("concepts", "writers"):
+            raise ValueError(f"split must be 'concepts' or 'writers', got {self.split!r}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {
@@ -557,6 +574,22 @@ def _read_toml(path: Path) -> dict[str, Any]:
         m = _LINE_RE.search(str(exc))
         line = int(m.group(1)) if m else None
         raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
+
+
+def _beside(robot: RobotConfig, folder: Path) -> RobotConfig:
+    """``robot`` with a relative ``urdf`` and ``package_dirs`` made absolute paths beside
+    the config file in ``folder`` (not the current folder): a config means the same
+    from anywhere, and a memory stores the absolute path, so it loads from anywhere."""
+    def absolute(p: str) -> str:
+        if not p or p.startswith("package://"):
+            return p
+        q = Path(p.removeprefix("file://")).expanduser()
+        return str(q if q.is_absolute() else (folder / q).resolve())
+
+    urdf, dirs = absolute(robot.urdf), tuple(absolute(d) for d in robot.package_dirs)
+    if urdf == robot.urdf and dirs == robot.package_dirs:
+        return robot
+    return dataclasses.replace(robot, urdf=urdf, package_dirs=dirs)
 
 
 def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | None = None,
@@ -663,22 +696,8 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
-    pm_params = getattr(kwargs.get("perceptual_model"), "params", None)
-    size = getattr(pm_params, "input_size", None)
-    default = getattr(type(pm_params), "input_size", None) if pm_params is not None else None
-    if isinstance(size, int) and size != default:
-        # the network's input is the robot's 2 + J features per step; the
-        # default is sized from the robot by iloci.build
-        from iloci.sensorimotor.encoding import feature_names
-        from iloci.sensorimotor.robots import robot_from_config
-        robot, _ = robot_from_config(kwargs["robot"])
-        names = feature_names(robot.dof)
-        if size != len(names):
-            raise ConfigError(
-                f"perceptual_model.input_size is {size}, but robot {robot.name!r} gives "
-                f"every encoded demonstration {len(names)} features per step "
-                f"({', '.join(names)}): set it to {len(names)} or leave it out (it is sized "
-                "from the robot).", source=origin, key="perceptual_model.input_size")
+    if isinstance(source, (str, os.PathLike)):
+        kwargs["robot"] = _beside(kwargs["robot"], Path(source).parent)
     if missing is not None:
         raise missing
     return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))

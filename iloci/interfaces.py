@@ -13,7 +13,7 @@ four joint deltas), ``P`` size of a parametric-bias (PB) vector (4),
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 import warnings
@@ -26,6 +26,7 @@ from iloci.validation import check_array
 
 __all__ = [
     "Demonstration",
+    "FoldExecutor",
     "Response",
     "Execution",
     "PerceptualModel",
@@ -365,10 +366,26 @@ class PerceptualModel(Protocol):
 
 @runtime_checkable
 class Clusterer(Protocol):
-    """Complete-link agglomerative clustering cut at a distance."""
+    """Complete-link agglomerative clustering cut at a distance.
+
+    The contract is complete link, and only complete link: the partition
+    must be the one agglomerative complete-link clustering gives at the cut,
+    i.e. (1) no cluster's diameter (largest pairwise Euclidean distance
+    between its members) exceeds ``distance_threshold``, and (2) any two
+    clusters are further apart than it under complete link (their farthest
+    pair of members), so no two could still merge. The learner's validity
+    rules for prototypes (the paper's eq. 1, :mod:`iloci.concepts.clustering`)
+    read ``D_cutoff`` as this diameter bound. Another algorithm (single or
+    average link, k-means, DBSCAN/HDBSCAN, an HDBSCAN-seeded search) gives
+    other partitions and fails the conformance check ``cl_complete_link``
+    (:mod:`iloci.testing`), even when it is a fine clusterer: iloci does not
+    support it as a ``Clusterer``. A plugin may compute the complete-link
+    partition any way it likes (faster, on a GPU, seeded by another method
+    and then repaired), as long as the result is that partition.
+    """
 
     def cluster(self, points: np.ndarray, distance_threshold: float) -> np.ndarray:
-        """Cluster points so that no cluster's diameter reaches the threshold.
+        """Cluster points so that no cluster's diameter exceeds the threshold.
 
         Parameters
         ----------
@@ -382,6 +399,12 @@ class Clusterer(Protocol):
         ndarray of int, shape (M,)
             Labels ``0..K-1`` numbered in order of first appearance, so two
             back ends giving the same partition give the same labels.
+
+        Raises
+        ------
+        InvalidInputError
+            ``points`` is not a finite 2-D array, or the threshold is
+            negative or not finite.
         """
         ...
 
@@ -592,3 +615,25 @@ def unmet_members(obj: Any, protocol: type) -> list[str]:
     out = [n for n in attributes - methods if not hasattr(obj, n)]
     out += [n for n in methods if not callable(getattr(obj, n, None))]
     return sorted(out)
+
+
+@runtime_checkable
+class FoldExecutor(Protocol):
+    """Runs evaluation folds (or any picklable calls) in parallel: ``iloci_make_executor``'s result.
+
+    :mod:`iloci.evaluation.executors` has the kernel's (``local``); ``iloci-ray`` adds ``ray``.
+    """
+
+    #: Short name, as ``iloci evaluate --executor`` takes it.
+    name: str
+
+    def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
+            emit: Callable[[dict], None]) -> Iterator[Any]:
+        """Call ``fn(*args, queue)`` for each ``args`` of ``calls``; yield results.
+
+        Results come in the order the calls finish. ``queue.put(msg)`` in a
+        call passes ``msg`` (a picklable dict) to ``emit`` in the caller.
+        An exception raised by a call is raised here, after the other calls
+        are cancelled; so is ``KeyboardInterrupt``.
+        """
+        ...

@@ -89,10 +89,29 @@ def test_block_named_plugin(monkeypatch):
     assert reg.names("teacher") == []
 
 
-def test_disable_autoload_env(monkeypatch):
+def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
+    from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
     monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
     pm = get_plugin_manager()
-    assert set(dict(pm.list_name_plugin())) == {"iloci.teachers"}
+    loaded = set(dict(pm.list_name_plugin()))
+    info = pm.iloci_plugin_info
+    # the built-ins and every installed first-party back end, nothing else
+    assert "iloci.teachers" in loaded
+    for name in loaded - {"iloci.teachers"}:
+        assert info[name].distribution in FIRST_PARTY_DISTRIBUTIONS
+    for name, i in info.items():
+        if i.distribution in FIRST_PARTY_DISTRIBUTIONS:
+            assert i.status == "loaded", (name, i)
+        elif i.distribution != "iloci":
+            assert i.status == "not autoloaded", (name, i)
+    assert set(dict(get_plugin_manager(autoload=False).list_name_plugin())) == \
+        {"iloci.teachers"}
+
+
+def test_disable_autoload_env_keeps_installed_back_ends(monkeypatch):
+    pytest.importorskip("iloci_scipy")
+    monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
+    assert "scipy" in get_registry(get_plugin_manager()).names("clusterer")
 
 
 def test_misspelled_hook_is_an_error():
@@ -361,3 +380,23 @@ def test_versions_list_every_plugin_distribution_and_what_it_requires():
                 assert md.metadata(name)["Name"] in out, (dist, name)
             except md.PackageNotFoundError:
                 pass
+
+
+def test_preload_imports_the_configured_back_ends_and_nothing_is_built():
+    """`import iloci` imports no back end; iloci.preload imports the configured ones."""
+    pytest.importorskip("iloci_torch")
+    pytest.importorskip("iloci_pinocchio")
+    pytest.importorskip("iloci_scipy")
+    code = textwrap.dedent("""
+        import sys, iloci
+        assert "torch" not in sys.modules and "pinocchio" not in sys.modules
+        done = iloci.preload({"perceptual_model": {"name": "torch-rnnpb"}})
+        print(",".join(done))
+        assert "torch" in sys.modules and "pinocchio" in sys.modules
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["perceptual_model=torch-rnnpb,clusterer=scipy,"
+                                  "teacher=oracle,ik=pinocchio"]
+    with pytest.raises(ConfigError):
+        iloci.preload({"learner": {"k_cutoff": "high"}})

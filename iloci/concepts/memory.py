@@ -291,24 +291,6 @@ class Memory:
                         for key in self.entries[i].sources]
                 for label in self.concepts()}
 
-    def label_concepts(self, concept_of_key: Any) -> dict[str, str | None]:
-        """Name each of the robot's concepts by its demonstrations' true concepts.
-
-        Parameters
-        ----------
-        concept_of_key : callable
-            As for :meth:`concept_members`.
-
-        Returns
-        -------
-        dict
-            Robot label -> the most frequent true concept among the sources
-            of its entries (ties: the first seen), ``None`` if none is known
-            (:func:`iloci.evaluation.metrics.majority_names`).
-        """
-        from iloci.evaluation.metrics import majority_names
-        return majority_names(self.concept_members(concept_of_key))
-
     def copy(self) -> Memory:
         enc = None
         if self.encoder is not None and self.encoder.scale_ is not None:
@@ -465,7 +447,8 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
     pathlib.Path
         The written file.
     """
-    path = Path(path)
+    # a symlinked memory is written through to its target (the link stays)
+    path = Path(os.path.realpath(os.fspath(path)))
     arrays, meta = memory.to_arrays()
     for k, v in network_state.items():
         a = np.asarray(v)
@@ -473,7 +456,7 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
             raise InvalidInputError(f"network state {k!r} is an object array; states must "
                                     "be numeric (no pickle).")
         arrays[f"net/{k}"] = a
-    from iloci import __version__
+    from iloci._version import __version__
     header: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                               "iloci": __version__, "memory": meta, **dict(extra or {})}
     header["checksum"] = _checksum(header, arrays)
