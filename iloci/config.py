@@ -123,7 +123,13 @@ class LearnerConfig:
     #: to shapes never taught). With the novelty answer at 0.8, LASA's 5
     #: folds, seeds 0 / 1 / 2: 1.98 / 2.19 / 2.21 feedbacks per learning
     #: demonstration with ``"reproduction"`` against 2.58 / 3.51 / 3.30
-    #: (benchmarks/quality.py, docs/method.md).
+    #: (benchmarks/quality.py, docs/method.md). ``"regeneration"``: the
+    #: lowest :func:`~iloci.concepts.learner.pattern_distances` to the
+    #: entries' regenerated patterns, on the scale at which two known
+    #: concepts' regenerated patterns lie apart
+    #: (:func:`~iloci.concepts.learner.regeneration_scale`); no closed-loop
+    #: run per entry, so it is cheaper (benchmarks/recognition.py compares
+    #: the three).
     familiarity: str = "reproduction"
     #: A reward that comes after a "no" for the same demonstration goes
     #: against the robot's own ranking of its concepts; with this on, the
@@ -172,9 +178,15 @@ class LearnerConfig:
     #: step, reproduces it with the lowest prediction error). The confidence
     #: margin is taken on the same quantity. ``"regeneration"``: LASA, 5
     #: folds, seeds 0 / 1 / 2, on the same learned memories: CCR 100.00 % on
-    #: every fold against 99.73 / 99.86 / 99.73 % by PB distance; UNIPEN
+    #: every fold against 99.73 / 100.00 / 99.59 % by PB distance; UNIPEN
     #: digits: see docs/method.md, "Recognition by regeneration".
     decision: str = "regeneration"
+    #: ``decision`` / ``familiarity = "regeneration"``: how far (steps of the
+    #: encoded sequence) the comparison of a drawing with a regenerated
+    #: pattern may shift one against the other, by dynamic time warping in
+    #: a band of this half-width (:func:`~iloci.concepts.learner.pattern_distances`);
+    #: 0 compares step ``t`` with step ``t``.
+    warp: int = 0
     #: What each rehearsal trains the network on for the entries it already
     #: holds: ``"regenerated"`` (the paper: each entry's pattern generated
     #: closed-loop from its PB; the robot keeps no demonstration) or
@@ -217,6 +229,8 @@ class LearnerConfig:
         if self.familiarity not in ("reproduction", "prediction", "regeneration"):
             raise ValueError("familiarity must be 'reproduction', 'prediction' or "
                              f"'regeneration', got {self.familiarity!r}")
+        if isinstance(self.warp, bool) or not isinstance(self.warp, int) or self.warp < 0:
+            raise ValueError(f"warp must be a whole number of steps >= 0, got {self.warp!r}")
         if self.decision not in ("pb_distance", "reproduction", "regeneration"):
             raise ValueError("decision must be 'pb_distance', 'reproduction' or "
                              f"'regeneration', got {self.decision!r}")

@@ -441,8 +441,9 @@ def test_novelty_answer_asks_the_configured_familiarity(lasa, kind):
 
 
 def test_familiarity_setting_is_checked():
-    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be 'reproduction' "
-                                                       "or 'prediction', got 'pb'"):
+    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be 'reproduction', "
+                                                       "'prediction' or 'regeneration', got "
+                                                       "'pb'"):
         iloci.build(small_config(familiarity="pb"))
 
 
@@ -692,6 +693,16 @@ def test_pattern_distances_and_regeneration_scale():
     # a pattern of another length is resampled in time to the sequence's
     assert d[0, 2] == pytest.approx(np.mean(np.linspace(0, 1, 5) ** 2))
     assert pattern_distances([a], []).shape == (1, 0)
+    # warped: a step pattern shifted by two steps costs only where it jumps
+    x = np.zeros((8, 1))
+    x[3:] = 1.0
+    y = np.zeros((8, 1))
+    y[5:] = 1.0
+    assert pattern_distances([x], [y])[0, 0] == pytest.approx(2 / 8)
+    assert pattern_distances([x], [y], warp=1)[0, 0] == pytest.approx(1 / 8)
+    assert pattern_distances([x], [y], warp=2)[0, 0] == pytest.approx(0.0)
+    with pytest.raises(iloci.errors.ConfigError, match="warp must be"):
+        iloci.build(small_config(warp=-1))
     assert np.isnan(regeneration_scale([a, b], ["c1", "c1"]))
     # nearest pattern of another concept: a -> c (0.375), b -> a (1), c -> a (on c's 9 steps)
     to_c = np.mean(np.linspace(0, 1, 9) ** 2)

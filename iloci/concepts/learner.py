@@ -328,20 +328,28 @@ def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
 
 
 def pattern_distances(sequences: Sequence[np.ndarray],
-                      patterns: Sequence[np.ndarray]) -> np.ndarray:
+                      patterns: Sequence[np.ndarray], warp: int = 0) -> np.ndarray:
     """Mean squared difference of each encoded sequence to each regenerated pattern, (B, M).
 
-    Step by step over the sequence's rows and every feature (encoded
-    units; pen displacement and joint displacements alike); a pattern of
-    another length is first resampled linearly in time to the sequence's.
-    Both sides come from the same preprocessing (arc-length resampling to
+    Over the sequence's rows and every feature (encoded units; pen
+    displacement and joint displacements alike); a pattern of another
+    length is first resampled linearly in time to the sequence's. Both
+    sides come from the same preprocessing (arc-length resampling to
     ``[sensorimotor] steps`` points), so step ``t`` is the same fraction of
-    the path's length in both.
+    the path's length in both. With ``warp = 0`` step ``t`` is compared
+    with step ``t``; with ``warp > 0`` the steps are aligned by dynamic
+    time warping (Sakoe and Chiba 1978, symmetric steps, a band of
+    ``warp`` steps around the diagonal) and the squared differences along
+    the alignment are summed and divided by the sequence's length times
+    ``D``: a corner drawn a little earlier or later along the path then
+    costs its shape difference, not a shift of every later step.
 
     Parameters
     ----------
     sequences : sequence of ndarray, each (T_b, D)
     patterns : sequence of ndarray, each (T_m, D)
+    warp : int
+        Band half-width of the alignment, in steps; 0 aligns step by step.
 
     Returns
     -------
@@ -358,14 +366,39 @@ def pattern_distances(sequences: Sequence[np.ndarray],
     for n, rows in by_len.items():
         S = np.stack([seqs[b] for b in rows])                        # (b, T, D)
         P = np.stack([_on_steps(p, n) for p in pats])                # (M, T, D)
-        out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
+        if warp <= 0:
+            out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
+        else:
+            out[rows] = _warped(S, P, int(warp)) / (n * S.shape[2])
     return out
 
 
-def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str]) -> float:
+def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:
+    """DTW cost (summed squared differences) of every (sequence, pattern) pair, (B, M).
+
+    ``S`` (B, T, D), ``P`` (M, T, D); cells further than ``band`` steps from
+    the diagonal are not visited. Vectorised over the pairs, one cell at a time.
+    """
+    b, t = S.shape[0], S.shape[1]
+    m = P.shape[0]
+    # squared distance of step i of S[b] to step j of P[m], laid out (i, j, pair)
+    cost = ((S * S).sum(-1).T[:, None, :, None] + (P * P).sum(-1).T[None, :, None, :]
+            - 2.0 * np.einsum("bid,mjd->ijbm", S, P)).reshape(t, t, b * m)
+    np.maximum(cost, 0.0, out=cost)
+    acc = np.full((t + 1, t + 1, b * m), np.inf)
+    acc[0, 0] = 0.0
+    for i in range(1, t + 1):
+        for j in range(max(1, i - band), min(t, i + band) + 1):
+            acc[i, j] = cost[i - 1, j - 1] + np.minimum(np.minimum(acc[i - 1, j], acc[i, j - 1]),
+                                                        acc[i - 1, j - 1])
+    return acc[t, t].reshape(b, m)
+
+
+def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],
+                       warp: int = 0) -> float:
     """The memory's own scale for "unlike everything it knows", on regenerated patterns.
 
-    For each entry, :func:`pattern_distances` from its regenerated pattern to
+    For each entry, :func:`pattern_distances` (with ``warp``) from its regenerated pattern to
     the nearest regenerated pattern of an entry of *another* concept (how
     far apart two known concepts lie); the median over entries. The
     project's calibration (the paper has none), the counterpart of
@@ -380,7 +413,7 @@ def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str]) ->
     if len(set(lab.tolist())) < 2:
         return float("nan")
     pats = list(patterns)
-    d = np.stack([pattern_distances([p], pats)[0] for p in pats])
+    d = np.stack([pattern_distances([p], pats, warp)[0] for p in pats])
     other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
     other = other[np.isfinite(other)]
     return float(np.median(other)) if other.size else float("nan")
@@ -600,7 +633,7 @@ class Learner:
         answers with the entry of the lowest one.
         """
         pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
-        return pattern_distances(sequences, pats)
+        return pattern_distances(sequences, pats, self.config.warp)
 
     def _tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
         """Per sequence, how well the memory reproduces it: the tilt search's criterion.
@@ -828,9 +861,9 @@ class Learner:
         regen = None
         if "regeneration" in (self.config.decision, self.config.familiarity):
             patterns = regenerated_patterns(self.model, self.memory)
-            regen = pattern_distances(seqs, patterns)
+            regen = self.regeneration_distances(seqs, patterns)
             if self.config.familiarity == "regeneration":
-                scale = regeneration_scale(patterns, labels)
+                scale = regeneration_scale(patterns, labels, self.config.warp)
         ranking = {"reproduction": entry_errors, "regeneration": regen}.get(
             self.config.decision)
         nearest, conf = confidence(dist if ranking is None else ranking, labels)
@@ -1007,7 +1040,8 @@ class Turn:
                 patterns = regenerated_patterns(learner.model, learner.memory)
                 self._fam = float(familiarity(
                     float(np.min(learner.regeneration_distances([seq], patterns)[0])),
-                    regeneration_scale(patterns, learner.memory.concept_labels)))
+                    regeneration_scale(patterns, learner.memory.concept_labels,
+                                       learner.config.warp)))
                 return self._fam
             if learner.config.familiarity == "reproduction":
                 error = float(np.min(self.ranking if learner.config.decision == "reproduction"
