@@ -447,7 +447,8 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
     pathlib.Path
         The written file.
     """
-    path = Path(path)
+    # a symlinked memory is written through to its target (the link stays)
+    path = Path(os.path.realpath(os.fspath(path)))
     arrays, meta = memory.to_arrays()
     for k, v in network_state.items():
         a = np.asarray(v)
@@ -455,7 +456,7 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
             raise InvalidInputError(f"network state {k!r} is an object array; states must "
                                     "be numeric (no pickle).")
         arrays[f"net/{k}"] = a
-    from iloci import __version__
+    from iloci._version import __version__
     header: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                               "iloci": __version__, "memory": meta, **dict(extra or {})}
     header["checksum"] = _checksum(header, arrays)
