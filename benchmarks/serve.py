@@ -200,7 +200,7 @@ async def _learn_with_loop(agent, demos, realtime: bool
     for demo in demos:
         turn = await agent.aobserve(demo)
         while not turn.done:
-            await turn.afeedback(oracle.feedback(demo, turn.answer.response))
+            await turn.afeedback(oracle.feedback(demo, turn.answer.response), turn.answer.id)
         actions.append(turn.outcome.action)
     seconds = time.perf_counter() - t0
     stop.set()

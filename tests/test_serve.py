@@ -84,9 +84,9 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     assert (answer["concept"], answer["attempt"], answer["confidence"]) == ("c1", 1, 1.0)
     assert len(answer["drawing"]) == len(answer["joint_path"]) == 50
     assert answer["dt"] > 0 and len(answer["start_posture"]) == 4
-    assert client.get("/api/state").json()["pending"]["turn"] == answer["turn"]
+    assert client.get("/api/state").json()["pending"]["id"] == answer["id"]
     assert client.get("/api/progress").json() == {"progress": None}
-    done = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}).json()
+    done = client.post("/api/feedback", json={"answer": answer["id"], "value": -1}).json()
     assert done["outcome"]["action"] == "new_concept" and done["outcome"]["concept"] == "c2"
     assert [c["name"] for c in done["memory"]["concepts"]] == ["c1", "c2"]
 
@@ -97,7 +97,7 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     # its drawing is shown where the stroke was drawn (pixels, y up)
     drawing = np.array(answer["drawing"])
     assert np.all(drawing.min(axis=0) > -200) and np.all(drawing.max(axis=0) < 600)
-    done = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1}).json()
+    done = client.post("/api/feedback", json={"answer": answer["id"], "value": 1}).json()
     assert done["outcome"]["action"] in ("strengthen", "new_exemplar")
     assert done["outcome"]["feedbacks"] == [1]
 
@@ -137,13 +137,13 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
                 if answer["novel"]:
                     assert answer["confidence"] is None
                     novel = answer
-                    r = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1})
+                    r = client.post("/api/feedback", json={"answer": answer["id"], "value": 1})
                     outcome = r.json()["outcome"]
                     assert (outcome["action"], outcome["concept"]) == ("new_concept",
                                                                        answer["concept"])
                     break
                 assert 0 <= answer["confidence"] <= 1
-                r = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1})
+                r = client.post("/api/feedback", json={"answer": answer["id"], "value": -1})
                 assert r.status_code == 200, r.text
             assert client.get("/api/state").status_code == 200
         assert novel is not None, "no novelty answer in six new shapes"
@@ -158,10 +158,10 @@ def test_feedback_refused_without_a_matching_guess(served, lasa):
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
     answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
     before = memory.read_bytes()
-    cases = [({"turn": answer["turn"] + 1, "value": 1}, 409),
-             ({"turn": answer["turn"], "value": 0}, 422),
-             ({"turn": answer["turn"], "value": True}, 422),
-             ({"turn": answer["turn"], "value": "yes"}, 422),
+    cases = [({"answer": answer["id"] + "x", "value": 1}, 409),
+             ({"answer": answer["id"], "value": 0}, 422),
+             ({"answer": answer["id"], "value": True}, 422),
+             ({"answer": answer["id"], "value": "yes"}, 422),
              ({"value": 1}, 400), ([1], 400)]
     for body, status in cases:
         r = client.post("/api/feedback", json=body)
@@ -169,9 +169,9 @@ def test_feedback_refused_without_a_matching_guess(served, lasa):
         assert r.json()["error"]
     assert memory.read_bytes() == before
     # the guess still waits: answered now, once
-    assert client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}
+    assert client.post("/api/feedback", json={"answer": answer["id"], "value": -1}
                        ).status_code == 200
-    assert client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}
+    assert client.post("/api/feedback", json={"answer": answer["id"], "value": -1}
                        ).status_code == 409
 
 
@@ -224,7 +224,7 @@ def test_rename_errors(served, lasa):
 
 def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp_path):
     client, _, _ = served
-    r = client.get("/api/arm.png?turn=1&attempt=1")
+    r = client.get("/api/arm.png?answer=00000000-1")
     assert r.status_code == 404 and "simulator" in r.json()["error"]
     pytest.importorskip("pybullet")
     cfg = {**CONFIG, "simulator": {"name": "pybullet"}}
@@ -236,7 +236,7 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
         assert answer["executed"] and answer["arm"]
         png = sim.get(answer["arm"])
         assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
-        assert sim.get("/api/arm.png?turn=99&attempt=1").status_code == 404
+        assert sim.get("/api/arm.png?answer=00000000-1").status_code == 404
 
 
 def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
@@ -247,7 +247,7 @@ def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
             answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}
                                  ).json()["answer"]
-            out = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}).json()
+            out = client.post("/api/feedback", json={"answer": answer["id"], "value": -1}).json()
             assert out["outcome"]["concept"] == "c2"
     finally:
         classroom.agent.close()

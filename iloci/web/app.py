@@ -18,14 +18,17 @@ and leaves the memory untouched):
     A demonstration: the robot's guess (``answer``), or, with an empty
     memory, the ``outcome`` (a new concept). A guess still pending is
     dropped (nothing learned from it).
-``POST /api/feedback`` ``{"turn": id, "value": 1 | -1}``
-    Judge the pending guess: the next ``answer`` or the ``outcome``.
+``POST /api/feedback`` ``{"answer": id, "value": 1 | -1}``
+    Judge the pending guess, named by its ``id`` (every answer carries
+    one): the next ``answer`` or the ``outcome``. A feedback naming an
+    answer that is not pending (a double click, a late request, a guess
+    replaced by a newer drawing) is refused with 409 and changes nothing.
 ``POST /api/recognize`` ``{"points": [...]}``
     Concept and confidence; nothing learned.
 ``POST /api/rename`` ``{"concept": "c3", "name": "circle"}``
 ``GET /api/progress``
     The rehearsal running, if any: phase, fraction of phases, seconds.
-``GET /api/arm.png?turn=id``
+``GET /api/arm.png?answer=id``
     With a simulator configured: the simulated arm after drawing the
     pending guess.
 
@@ -169,14 +172,15 @@ class Classroom:
         # a novelty answer ([learner] novelty_below, novelty_after) names the
         # concept it would found and has no confidence (NaN): null in JSON,
         # which has no NaN
-        out = {"turn": self.turn_id, "concept": answer.concept, "novel": bool(r.novel),
+        out = {"id": answer.id, "turn": self.turn_id, "concept": answer.concept,
+               "novel": bool(r.novel),
                "confidence": _number(answer.confidence), "attempt": answer.attempt,
                "drawing": _polyline(answer.drawing), "dt": answer.dt,
                "joint_path": [[round(float(v), 5) for v in row] for row in answer.joint_path],
                "start_posture": [float(v) for v in answer.start_posture],
                "executed": r.execution is not None, "arm": None}
         if r.execution is not None and self.agent.simulator is not None:
-            out["arm"] = f"/api/arm.png?turn={self.turn_id}&attempt={answer.attempt}"
+            out["arm"] = f"/api/arm.png?answer={answer.id}"
         return out
 
     def outcome_json(self, outcome: Any) -> dict[str, Any]:
@@ -245,17 +249,18 @@ class Classroom:
             return {"answer": self.answer_json(turn.answer)}
 
     async def feedback(self, body: Any) -> dict[str, Any]:
-        if not isinstance(body, dict) or "value" not in body or "turn" not in body:
-            raise HTTPError(400, 'expected {"turn": id, "value": 1 or -1}.')
-        value, turn_id = body["value"], body["turn"]
+        if not isinstance(body, dict) or "value" not in body \
+                or not isinstance(body.get("answer"), str):
+            raise HTTPError(400, 'expected {"answer": "<the answer\'s id>", "value": 1 or -1}.')
+        value, answer_id = body["value"], body["answer"]
         if isinstance(value, bool) or value not in (1, -1):
             raise HTTPError(422, f"value must be 1 (yes) or -1 (no), got {json.dumps(value)}.")
         async with self.lock:
             turn = self.turn
-            if turn is None or turn.answer is None or turn_id != self.turn_id:
-                raise HTTPError(409, "no such guess is waiting for an answer (it was answered "
-                                     "or replaced by a newer drawing); draw again.")
-            step = await turn.afeedback(int(value))
+            if turn is None or turn.answer is None or turn.answer.id != answer_id:
+                raise HTTPError(409, f"no guess {answer_id!r} is waiting for an answer (it was "
+                                     "answered or replaced by a newer drawing); draw again.")
+            step = await turn.afeedback(int(value), answer_id)
             if turn.done:
                 self.turn = None
                 await asyncio.to_thread(self._save)
@@ -285,13 +290,12 @@ class Classroom:
             await asyncio.to_thread(self._save)
             return {"memory": await asyncio.to_thread(self.memory_json)}
 
-    async def arm_png(self, turn_id: str | None, attempt: str | None) -> bytes:
+    async def arm_png(self, answer_id: str | None) -> bytes:
         turn = self.turn
         sim = self.agent.simulator
         if sim is None:
             raise HTTPError(404, "no simulator is configured ([simulator] name in the config).")
-        if turn is None or turn.answer is None or str(self.turn_id) != turn_id \
-                or str(turn.answer.attempt) != attempt:
+        if turn is None or turn.answer is None or turn.answer.id != answer_id:
             raise HTTPError(404, "no such guess is pending.")
         execution = turn.answer.response.execution
 
@@ -369,8 +373,7 @@ def create_app(classroom: Classroom, *, on_shutdown: Any = None) -> Any:
         return JSONResponse(await classroom.rename(await _read_json(request)))
 
     async def arm(request: Request) -> Any:
-        data = await classroom.arm_png(request.query_params.get("turn"),
-                                       request.query_params.get("attempt"))
+        data = await classroom.arm_png(request.query_params.get("answer"))
         return Response(data, media_type="image/png")
 
     @contextlib.asynccontextmanager

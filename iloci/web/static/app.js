@@ -212,7 +212,7 @@ async function judge(value) {
   $("judge").hidden = true;
   say(value > 0 ? "Yes: learning..." : "No: thinking again...");
   try {
-    const data = await withProgress(api("/api/feedback", {turn: pending.turn, value}));
+    const data = await withProgress(api("/api/feedback", {answer: pending.id, value}));
     if (data.answer) { say(""); showAnswer(data.answer); }
     else { pending = null; say(describe(data.outcome)); renderMemory(data.memory); }
   } catch (err) {
