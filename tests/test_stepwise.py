@@ -199,13 +199,13 @@ def test_on_progress_set_after_observe_applies_to_that_turn(lasa):
     phases = []
     agent.on_progress = phases.append              # set while the turn waits
     while not turn.done:
-        turn.feedback(-1)
+        turn.feedback(-1, turn.answer.id)
     assert turn.outcome.action == "new_concept"
     assert [p.phase for p in phases] == list(PHASES)
     agent.on_progress = None                       # and unset: no more reports
     turn = agent.observe(lasa["Sine/0"])
     while not turn.done:
-        turn.feedback(-1)
+        turn.feedback(-1, turn.answer.id)
     assert len(phases) == len(PHASES)
 
 
