@@ -252,7 +252,7 @@ class Agent:
         Turn
             ``turn.answer``: the guess (concept, confidence, attempt, the
             drawing in the demonstration's frame, joint path, dt, start
-            posture) to judge with ``turn.feedback(+1 | -1)``; or, for the
+            posture) to judge with ``turn.feedback(+1 | -1, turn.answer.id)``; or, for the
             first demonstration of an empty memory, ``turn.outcome`` at once
             (a new concept, nothing asked).
 
