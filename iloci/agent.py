@@ -576,10 +576,22 @@ class Agent:
 
         See :mod:`iloci.concepts.memory` for the format. ``extra``: more
         JSON-able header values (``iloci teach`` keeps its progress through
-        a stream there). Returns the path.
+        a stream there). Returns the path (a symlink's target is written
+        through, the link kept).
+
+        Raises
+        ------
+        MemoryLockedError
+            Another process (``iloci serve``, ``iloci teach``) holds the
+            memory's lock (:func:`iloci.progress.memory_lock`); nothing is
+            written.
+        OSError
+            The file cannot be written (disk full, permissions); the file
+            on disk is the previous one, untouched.
         """
         from iloci.concepts.memory import save_memory
-        with self._lock:
+        from iloci.progress import saving
+        with self._lock, saving(path):
             return save_memory(path, self.memory, self.perceptual_model.state(),
                                extra={**dict(extra or {}), "config": self.config.to_dict(),
                                       "robot": _robot_record(self.robot),
