@@ -11,7 +11,7 @@ import numpy as np
 
 from iloci.data.files import write_text_atomic
 from iloci.errors import MissingBackendError
-from iloci.evaluation.evaluate import FoldResult
+from iloci.evaluation.results import FoldResult
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
 __all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
@@ -60,6 +60,11 @@ def write_json_atomic(path: str | Path, data: Any) -> Path:
 
 def _pct(x: float) -> str:
     return f"{100 * x:.2f}"
+
+
+def _pct_or_none(x: float) -> str:
+    """``x`` as "12.34 %", or "none" for the NaN of an empty selection."""
+    return "none" if x != x else f"{_pct(x)} %"
 
 
 def headline(metrics: dict[str, Any]) -> str:
@@ -141,7 +146,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         (:meth:`FoldResult.to_dict` of each fold), ``report.md`` and
         ``figures/*.png``.
     metrics : dict
-        :func:`~iloci.evaluation.evaluate.summarize`'s result.
+        :func:`~iloci.evaluation.summary.summarize`'s result.
     results : sequence of FoldResult
         As :func:`~iloci.evaluation.evaluate.evaluate` returns them.
     """
@@ -281,16 +286,27 @@ def stream_headline(metrics: dict[str, Any]) -> str:
     """The stream protocol's summary (Markdown), also printed by ``iloci evaluate``."""
     m = metrics
     k = m["first_scored"]
+    n = m["demonstrations"]
+    if n >= k:
+        late = [
+            f"| first guess right, demonstrations {k}-{n} | {_pct(m['first_guess'])} % |",
+            f"| ... of concepts already taught | {_pct_or_none(m['first_guess_seen'])} "
+            f"({m['unseen_after_first_scored']} first-of-their-concept demonstrations "
+            f"after {k}) |",
+        ]
+        feedbacks_late = f"(from {k}: {m['feedbacks_per_demo_late']:.2f})"
+    else:
+        # a short stream: nothing from demonstration k on to score (no "46-21 nan %")
+        late = [f"| first guess right, demonstrations {k}- | not scored: the stream has "
+                f"{n} demonstrations, scoring starts at demonstration {k} |"]
+        feedbacks_late = f"(none from {k})"
     return "\n".join([
         "| measure | value |",
         "|---|---|",
-        f"| first guess right, demonstrations {k}-{m['demonstrations']} | "
-        f"{_pct(m['first_guess'])} % |",
-        f"| ... of concepts already taught | {_pct(m['first_guess_seen'])} % "
-        f"({m['unseen_after_first_scored']} first-of-their-concept demonstrations after {k}) |",
-        f"| first guess right, all demonstrations | {_pct(m['first_guess_all'])} % |",
+        *late,
+        f"| first guess right, all demonstrations | {_pct_or_none(m['first_guess_all'])} |",
         f"| teacher feedbacks per demonstration | {m['feedbacks_per_demo']:.2f} "
-        f"(from {k}: {m['feedbacks_per_demo_late']:.2f}) |",
+        f"{feedbacks_late} |",
         f"| robot concepts at the end | {m['concepts']} (purity {_pct(m['purity'])} %) |",
         f"| wall time | {m['wall_seconds']:.0f} s |",
     ])
