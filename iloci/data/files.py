@@ -317,6 +317,8 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
     lines = raw.count(b"\n")
     if lines > MAX_POINTS + 1:  # before any parsing: the file is refused at once
         check_size(lines - 1, f"{p.name} (about {lines:,} lines)")
+    if len(raw) < 1_000_000:  # read in well under a second
+        return _parse_csv(raw, p, lambda fraction: None)
     with long_step(f"reading {p.name} ({lines:,} lines)") as tell:
         return _parse_csv(raw, p, tell)
 

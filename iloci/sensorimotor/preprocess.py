@@ -61,6 +61,11 @@ __all__ = ["MAX_POINTS", "POLYORDER", "PRESMOOTH", "check_size", "densify", "fit
 MAX_POINTS = 2_000_000
 
 
+#: Drawings of at least this many samples show their progress (:func:`iloci.progress.long_step`)
+#: when reading them takes over a second; smaller ones take far less.
+SHOWN_ABOVE = 20_000
+
+
 def check_size(n: int, what: str) -> None:
     """Raise InvalidDemonstrationError when ``n`` samples exceed :data:`MAX_POINTS`."""
     if n > MAX_POINTS:
@@ -566,10 +571,13 @@ def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_
             f"{min_points} are needed to read a drawing (a tap or a click is not one): "
             "sample the pen more often or draw a longer stroke ([sensorimotor] min_points).")
     if resample_by == "arc_length":
-        from iloci.progress import long_step
-        with long_step(f"reading the drawing {demo.key} ({len(demo.positions):,} samples)"
-                       ) as tell:
-            path = resample_path(positions, steps, smoothing, progress=tell)
+        if len(positions) < SHOWN_ABOVE:
+            path = resample_path(positions, steps, smoothing)
+        else:
+            from iloci.progress import long_step
+            with long_step(f"reading the drawing {demo.key} ({len(demo.positions):,} "
+                           "samples)") as tell:
+                path = resample_path(positions, steps, smoothing, progress=tell)
     elif resample_by == "time":
         path = resample(smooth(positions, smoothing_window), times, steps, "time")
     else:
