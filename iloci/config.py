@@ -381,11 +381,20 @@ class DataConfig:
     dataset: str = "lasa"
     #: LASA shapes to use; empty means all 26 single-pattern shapes.
     shapes: tuple[str, ...] = ()
+    #: A data set of your own for ``iloci evaluate`` instead of LASA: a
+    #: folder with a sub-folder of trajectory files per concept (optionally
+    #: a sub-folder per writer in each), or a manifest (``.csv``/``.json``:
+    #: file, concept[, writer, session]); see docs/guide.md, "Your own
+    #: shapes". A relative path is read from the current folder. Empty: LASA.
+    path: str = ""
 
     def validate(self) -> None:
         if self.dataset != "lasa":
-            raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; load your "
-                             "own trajectories with iloci.data.load_trajectory")
+            raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; evaluate your "
+                             "own trajectories with [data] path (or --data PATH)")
+        if self.path and self.shapes:
+            raise ValueError("shapes picks LASA shapes; it cannot be combined with path "
+                             "(your own data set)")
         from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
         known = LASA_SHAPES + MULTI_MODEL_SHAPES
         for shape in self.shapes:
@@ -430,8 +439,14 @@ class EvaluationConfig:
     order: str = "shuffled"
     #: Also recognize every fold's test set under the perturbations of
     #: :mod:`iloci.evaluation.perturb` (pace, sampling, rests, jitter,
-    #: rotation, stretch, scale), iloci beside DTW 1-NN.
+    #: rotation, stretch, scale), iloci beside the baselines.
     robustness: bool = False
+    #: How the folds are made: ``"concepts"`` (the paper's: each concept's
+    #: samples dealt into ``folds`` parts, fold ``k`` learns part ``k``) or
+    #: ``"writers"`` (the writers of ``[data] path`` dealt into ``folds``
+    #: groups, fold ``k`` learns from group ``k``'s samples and recognizes
+    #: the other writers', never seen).
+    split: str = "concepts"
 
     def validate(self) -> None:
         if self.protocol not in ("folds", "stream"):
@@ -450,6 +465,8 @@ class EvaluationConfig:
             raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
         if self.order not in ("shuffled", "blocked"):
             raise ValueError(f"order must be 'shuffled' or 'blocked', got {self.order!r}")
+        if self.split not in ("concepts", "writers"):
+            raise ValueError(f"split must be 'concepts' or 'writers', got {self.split!r}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {

@@ -20,8 +20,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +36,10 @@ __all__ = [
     "PROGRESS_KEY",
     "MemoryLockedError",
     "SHOW_AFTER",
+    "acquire_memory_lock",
+    "lock_path_of",
+    "memory_lock",
+    "saving",
     "item_digest",
     "long_step",
     "progress_sink",
@@ -110,35 +117,147 @@ def resume_point(record: Any, digests: Sequence[str]) -> int:
     return n if record.get("digest") == prefix_digest(digests, n) else 0
 
 
+#: Memory locks this process holds: real path of the memory -> (lock, holder record).
+_HELD: dict[str, tuple[Any, dict[str, Any]]] = {}
+_HELD_GUARD = threading.Lock()
+
+
+def lock_path_of(memory: str | os.PathLike[str]) -> Path:
+    """The lock file of a memory: ``TARGET.lock`` beside the file a symlink points to."""
+    target = Path(os.path.realpath(os.fspath(memory)))
+    return target.with_name(target.name + ".lock")
+
+
+def _holder_path(lock_path: Path) -> Path:
+    # the lock file itself is truncated by whoever tries it, so the holder's
+    # record is kept beside it
+    return lock_path.with_name(lock_path.name + ".json")
+
+
+def _holder_text(lock_path: Path) -> str:
+    """``"iloci serve, pid 123, since 2026-12-01 21:40:03 UTC"`` or a vaguer phrase."""
+    try:
+        rec = json.loads(_holder_path(lock_path).read_text(encoding="utf-8"))
+        when = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(float(rec["since"])))
+        return f"{str(rec['command'])[:60]}, pid {int(rec['pid'])}, since {when}"
+    except (OSError, ValueError, KeyError, TypeError, OverflowError):
+        return "another process (it did not say which)"
+
+
+def _locked_error(memory: str | os.PathLike[str], lock_path: Path) -> MemoryLockedError:
+    return MemoryLockedError(
+        f"the memory {memory} is being taught by another process or session: "
+        f"{_holder_text(lock_path)} (it holds {lock_path}). Stop that one first, or "
+        "use another --memory file. Nothing was changed.")
+
+
+def acquire_memory_lock(memory: str | os.PathLike[str],
+                        command: str = "iloci") -> Callable[[], None]:
+    """Lock ``memory`` for one writer (``iloci teach``, ``iloci serve``); never wait.
+
+    The lock is an OS file lock (:mod:`filelock`) on ``TARGET.lock``, where
+    TARGET is the file a symlinked memory path points to, so every path to
+    one file shares one lock. The kernel releases it when the process dies,
+    even by ``kill -9``: a crashed session never leaves the memory locked.
+    Beside it, ``TARGET.lock.json`` names the holder (``command``, pid,
+    since when) for the error a second writer gets. While it is held,
+    :meth:`Agent.save <iloci.agent.Agent.save>` in this process writes
+    ``memory``, and any other process's save of it is refused.
+
+    Returns
+    -------
+    callable
+        Releases the lock (idempotent).
+
+    Raises
+    ------
+    MemoryLockedError
+        Another process, or another session of this one, holds it; the
+        message names the holder.
+    """
+    from filelock import FileLock, Timeout
+    lock_path = lock_path_of(memory)
+    key = str(lock_path)
+    with _HELD_GUARD:
+        if key in _HELD:
+            raise _locked_error(memory, lock_path)
+        lock = FileLock(lock_path, timeout=0, thread_local=False)
+        try:
+            lock.acquire()
+        except Timeout:
+            raise _locked_error(memory, lock_path) from None
+        except OSError as exc:
+            raise MemoryLockedError(f"cannot lock the memory {memory} ({lock_path}: "
+                                    f"{exc.strerror or exc}).") from None
+        record = {"command": command, "pid": os.getpid(), "since": time.time()}
+        with contextlib.suppress(OSError):
+            _holder_path(lock_path).write_text(json.dumps(record), encoding="utf-8")
+        _HELD[key] = (lock, record)
+
+    def release() -> None:
+        with _HELD_GUARD:
+            held = _HELD.pop(key, None)
+            if held is None:
+                return
+            with contextlib.suppress(OSError):
+                _holder_path(lock_path).unlink()
+            held[0].release()
+    return release
+
+
+@contextlib.contextmanager
+def memory_lock(memory: str | os.PathLike[str], command: str = "iloci") -> Iterator[Path]:
+    """:func:`acquire_memory_lock` as a context manager; yields the lock file's path."""
+    release = acquire_memory_lock(memory, command)
+    try:
+        yield lock_path_of(memory)
+    finally:
+        release()
+
+
 @contextlib.contextmanager
 def teaching_lock(memory: str | os.PathLike[str]) -> Iterator[Path]:
-    """Hold ``MEMORY.lock`` while teaching ``memory``; never wait for it.
-
-    The lock is an OS file lock (:mod:`filelock`), released by the kernel
-    when its process dies, even by ``kill -9``: a crashed session never
-    leaves the memory locked. The empty lock file itself may stay.
+    """Hold the memory's lock while ``iloci teach`` teaches it (see :func:`memory_lock`).
 
     Raises
     ------
     MemoryLockedError
         Another process holds the lock.
     """
+    with memory_lock(memory, "iloci teach") as path:
+        yield path
+
+
+@contextlib.contextmanager
+def saving(memory: str | os.PathLike[str]) -> Iterator[None]:
+    """Around one save of ``memory``: the lock this process holds, or the lock for the save.
+
+    Raises
+    ------
+    MemoryLockedError
+        Another process (``iloci serve``, ``iloci teach``) holds the
+        memory's lock: its work would be overwritten. Nothing is written.
+    """
+    key = str(lock_path_of(memory))
+    with _HELD_GUARD:
+        mine = key in _HELD
+    if mine or not os.path.exists(key):
+        # held here, or never locked by anyone (a writer's lock file stays after
+        # it ends): no lock file is made for a plain save
+        yield
+        return
     from filelock import FileLock, Timeout
-    path = Path(os.fspath(memory))
-    lock_path = path.with_name(path.name + ".lock")
-    lock = FileLock(lock_path, timeout=0)
+    lock = FileLock(key, timeout=0, thread_local=False)
     try:
         lock.acquire()
     except Timeout:
-        raise MemoryLockedError(
-            f"the memory {path} is being taught by another process (it holds {lock_path}); "
-            "wait for it to finish, or teach another --memory file. Nothing was changed."
-        ) from None
-    except OSError as exc:
-        raise MemoryLockedError(f"cannot lock the memory {path} ({lock_path}: "
-                                f"{exc.strerror or exc}).") from None
+        raise _locked_error(memory, Path(key)) from None
+    except OSError:
+        # a directory where no lock file can be made: the save itself reports it
+        yield
+        return
     try:
-        yield lock_path
+        yield
     finally:
         lock.release()
 
@@ -180,7 +299,6 @@ def long_step(what: str) -> Iterator[Callable[[float], None]]:
     what : str
         What is being done, e.g. ``"reading stroke.csv (1,000,000 samples)"``.
     """
-    import time
     start = time.monotonic()
     last = [start - _EVERY]
     shown = [False]

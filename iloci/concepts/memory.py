@@ -447,7 +447,8 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
     pathlib.Path
         The written file.
     """
-    path = Path(path)
+    # a symlinked memory is written through to its target (the link stays)
+    path = Path(os.path.realpath(os.fspath(path)))
     arrays, meta = memory.to_arrays()
     for k, v in network_state.items():
         a = np.asarray(v)
