@@ -51,7 +51,7 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     PluginError
         A plugin's command has a name already taken.
     """
-    from iloci import __version__
+    from iloci._version import __version__
     from iloci.errors import PluginError
     from iloci.plugins import get_plugin_manager
 

@@ -721,22 +721,6 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
-    pm_params = getattr(kwargs.get("perceptual_model"), "params", None)
-    size = getattr(pm_params, "input_size", None)
-    default = getattr(type(pm_params), "input_size", None) if pm_params is not None else None
-    if isinstance(size, int) and size != default:
-        # the network's input is the robot's 2 + J features per step; the
-        # default is sized from the robot by iloci.build
-        from iloci.sensorimotor.encoding import feature_names
-        from iloci.sensorimotor.robots import robot_from_config
-        robot, _ = robot_from_config(kwargs["robot"])
-        names = feature_names(robot.dof)
-        if size != len(names):
-            raise ConfigError(
-                f"perceptual_model.input_size is {size}, but robot {robot.name!r} gives "
-                f"every encoded demonstration {len(names)} features per step "
-                f"({', '.join(names)}): set it to {len(names)} or leave it out (it is sized "
-                "from the robot).", source=origin, key="perceptual_model.input_size")
     if missing is not None:
         raise missing
     return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))
