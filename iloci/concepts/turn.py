@@ -65,11 +65,12 @@ from dataclasses import replace
 from enum import StrEnum
 from functools import cached_property
 import os
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from iloci.concepts.answers import Answer, LearnOutcome, check_answer_id
+from iloci.concepts.face import LearnerFace
 from iloci.concepts.inference import familiarity, novelty_scale
 from iloci.concepts.memory import Entry
 from iloci.errors import InvalidInputError
@@ -77,8 +78,6 @@ from iloci.events import InteractionEvent, RehearsalEvent
 from iloci.interfaces import Demonstration, check_feedback
 from iloci.sensorimotor.frames import TeacherFrame
 
-if TYPE_CHECKING:
-    from iloci.concepts.learner import Learner
 
 __all__ = ["Phase", "TRANSITIONS", "Turn"]
 
@@ -139,7 +138,7 @@ class Turn:
     :data:`TRANSITIONS` and one method per new action.
     """
 
-    def __init__(self, learner: Learner, demo: Demonstration, sequence: np.ndarray,
+    def __init__(self, learner: LearnerFace, demo: Demonstration, sequence: np.ndarray,
                  start: np.ndarray, dt: float, frame: TeacherFrame | None = None) -> None:
         seq = np.asarray(sequence, dtype=np.float64)
         if seq.ndim != 2 or len(seq) < 2 or not np.all(np.isfinite(seq)):
