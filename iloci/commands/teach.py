@@ -138,7 +138,18 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
         while i < len(items) and keys[i] != outcome.demo:
             i += 1
         position[0] = min(i + 1, len(items))
-        agent.save(memory_path, extra={PROGRESS_KEY: progress_record(digests, position[0])})
+        try:
+            agent.save(memory_path, extra={PROGRESS_KEY: progress_record(digests, position[0])})
+        except OSError as exc:
+            from iloci.errors import MemoryFileError
+            from iloci.progress import why_not_saved
+            before = "no memory yet" if not memory_path.exists() else \
+                "the memory as it was before it"
+            raise MemoryFileError(
+                f"{why_not_saved(memory_path, exc)} {outcome.demo} was learned but not saved: "
+                f"{memory_path} still holds {before} (every demonstration saved so far is "
+                "kept). Free some space or fix the permissions and run the same command "
+                "again: it goes on after the last saved demonstration.") from None
         print(_describe(outcome), flush=True)
         advance()
 
