@@ -456,7 +456,7 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
             raise InvalidInputError(f"network state {k!r} is an object array; states must "
                                     "be numeric (no pickle).")
         arrays[f"net/{k}"] = a
-    from iloci import __version__
+    from iloci._version import __version__
     header: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                               "iloci": __version__, "memory": meta, **dict(extra or {})}
     header["checksum"] = _checksum(header, arrays)

@@ -393,12 +393,7 @@ class Classroom:
         with self._thumb_lock:
             if self._thumbs is not None and self._thumbs[:3] == key:
                 return self._thumbs[3]
-            out: list = []
-            if entries and mem.encoder is not None:
-                from iloci.concepts.rehearsal import regenerate
-                seqs = regenerate(self.agent.perceptual_model, entries)
-                out = [_polyline(mem.encoder.decode(s, e.start)[0])
-                       for s, e in zip(seqs, entries)]
+            out: list = [_polyline(p) for p in self.agent.entry_drawings(entries)]
             self._thumbs = (*key, out)
             return out
 
