@@ -1,4 +1,4 @@
-"""iloci plugin: the ``native-rnnpb`` PerceptualModel (RNNPB, float32 in a C kernel, numpy elsewhere).
+"""iloci plugin: the ``native-rnnpb`` PerceptualModel (RNNPB: float32 in a C kernel, else numpy).
 
 Light on import: the kernel is loaded when a model is built.
 """

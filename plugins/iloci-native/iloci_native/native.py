@@ -1,4 +1,4 @@
-"""native-rnnpb's C kernel (training, recognition, scoring): finding it, choosing its instruction set.
+"""native-rnnpb's C kernel (training, recognition, scoring): loading it, choosing the ISA.
 
 ctypes only. The kernel itself is ``_native.c`` (an optional C extension
 built at install); :mod:`iloci_native.rnnpb` calls it. Every instruction

@@ -38,7 +38,7 @@ __all__ = ["NativeRNNPB", "NativeFallbackWarning"]
 
 
 class NativeFallbackWarning(UserWarning):
-    """A native-rnnpb model runs the numpy reference instead of the C kernel (said once per model)."""
+    """A native-rnnpb model runs the numpy reference, not the C kernel (said once per model)."""
 
 
 def _f32(a: np.ndarray) -> np.ndarray:
