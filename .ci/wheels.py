@@ -68,7 +68,7 @@ def smoke() -> None:
     names = [md.distribution(n) for n in ("iloci", "iloci-native", "iloci-torch", "iloci-jax",
                                           "iloci-scipy", "iloci-sklearn", "iloci-pinocchio",
                                           "iloci-pybullet", "iloci-mujoco", "iloci-ray",
-                                          "iloci-robots")]
+                                          "iloci-robots", "iloci-ros")]
     for d in names:
         direct = d.read_text("direct_url.json")
         if direct and json.loads(direct).get("dir_info", {}).get("editable"):
@@ -82,6 +82,8 @@ def smoke() -> None:
         subprocess.run(["iloci", "plugins"], cwd=tmp, check=True)
         # a plugin's command is on the command line
         subprocess.run(["iloci", "sweep", "--help"], cwd=tmp, check=True,
+                       stdout=subprocess.DEVNULL)
+        subprocess.run(["iloci", "ros", "--help"], cwd=tmp, check=True,
                        stdout=subprocess.DEVNULL)
         # a plugin's robot presets are listed (their meshes need example-robot-data)
         listed = subprocess.run(["iloci", "robots", "--json"], cwd=tmp, check=True,

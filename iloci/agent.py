@@ -30,8 +30,42 @@ from iloci.interfaces import Demonstration
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.registry import Registry
 
-__all__ = ["Agent", "build", "TeachReport", "SkippedDemonstrationWarning",
-           "learn_and_recognize"]
+__all__ = ["Agent", "build", "NotLoaded", "PURPOSES", "TeachReport",
+           "SkippedDemonstrationWarning", "learn_and_recognize"]
+
+
+#: What each use of a saved memory needs (:meth:`Agent.load`'s ``purpose``):
+#: recognition encodes a demonstration's motion (the IK solver) and finds its
+#: PB (the perceptual model); it never clusters, asks a teacher or executes.
+PURPOSES: dict[str, tuple[str, ...]] = {
+    "recognize": ("perceptual_model", "ik"),
+    "learn": ("perceptual_model", "clusterer", "teacher", "ik", "simulator"),
+}
+
+
+class NotLoaded:
+    """Stands in for a component :meth:`Agent.load` did not build for its purpose.
+
+    Any use raises :class:`~iloci.errors.NotLoadedError` naming the section
+    and what to do (load the memory for learning).
+    """
+
+    def __init__(self, section: str, purpose: str, path: str) -> None:
+        self._section = section
+        self._purpose = purpose
+        self._path = path
+
+    def __repr__(self) -> str:
+        return f"NotLoaded({self._section!r})"
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        from iloci.errors import NotLoadedError
+        raise NotLoadedError(
+            f"the {self._section} was not loaded: the memory {self._path} was loaded for "
+            f"{self._purpose!r}, which does not need it. Load it with "
+            f"iloci.Agent.load({self._path!r}) (purpose='learn') to keep learning.")
 
 
 class SkippedDemonstrationWarning(UserWarning):
@@ -149,7 +183,13 @@ class Agent:
                        self.config.learner, simulator=self.simulator,
                        hook=self.plugin_manager.hook,
                        joint_limits=ik_joint_limits(self.ik_solver),
-                       on_progress=self.on_progress, lock=self._lock)
+                       on_progress=self._report_progress, lock=self._lock)
+
+    def _report_progress(self, progress: Any) -> None:
+        # looked up at each report, so a callback set after observe() applies to that turn
+        callback = self.on_progress
+        if callback is not None:
+            callback(progress)
 
     def motion(self, demo: Demonstration):
         """The demonstration as the robot performs it (preprocessing + IK).
@@ -268,7 +308,9 @@ class Agent:
             An observer hook raised after the demonstration was learned
             (its ``outcome`` says how); do not teach it again.
         """
+        from iloci.concepts.learner import show_to_teacher
         from iloci.interfaces import check_feedback
+        show_to_teacher(self.teacher, demo)
         turn = self.observe(demo, motion)
         while turn.answer is not None:
             value = self.teacher.feedback(demo, turn.answer.response)
@@ -489,11 +531,36 @@ class Agent:
         with self._lock:
             return save_memory(path, self.memory, self.perceptual_model.state(),
                                extra={**dict(extra or {}), "config": self.config.to_dict(),
-                                      "robot": _robot_record(self.robot)})
+                                      "robot": _robot_record(self.robot),
+                                      "needs": self.needs()})
+
+    def needs(self) -> dict[str, dict[str, dict[str, str | None]]]:
+        """What each use of this agent's memory needs: purpose -> section -> component.
+
+        ``{"recognize": {...}, "learn": {...}}``; each component as
+        ``{"name": ..., "distribution": ...}`` (the distribution that
+        registered it, None for an object passed to :func:`build`).
+        :meth:`save` records it in the memory file, and :meth:`load` with
+        ``purpose="recognize"`` builds only the sections listed there (see
+        :data:`PURPOSES`).
+        """
+        out: dict[str, dict[str, dict[str, str | None]]] = {}
+        for purpose, sections in PURPOSES.items():
+            out[purpose] = {}
+            for sec in sections:
+                name = getattr(self.config, sec).name
+                if name == "none":
+                    continue
+                dist = None
+                if sec not in self.config._supplied and (sec, name) in self.registry:
+                    dist = self.registry.get(sec, name).distribution
+                out[purpose][sec] = {"name": name, "distribution": dist}
+        return out
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], config: Any = None, *,
-             plugin_manager: pluggy.PluginManager | None = None, **overrides: Any) -> Agent:
+             plugin_manager: pluggy.PluginManager | None = None, purpose: str = "learn",
+             **overrides: Any) -> Agent:
         """An agent with a saved memory, ready to recognize and to keep learning.
 
         Parameters
@@ -505,11 +572,23 @@ class Agent:
             with the memory. Its perceptual model must have the saved
             network's sizes.
         plugin_manager : pluggy.PluginManager, optional
+        purpose : {"learn", "recognize"}
+            ``"learn"`` (default) builds every configured component.
+            ``"recognize"`` builds only what recognition needs, as the memory
+            file records it (:meth:`needs`; by default the perceptual model
+            and the IK solver, :data:`PURPOSES`): the teaching-only
+            components (clusterer, teacher) are not built, so their plugins
+            need not be installed, and there is no simulator
+            (:meth:`respond` is then not executed). Using the clusterer or
+            the teacher raises :class:`~iloci.errors.NotLoadedError`, which
+            says to load for learning.
         **overrides
             Component instances, as for :func:`build`.
 
         Raises
         ------
+        InvalidInputError
+            ``purpose`` is neither ``"learn"`` nor ``"recognize"``.
         MemoryFileError
             Missing, truncated, tampered with or written by a newer iloci.
         MemoryConfigError
@@ -518,6 +597,9 @@ class Agent:
             ``[sensorimotor] steps`` or the network's sizes.
         """
         from iloci.concepts.memory import load_memory
+        if purpose not in PURPOSES:
+            raise InvalidInputError(f"purpose must be one of {', '.join(map(repr, PURPOSES))}, "
+                                    f"got {purpose!r}.")
         memory, net_state, header = load_memory(path)
         saved = header.get("config")
         if config is None:
@@ -525,6 +607,16 @@ class Agent:
             if not isinstance(config, dict):
                 raise MemoryFileError(f"{path} holds no config; pass config= to load it.")
             config = _upgrade_config(config)
+        if purpose != "learn":
+            needed = set(PURPOSES[purpose])
+            recorded = (header.get("needs") or {}).get(purpose)
+            if isinstance(recorded, dict):
+                needed = set(recorded) | {"perceptual_model", "ik"}
+            for sec in PURPOSES["learn"]:
+                if sec not in needed and sec not in overrides:
+                    # recognition executes nothing: no simulator (respond() is not executed)
+                    overrides[sec] = (None if sec == "simulator"
+                                      else NotLoaded(sec, purpose, str(path)))
         agent = build(config, plugin_manager=plugin_manager, **overrides)
         saved_robot = header.get("robot") or {
             "name": "nao-v32-right-arm",
@@ -588,7 +680,8 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         from iloci.errors import ConfigError
         raise ConfigError(f"build() got unknown component override(s) {sorted(unknown)}; "
                           f"valid: {', '.join(COMPONENT_KINDS)}.")
-    _check_overrides(overrides)
+    _check_overrides({sec: obj for sec, obj in overrides.items()
+                      if not isinstance(obj, NotLoaded)})
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config, registry=registry, supplied=overrides)

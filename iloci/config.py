@@ -552,6 +552,22 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
 
 
+def _beside(robot: RobotConfig, folder: Path) -> RobotConfig:
+    """``robot`` with a relative ``urdf`` and ``package_dirs`` made absolute paths beside
+    the config file in ``folder`` (not the current folder): a config means the same
+    from anywhere, and a memory stores the absolute path, so it loads from anywhere."""
+    def absolute(p: str) -> str:
+        if not p or p.startswith("package://"):
+            return p
+        q = Path(p.removeprefix("file://")).expanduser()
+        return str(q if q.is_absolute() else (folder / q).resolve())
+
+    urdf, dirs = absolute(robot.urdf), tuple(absolute(d) for d in robot.package_dirs)
+    if urdf == robot.urdf and dirs == robot.package_dirs:
+        return robot
+    return dataclasses.replace(robot, urdf=urdf, package_dirs=dirs)
+
+
 def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | None = None,
                 *, registry: Registry | None = None,
                 supplied: Iterable[str] = ()) -> Config:
@@ -656,6 +672,8 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
+    if isinstance(source, (str, os.PathLike)):
+        kwargs["robot"] = _beside(kwargs["robot"], Path(source).parent)
     pm_params = getattr(kwargs.get("perceptual_model"), "params", None)
     size = getattr(pm_params, "input_size", None)
     default = getattr(type(pm_params), "input_size", None) if pm_params is not None else None

@@ -24,6 +24,7 @@ __all__ = [
     "UnreachableTargetError",
     "FeedbackError",
     "NotFittedError",
+    "NotLoadedError",
     "MemoryFileError",
     "MemoryConfigError",
     "TimeUnitWarning",
@@ -229,6 +230,15 @@ class FeedbackError(IlociError, ValueError):
 
 class NotFittedError(IlociError, RuntimeError):
     """An operation needs learned state that does not exist yet."""
+
+
+class NotLoadedError(IlociError, RuntimeError):
+    """A component was not built, because the memory was loaded for another purpose.
+
+    ``Agent.load(path, purpose="recognize")`` builds only what recognition
+    needs; the clusterer and the teacher stand in as placeholders that
+    raise this on use.
+    """
 
 
 class MemoryFileError(IlociError, OSError):

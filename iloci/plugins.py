@@ -6,8 +6,10 @@ manager; :func:`get_registry` asks every plugin to register its components.
 Environment variables
 ---------------------
 ``ILOCI_DISABLE_PLUGIN_AUTOLOAD``
-    Any non-empty value other than ``0``: do not load entry points of group
-    ``iloci`` (only iloci's own plugins are registered).
+    Any non-empty value other than ``0``: load only iloci's own plugins, the
+    built-ins and the first-party back-end distributions
+    (:data:`FIRST_PARTY_DISTRIBUTIONS`: ``iloci-torch``, ``iloci-scipy``,
+    ...); no third-party entry point of group ``iloci`` is loaded.
 ``ILOCI_BLOCK_PLUGINS``
     Comma-separated plugin names (entry-point names, or ``iloci.teachers``
     for a built-in) not to register.
@@ -32,6 +34,7 @@ from iloci.registry import Registry
 __all__ = [
     "DEFAULT_PLUGINS",
     "ENTRY_POINT_GROUP",
+    "FIRST_PARTY_DISTRIBUTIONS",
     "PluginInfo",
     "PluginLoadWarning",
     "STATUSES",
@@ -45,6 +48,14 @@ DEFAULT_PLUGINS = ("iloci.teachers",)
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
+
+#: iloci's own back-end distributions (``plugins/`` in its repository), kept
+#: when autoloading is off by ``ILOCI_DISABLE_PLUGIN_AUTOLOAD`` (or
+#: ``autoload="first-party"``). Recognized by distribution name.
+FIRST_PARTY_DISTRIBUTIONS = frozenset({
+    "iloci-torch", "iloci-jax", "iloci-scipy", "iloci-sklearn", "iloci-pinocchio",
+    "iloci-pybullet", "iloci-mujoco", "iloci-ray", "iloci-robots", "iloci-ros",
+})
 
 class PluginLoadWarning(UserWarning):
     """An installed plugin failed to import or to register; it was skipped."""
@@ -150,7 +161,7 @@ def _register_isolated(pm: pluggy.PluginManager, plugin: object, name: str) -> s
     return None
 
 
-def get_plugin_manager(*, autoload: bool | None = None,
+def get_plugin_manager(*, autoload: bool | str | None = None,
                        block: Iterable[str] = (),
                        plugins: Iterable[object] = ()) -> pluggy.PluginManager:
     """Build a plugin manager with iloci's hook specs and plugins.
@@ -163,8 +174,10 @@ def get_plugin_manager(*, autoload: bool | None = None,
 
     Parameters
     ----------
-    autoload : bool, optional
-        Load entry points of group ``iloci``. Defaults to true unless
+    autoload : bool or "first-party", optional
+        Load entry points of group ``iloci``: all of them (True), none
+        (False), or only those of :data:`FIRST_PARTY_DISTRIBUTIONS`
+        (``"first-party"``). Defaults to True, or to ``"first-party"`` when
         ``ILOCI_DISABLE_PLUGIN_AUTOLOAD`` is set.
     block : iterable of str
         Plugin names not to register, in addition to ``ILOCI_BLOCK_PLUGINS``.
@@ -199,12 +212,16 @@ def get_plugin_manager(*, autoload: bool | None = None,
         pm.register(importlib.import_module(mod_name), name=mod_name)
         info[mod_name] = PluginInfo(mod_name, "iloci", version)
     if autoload is None:
-        autoload = not _truthy(os.environ.get("ILOCI_DISABLE_PLUGIN_AUTOLOAD"))
+        autoload = ("first-party" if _truthy(os.environ.get("ILOCI_DISABLE_PLUGIN_AUTOLOAD"))
+                    else True)
+    if autoload not in (True, False, "first-party"):
+        raise PluginError(f"autoload must be True, False or 'first-party', got {autoload!r}.")
     for name, ep, dist_name, dist_version in _entry_points():
         if ep.name in blocked or name in blocked:
             info[name] = PluginInfo(name, dist_name, dist_version, status="blocked")
             continue
-        if not autoload:
+        if not autoload or (autoload == "first-party"
+                            and dist_name not in FIRST_PARTY_DISTRIBUTIONS):
             info[name] = PluginInfo(name, dist_name, dist_version, status="not autoloaded")
             continue
         try:

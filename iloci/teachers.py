@@ -24,7 +24,6 @@ from typing import TextIO
 
 import numpy as np
 
-from iloci.data.concepts import concept_of
 from iloci.data.files import write_atomic
 from iloci.errors import FeedbackError
 from iloci.hookspecs import hookimpl
@@ -36,26 +35,52 @@ __all__ = ["OracleTeacher", "NoisyTeacher", "DrawingTeacher", "ConsoleTeacher"]
 class OracleTeacher:
     """Rewards an answer iff its source demonstration has the shown concept.
 
+    The oracle knows labels from the data only: a demonstration's
+    ``true_concept`` (``load_lasa`` and ``iloci evaluate --data`` fill it
+    in), else ``concepts[demo.shape]``; never from a LASA shape name. It
+    judges an answer by the demonstration the answering memory entry stands
+    for, so it must have seen that one: the learning loops
+    (:meth:`Agent.learn <iloci.agent.Agent.learn>`,
+    :meth:`Learner.learn <iloci.concepts.learner.Learner.learn>`) call
+    :meth:`show` with every demonstration before the robot answers, the
+    founding one of a concept too (which is placed without a question).
+
     Parameters
     ----------
     concepts : mapping of str to str, optional
-        Shape name -> concept, for demonstrations outside LASA. LASA shapes
-        are known already.
+        Shape name -> concept, for demonstrations without ``true_concept``.
     """
 
     def __init__(self, concepts: Mapping[str, str] | None = None) -> None:
         self.concepts = dict(concepts or {})
         self._seen: dict[str, str] = {}
 
+    def show(self, demo: Demonstration) -> None:
+        """Record the true concept of a demonstration the robot is about to be shown.
+
+        Raises
+        ------
+        FeedbackError
+            The oracle does not know its concept (see :meth:`true_concept`).
+        """
+        self.true_concept(demo)
+
     def concept_of_key(self, key: str) -> str | None:
-        """True concept of the demonstration ``"SHAPE/INDEX"``."""
+        """True concept of the demonstration ``"SHAPE/INDEX"`` shown before, else of its shape
+        in ``concepts``, else ``None``."""
         if key in self._seen:
             return self._seen[key]
-        shape = key.rsplit("/", 1)[0]
-        return self.concepts.get(shape) or concept_of(shape)
+        return self.concepts.get(key.rsplit("/", 1)[0])
 
     def true_concept(self, demo: Demonstration) -> str:
-        c = demo.true_concept or self.concepts.get(demo.shape) or concept_of(demo.shape)
+        """The concept of ``demo`` from the data (recorded for :meth:`concept_of_key`).
+
+        Raises
+        ------
+        FeedbackError
+            ``demo`` has no ``true_concept`` and its shape is not in ``concepts``.
+        """
+        c = demo.true_concept or self.concepts.get(demo.shape)
         if c is None:
             raise FeedbackError(
                 f"oracle teacher does not know the concept of {demo.key!r}: give the "

@@ -85,3 +85,23 @@ def test_auroc_is_the_probability_a_positive_outranks_a_negative():
     assert auroc([1, 1], [1, 1]) == 0.5
     assert auroc([0.9, 0.2], [0.5]) == 0.5
     assert np.isnan(auroc([], [1.0]))
+
+
+@pytest.mark.parametrize("n", [21, 50])
+def test_stream_headline_says_when_the_stream_is_too_short_to_score(n):
+    from iloci.config import load_config
+    from iloci.evaluation.report import stream_headline
+    from iloci.evaluation.stream import FIRST_SCORED, summarize_stream
+
+    steps = [{"correct": i % 2 == 0, "feedbacks": [1] * (i % 3), "seen_before": i > 3}
+             for i in range(n)]
+    metrics = summarize_stream(steps, load_config(None), 1.0)
+    metrics.update(purity=1.0, concepts=3)
+    text = stream_headline(metrics)
+    assert "nan" not in text
+    if n < FIRST_SCORED:
+        assert f"{FIRST_SCORED}-{n}" not in text
+        assert f"the stream has {n} demonstrations, scoring starts at demonstration " \
+               f"{FIRST_SCORED}" in text
+    else:
+        assert f"demonstrations {FIRST_SCORED}-{n} | " in text

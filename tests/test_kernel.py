@@ -89,10 +89,29 @@ def test_block_named_plugin(monkeypatch):
     assert reg.names("teacher") == []
 
 
-def test_disable_autoload_env(monkeypatch):
+def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
+    from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
     monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
     pm = get_plugin_manager()
-    assert set(dict(pm.list_name_plugin())) == {"iloci.teachers"}
+    loaded = set(dict(pm.list_name_plugin()))
+    info = pm.iloci_plugin_info
+    # the built-ins and every installed first-party back end, nothing else
+    assert "iloci.teachers" in loaded
+    for name in loaded - {"iloci.teachers"}:
+        assert info[name].distribution in FIRST_PARTY_DISTRIBUTIONS
+    for name, i in info.items():
+        if i.distribution in FIRST_PARTY_DISTRIBUTIONS:
+            assert i.status == "loaded", (name, i)
+        elif i.distribution != "iloci":
+            assert i.status == "not autoloaded", (name, i)
+    assert set(dict(get_plugin_manager(autoload=False).list_name_plugin())) == \
+        {"iloci.teachers"}
+
+
+def test_disable_autoload_env_keeps_installed_back_ends(monkeypatch):
+    pytest.importorskip("iloci_scipy")
+    monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
+    assert "scipy" in get_registry(get_plugin_manager()).names("clusterer")
 
 
 def test_misspelled_hook_is_an_error():

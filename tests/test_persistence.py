@@ -312,3 +312,60 @@ def test_default_teaching_stream_is_seeded():
     assert len(a) == 3 * 2 and {d.shape for d in a} == {"GShape", "Angle", "Sine"}
     other = default_stream(cfg.replace(evaluation={"seed": 4}))
     assert [d.key for d in other] != [d.key for d in a]
+
+
+class _HdbscanLike:
+    """A third-party clusterer plugin object, there at teaching time only."""
+
+    @iloci.hookimpl
+    def iloci_register_clusterers(self, registry):
+        registry.add("hdbscan-like", "iloci_scipy.clusterer:ScipyClusterer",
+                     summary="stands in for a clusterer the recognizing machine lacks")
+
+
+def test_a_memory_recognizes_without_its_teaching_only_plugins(tmp_path):
+    """Taught with a clusterer plugin that is then not installed: recognition still loads."""
+    pytest.importorskip("iloci_scipy")
+    pytest.importorskip("torch")
+    pytest.importorskip("pinocchio")
+    from iloci.data import load_lasa
+    from iloci.errors import NotLoadedError, UnknownComponentError
+    from iloci.plugins import get_plugin_manager
+
+    demos = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    settings = {"perceptual_model": {"name": RNNPB, "epochs": 30, "recognition_steps": 30},
+                "learner": {"rehearsal_epochs": 30}, "evaluation": {"seed": 0},
+                "clusterer": {"name": "hdbscan-like"}}
+    agent = iloci.build(settings, plugin_manager=get_plugin_manager(plugins=[_HdbscanLike()]))
+    agent.teach([demos["GShape/0"], demos["Angle/0"]])
+    path = agent.save(tmp_path / "m.npz")
+    needs = load_memory(path)[2]["needs"]
+    assert set(needs["recognize"]) == {"perceptual_model", "ik"}
+    assert needs["learn"]["clusterer"] == {"name": "hdbscan-like", "distribution": None}
+    assert needs["learn"]["perceptual_model"]["distribution"] == f"iloci-{RNNPB[:-6]}"
+
+    with pytest.raises(UnknownComponentError, match="hdbscan-like"):
+        iloci.Agent.load(path)                      # learning needs the clusterer
+    loaded = iloci.Agent.load(path, purpose="recognize")
+    test = [demos["GShape/3"], demos["Angle/3"]]
+    for a, b in zip(agent.recognize(test), loaded.recognize(test)):
+        assert (a.concept, a.source) == (b.concept, b.source)
+        assert a.distance == pytest.approx(b.distance, abs=1e-12)
+    with pytest.raises(NotLoadedError, match=r"(teacher|clusterer) was not loaded.*'learn'"):
+        loaded.learn(demos["GShape/1"])
+    assert "clusterer=NotLoaded" in repr(loaded) and loaded.simulator is None
+    with pytest.raises(NotLoadedError, match="clusterer was not loaded"):
+        loaded.clusterer.cluster(np.zeros((3, 2)), 1.0)
+    with pytest.raises(iloci.errors.InvalidInputError, match="purpose must be one of"):
+        iloci.Agent.load(path, purpose="teach")
+
+
+def test_cli_recognize_needs_no_clusterer_plugin(taught, cli):
+    """`iloci recognize` with the clusterer's plugin blocked; `iloci teach` says what is missing."""
+    _, path, _, _ = taught
+    blocked = {"ILOCI_BLOCK_PLUGINS": "scipy"}
+    out = cli("recognize", "--memory", str(path), "GShape/4", "--json", env=blocked)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["concept"] in ("c1", "c2")
+    out = cli("teach", "--memory", str(path), "GShape/1", env=blocked)
+    assert out.returncode == 2 and "blocked" in out.stderr

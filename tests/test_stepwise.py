@@ -133,6 +133,23 @@ def test_the_first_demonstration_ends_its_turn_at_once(lasa):
     assert phases[-1].elapsed == pytest.approx(turn.outcome.rehearsals[0].seconds, abs=0.05)
 
 
+def test_on_progress_set_after_observe_applies_to_that_turn(lasa):
+    agent = make_agent()
+    agent.learn(lasa["GShape/0"])
+    turn = agent.observe(lasa["Angle/0"])          # guesses GShape's concept: wrong
+    phases = []
+    agent.on_progress = phases.append              # set while the turn waits
+    while not turn.done:
+        turn.feedback(-1)
+    assert turn.outcome.action == "new_concept"
+    assert [p.phase for p in phases] == list(PHASES)
+    agent.on_progress = None                       # and unset: no more reports
+    turn = agent.observe(lasa["Sine/0"])
+    while not turn.done:
+        turn.feedback(-1)
+    assert len(phases) == len(PHASES)
+
+
 def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(lasa):
     stream = [lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1")]
     local = make_agent()

@@ -152,13 +152,16 @@ def test_oracle_and_noisy_teachers_judge_the_novelty_answer():
     from iloci.teachers import NoisyTeacher, OracleTeacher
 
     g, angle = load_lasa("GShape")[0], load_lasa("Angle")[0]
-    oracle = OracleTeacher()
+    oracle, noisy1, noisy0 = OracleTeacher(), NoisyTeacher(p=1.0), NoisyTeacher(p=0.0)
+    for teacher in (oracle, noisy1, noisy0):  # it knows what it was shown, from the data
+        for d in load_lasa(["Angle", "Sine", "GShape"]):
+            teacher.show(d)
     # new exactly when no demonstration the memory stands for has its concept
     assert oracle.feedback(g, _novel(("Angle/0", "Sine/1"))) == 1
     assert oracle.feedback(g, _novel(("Angle/0", "GShape/3"))) == -1
     assert oracle.feedback(angle, _novel(())) == 1
-    assert NoisyTeacher(p=1.0).feedback(g, _novel(("Angle/0",))) == -1
-    assert NoisyTeacher(p=0.0).feedback(g, _novel(("Angle/0",))) == 1
+    assert noisy1.feedback(g, _novel(("Angle/0",))) == -1
+    assert noisy0.feedback(g, _novel(("Angle/0",))) == 1
 
 
 def test_noisy_teacher_errs_by_demonstration_and_attempt_not_by_call_order():

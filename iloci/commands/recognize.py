@@ -29,7 +29,8 @@ def run(args: argparse.Namespace) -> int:
     from iloci.data.files import TrajectoryFile
     from iloci.data.streams import resolve_demos, shared_stem_notes
 
-    agent = Agent.load(args.memory)
+    # recognition never clusters nor asks a teacher: their plugins need not be installed
+    agent = Agent.load(args.memory, purpose="recognize")
     items = resolve_demos(args.files)
     for note in shared_stem_notes(items):
         print(f"note: {note}", file=sys.stderr)

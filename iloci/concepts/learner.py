@@ -235,6 +235,19 @@ def perform(memory: Memory, model: PerceptualModel, index: int, *,
                            "clipped": clipped})
 
 
+def show_to_teacher(teacher: Any, demo: Demonstration) -> None:
+    """Tell a teacher with a ``show(demo)`` method which demonstration the robot is shown.
+
+    Called before the robot answers, so a teacher that judges answers by
+    the demonstrations memory entries stand for (the oracle) knows the
+    founding demonstration of each concept too, which is placed without a
+    question. Teachers without ``show`` are left alone.
+    """
+    show = getattr(teacher, "show", None)
+    if callable(show) and isinstance(demo, Demonstration):  # others: observe's error
+        show(demo)
+
+
 def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
     """``(lower, upper)`` joint limits (rad, shape (J,) each) of an IK solver, if it has them.
 
@@ -584,6 +597,7 @@ class Learner:
             error's ``outcome`` says how) and must not be taught again.
             Every other observer received every event.
         """
+        show_to_teacher(self.teacher, demo)
         turn = self.observe(demo, sequence, start, dt, frame)
         while turn.answer is not None:
             value = self.teacher.feedback(demo, turn.answer.response)

@@ -62,6 +62,11 @@ def _pct(x: float) -> str:
     return f"{100 * x:.2f}"
 
 
+def _pct_or_none(x: float) -> str:
+    """``x`` as "12.34 %", or "none" for the NaN of an empty selection."""
+    return "none" if x != x else f"{_pct(x)} %"
+
+
 def headline(metrics: dict[str, Any]) -> str:
     """The headline table (Markdown), also printed by ``iloci evaluate``."""
     rows = [
@@ -281,16 +286,27 @@ def stream_headline(metrics: dict[str, Any]) -> str:
     """The stream protocol's summary (Markdown), also printed by ``iloci evaluate``."""
     m = metrics
     k = m["first_scored"]
+    n = m["demonstrations"]
+    if n >= k:
+        late = [
+            f"| first guess right, demonstrations {k}-{n} | {_pct(m['first_guess'])} % |",
+            f"| ... of concepts already taught | {_pct_or_none(m['first_guess_seen'])} "
+            f"({m['unseen_after_first_scored']} first-of-their-concept demonstrations "
+            f"after {k}) |",
+        ]
+        feedbacks_late = f"(from {k}: {m['feedbacks_per_demo_late']:.2f})"
+    else:
+        # a short stream: nothing from demonstration k on to score (no "46-21 nan %")
+        late = [f"| first guess right, demonstrations {k}- | not scored: the stream has "
+                f"{n} demonstrations, scoring starts at demonstration {k} |"]
+        feedbacks_late = f"(none from {k})"
     return "\n".join([
         "| measure | value |",
         "|---|---|",
-        f"| first guess right, demonstrations {k}-{m['demonstrations']} | "
-        f"{_pct(m['first_guess'])} % |",
-        f"| ... of concepts already taught | {_pct(m['first_guess_seen'])} % "
-        f"({m['unseen_after_first_scored']} first-of-their-concept demonstrations after {k}) |",
-        f"| first guess right, all demonstrations | {_pct(m['first_guess_all'])} % |",
+        *late,
+        f"| first guess right, all demonstrations | {_pct_or_none(m['first_guess_all'])} |",
         f"| teacher feedbacks per demonstration | {m['feedbacks_per_demo']:.2f} "
-        f"(from {k}: {m['feedbacks_per_demo_late']:.2f}) |",
+        f"{feedbacks_late} |",
         f"| robot concepts at the end | {m['concepts']} (purity {_pct(m['purity'])} %) |",
         f"| wall time | {m['wall_seconds']:.0f} s |",
     ])

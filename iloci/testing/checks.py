@@ -177,10 +177,15 @@ def _complete_link_ok(x: np.ndarray, labels: np.ndarray, t: float) -> None:
 
 
 def cl_protocol(make: Factory) -> None:
+    """The clusterer has ``cluster(points, distance_threshold)``."""
     _has(make(0), "cluster")
 
 
 def cl_shapes_and_labels(make: Factory) -> None:
+    """Labels: integer, shape (M,), ``0..K-1`` in order of first appearance; one point, one cluster.
+
+    Says nothing about which partition: ``cl_complete_link`` checks that.
+    """
     c = make(0)
     rng = np.random.default_rng(0)
     x = rng.normal(size=(15, 4))
@@ -197,6 +202,14 @@ def cl_shapes_and_labels(make: Factory) -> None:
 
 
 def cl_complete_link(make: Factory) -> None:
+    """The partition is complete link's at the cut (the Clusterer contract).
+
+    On 20 random point sets (2 to 24 points in 3-D, thresholds 0.3 to 3):
+    every cluster's diameter is ``<= threshold`` and every two clusters'
+    complete-link distance is ``> threshold``. Complete link only: a
+    single-link, average-link, k-means or (H)DBSCAN clusterer fails here,
+    since its partitions differ.
+    """
     c = make(0)
     rng = np.random.default_rng(1)
     for _ in range(20):
@@ -206,6 +219,7 @@ def cl_complete_link(make: Factory) -> None:
 
 
 def cl_deterministic(make: Factory) -> None:
+    """Two clusterers made with the same seed give the same labels for the same points."""
     rng = np.random.default_rng(2)
     x = rng.normal(size=(20, 4))
     a = np.asarray(make(0).cluster(x, 1.2))
@@ -214,6 +228,7 @@ def cl_deterministic(make: Factory) -> None:
 
 
 def cl_bad_input(make: Factory) -> None:
+    """NaN points, 1-D points and a negative threshold raise ``InvalidInputError``."""
     c = make(0)
     x = np.zeros((4, 2))
     x[1, 1] = np.nan

@@ -47,11 +47,11 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import InvalidInputError, UnknownComponentError, did_you_mean
-from iloci.sensorimotor.robots.urdf import MOVABLE, read_urdf, resolve_uri
+from iloci.sensorimotor.robots.urdf import MOVABLE, limits_message, read_urdf, resolve_uri
 from iloci.validation import check_array
 
 __all__ = ["ROBOTS", "DrawingPlane", "Robot", "RobotPreset", "available_robots",
-           "describe_robot", "get_robot", "place_robot", "robot_from_config"]
+           "check_robot", "describe_robot", "get_robot", "place_robot", "robot_from_config"]
 
 
 def _unit(v: Sequence[float], what: str) -> np.ndarray:
@@ -390,13 +390,12 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
     if moving:
         raise InvalidInputError(f"base frame {base!r} moves with joint(s) {moving}; choose "
                                 "a base frame above every joint used.")
+    _check_mimic(tree, base, tip_frame, names, path)
+    faults = limits_message([tree.joints[n] for n in names])
+    if faults:
+        raise InvalidInputError(f"{path}: {faults}.")
     lo = np.array([tree.joints[n].lower for n in names])
     hi = np.array([tree.joints[n].upper for n in names])
-    unbounded = [n for n, a, b in zip(names, lo, hi) if not (np.isfinite(a) and np.isfinite(b)
-                                                             and a < b)]
-    if unbounded:
-        raise InvalidInputError(f"joint(s) {unbounded} of {path} have no finite limits "
-                                "(lower < upper); iloci needs them to keep margins.")
     if rest is None:
         q_rest = (lo + hi) / 2
         rest_given = None
@@ -424,6 +423,29 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
         rest=None if rest_given is None else _frozen(rest_given), package_dirs=dirs,
         base_pose=_frozen(tree.pose_of(base)),
         plane_report={"method": "placeholder" if placeholder else "given"})
+
+
+def _check_mimic(tree: Any, base: str, tip: str, names: Sequence[str], path: Path) -> None:
+    """Refuse a ``<mimic>`` joint that moves the pen tip with a joint iloci uses.
+
+    iloci solves every joint it uses as free, so the joint path would break the
+    coupling and the real arm would draw another shape. A mimic joint off the
+    base-to-tip chain (a gripper finger), or one whose leader is held fixed too,
+    is harmless.
+    """
+    for j in tree.chain(base, tip):
+        if j.mimic is None:
+            continue
+        leader, mult, off = j.mimic
+        if j.name in names or leader in names:
+            raise InvalidInputError(
+                f"{path}: joint {j.name!r} mimics joint {leader!r} (<mimic multiplier="
+                f'"{mult:g}" offset="{off:g}">: its angle is {mult:g} * {leader} + {off:g}, '
+                "not free), and iloci cannot plan a joint path that keeps such a coupling: "
+                "it would solve the joint as free and the real arm would draw another shape. "
+                f"Describe the arm without the coupling on the way to the pen tip: make "
+                f"{j.name!r} a fixed joint (or a free one, if the real arm's joint is free), "
+                "or choose a tip_frame above it.")
 
 
 def _urdf_path(urdf: str, dirs: tuple[Path, ...]) -> Path:
@@ -582,6 +604,40 @@ def robot_from_config(cfg: Any, plugin_manager: Any = None) -> tuple[Robot, str]
         robot = robot.with_plane(plane, robot.q_home, {"method": "given"})
         mode = "home"
     return robot, mode
+
+
+def check_robot(cfg: Any, simulator: str = "none", plugin_manager: Any = None) -> Robot:
+    """Check a ``[robot]`` section without placing its plane: what ``iloci config check``
+    and ``iloci robots`` report before anything runs.
+
+    Reads the URDF (unexpanded xacro, limits, ``<mimic>`` couplings on the pen
+    tip's chain, frames and joints; see :func:`describe_robot`) and, for the
+    ``"mujoco"`` simulator, that every moving link has a mass.
+
+    Parameters
+    ----------
+    cfg : iloci.config.RobotConfig
+    simulator : str
+        The configured simulator's name.
+
+    Returns
+    -------
+    Robot
+        Its plane not yet placed.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the joint or link at fault and what to do.
+    UnknownComponentError, MissingBackendError
+        An unknown preset, or one whose files are not installed.
+    """
+    robot, _ = robot_from_config(cfg, plugin_manager)
+    if simulator == "mujoco":
+        massless = read_urdf(robot.urdf_path).massless_message()
+        if massless:
+            raise InvalidInputError(massless)
+    return robot
 
 
 def place_robot(robot: Robot, mode: str, ik: Any, cfg: Any) -> Robot:

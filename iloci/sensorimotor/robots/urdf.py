@@ -32,7 +32,8 @@ import numpy as np
 
 from iloci.errors import InvalidInputError, did_you_mean
 
-__all__ = ["MOVABLE", "UrdfJoint", "UrdfTree", "read_urdf", "resolve_uri", "resolved_urdf_text"]
+__all__ = ["MOVABLE", "UrdfJoint", "UrdfTree", "limits_message", "read_urdf", "resolve_uri",
+           "resolved_urdf_text"]
 
 #: URDF joint types with one degree of freedom a drawing arm can use.
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -51,6 +52,12 @@ class UrdfJoint:
         without ``<limit>``.
     origin : ndarray, shape (4, 4)
         The child link's frame in the parent link's frame at zero motion.
+    mimic : tuple (str, float, float) or None
+        ``(joint, multiplier, offset)`` of a ``<mimic>`` element: this joint's
+        value is ``multiplier * q[joint] + offset``, not free.
+    limits_given : bool
+        Whether the file gives both ``lower`` and ``upper`` (URDF lets a
+        revolute or prismatic joint leave them out: they then read 0).
     """
 
     name: str
@@ -60,6 +67,55 @@ class UrdfJoint:
     lower: float
     upper: float
     origin: np.ndarray
+    mimic: tuple[str, float, float] | None = None
+    limits_given: bool = True
+
+    def limits_fault(self) -> str:
+        """What keeps iloci from moving this joint: ``"continuous"`` (no limits),
+        ``"missing"`` (no lower/upper given), ``"empty"`` (not lower < upper) or "".
+
+        iloci keeps every joint it moves inside finite limits (margins of the
+        drawing plane, IK clipping), so a joint used needs ``lower < upper``;
+        :func:`limits_message` words the faults of several joints.
+        """
+        if self.type == "continuous":
+            return "continuous"
+        if not self.limits_given:
+            return "missing"
+        if not (np.isfinite(self.lower) and np.isfinite(self.upper)) or \
+                self.lower >= self.upper:
+            return "empty"
+        return ""
+
+
+def limits_message(joints: list[UrdfJoint]) -> str:
+    """One sentence per kind of limit fault of ``joints`` (see :meth:`UrdfJoint.limits_fault`),
+    naming the joints and what to do; "" when every joint has usable limits."""
+    by: dict[str, list[UrdfJoint]] = {}
+    for j in joints:
+        fault = j.limits_fault()
+        if fault:
+            by.setdefault(fault, []).append(j)
+    out = []
+    if "continuous" in by:
+        names = ", ".join(repr(j.name) for j in by["continuous"])
+        out.append(f"joint(s) {names} are continuous (they turn without limits), and iloci "
+                   "keeps every joint it moves inside finite limits: make each "
+                   'type="revolute" with <limit lower="-3.14159" upper="3.14159" .../> (or '
+                   "the range it should use), or leave it out of [robot] joints so it is "
+                   "held fixed")
+    if "missing" in by:
+        names = ", ".join(f"{j.name!r} ({j.type})" for j in by["missing"])
+        out.append(f"joint(s) {names} have no lower and upper in a <limit> (URDF then reads "
+                   "both as 0: a joint that cannot move): give each "
+                   '<limit lower="..." upper="..." effort="..." velocity="..."/> with its '
+                   "range (rad; m for a prismatic joint), or leave it out of [robot] joints")
+    if "empty" in by:
+        names = ", ".join(f"{j.name!r} [{j.lower:g}, {j.upper:g}]" for j in by["empty"])
+        out.append(f"joint(s) {names} have limits with no range (iloci needs lower < upper "
+                   "for every joint it moves): give the real range in <limit>, or leave the "
+                   "joint out of [robot] joints")
+    return "; ".join(out)
 
 
 @dataclass(frozen=True)
@@ -76,6 +132,9 @@ class UrdfTree:
         By joint name.
     root : str
         The one link that is no joint's child.
+    massless : tuple of str
+        Links without an ``<inertial>`` of positive mass (MuJoCo cannot move
+        such a body; see :meth:`massless_moving`).
     """
 
     path: Path
@@ -83,6 +142,34 @@ class UrdfTree:
     links: tuple[str, ...]
     joints: dict[str, UrdfJoint]
     root: str
+    massless: tuple[str, ...] = ()
+
+    def massless_moving(self) -> list[str]:
+        """Links moved by a joint (child of a movable joint) with nothing of positive mass
+        attached to them by fixed joints: the bodies MuJoCo refuses to compile
+        ("mass and inertia of moving bodies must be larger than mjMINVAL")."""
+        fixed_children: dict[str, list[str]] = {}
+        for j in self.joints.values():
+            if j.type not in MOVABLE:
+                fixed_children.setdefault(j.parent, []).append(j.child)
+
+        def has_mass(link: str) -> bool:
+            return link not in self.massless or any(
+                has_mass(c) for c in fixed_children.get(link, ()))
+
+        return [j.child for j in self.joints.values()
+                if j.type in MOVABLE and not has_mass(j.child)]
+
+    def massless_message(self) -> str:
+        """Why MuJoCo cannot simulate this URDF, naming the links and what to do; "" if it can."""
+        links = self.massless_moving()
+        if not links:
+            return ""
+        return (f"{self.path}: link(s) {', '.join(map(repr, links))} move with a joint but "
+                "have no <inertial> with a positive <mass> (nor anything fixed to them "
+                "that has one); MuJoCo cannot simulate a massless moving body. Add "
+                '<inertial><mass value="..."/><inertia .../></inertial> to each, or choose '
+                'the PyBullet simulator ([simulator] name = "pybullet"), which accepts them.')
 
     def parent_joint(self, link: str) -> UrdfJoint | None:
         """The joint whose child is ``link`` (None for the root)."""
@@ -183,13 +270,21 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
             "'package://PACKAGE/path/to/robot.urdf' for a file inside an installed package; "
             "`iloci robots` lists the shipped robots.")
     try:
-        root = ET.parse(p).getroot()
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise InvalidInputError(f"cannot read the URDF {p}: {exc.strerror}.") from None
+    try:
+        root = ET.fromstring(raw)
     except ET.ParseError as exc:
+        if b"xacro:" in raw:  # an undeclared xacro: prefix is not even XML
+            raise InvalidInputError(_xacro_message(p, "its xacro: tags")) from None
         raise InvalidInputError(f"{p} is not valid XML: {exc}.") from None
+    _check_expanded(root, p)
     if root.tag != "robot":
         raise InvalidInputError(f"{p} is not a URDF: its root element is <{root.tag}>, "
                                 "not <robot>.")
     links = tuple(el.get("name", "") for el in root.findall("link"))
+    massless = tuple(el.get("name", "") for el in root.findall("link") if not _has_mass(el, p))
     joints: dict[str, UrdfJoint] = {}
     for el in root.findall("joint"):
         name, kind = el.get("name", ""), el.get("type", "")
@@ -200,16 +295,68 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
                                         "file does not define.")
         lim = el.find("limit")
         lo, hi = -np.inf, np.inf
+        given = kind == "continuous" or (lim is not None and "lower" in lim.attrib
+                                         and "upper" in lim.attrib)
         if kind != "continuous" and lim is not None:
-            lo = float(lim.get("lower", "0"))
-            hi = float(lim.get("upper", "0"))
-        joints[name] = UrdfJoint(name, kind, parent, child, lo, hi, _origin(el.find("origin"), p))
+            lo = _number(lim.get("lower", "0"), f"joint {name!r} <limit lower>", p)
+            hi = _number(lim.get("upper", "0"), f"joint {name!r} <limit upper>", p)
+        elif kind in ("revolute", "prismatic"):
+            given = False
+        mimic = None
+        m = el.find("mimic")
+        if m is not None:
+            mimic = (m.get("joint", ""),
+                     _number(m.get("multiplier", "1"), f"joint {name!r} <mimic multiplier>", p),
+                     _number(m.get("offset", "0"), f"joint {name!r} <mimic offset>", p))
+        joints[name] = UrdfJoint(name, kind, parent, child, lo, hi,
+                                 _origin(el.find("origin"), p), mimic, given)
     children = {j.child for j in joints.values()}
     roots = [link for link in links if link not in children]
     if len(roots) != 1:
         raise InvalidInputError(f"{p}: a URDF tree has exactly one root link, found "
                                 f"{roots or 'none'}.")
-    return UrdfTree(p, root.get("name", p.stem), links, joints, roots[0])
+    return UrdfTree(p, root.get("name", p.stem), links, joints, roots[0], massless)
+
+
+def _xacro_message(path: Path, what: str) -> str:
+    out = path.stem if path.suffix == ".xacro" else path.stem + ".expanded.urdf"
+    if not out.endswith(".urdf"):
+        out += ".urdf"
+    return (f"{path} is a xacro file, not a URDF yet ({what}); iloci reads plain URDF: "
+            f"run xacro first (`xacro {path.name} > {out}`, "
+            "from ROS's xacro package or `pip install xacro`) and give the expanded file.")
+
+
+def _check_expanded(root: ET.Element, path: Path) -> None:
+    """Raise InvalidInputError naming the first xacro tag or ``${...}`` / ``$(...)`` left."""
+    parent = {c: p for p in root.iter() for c in p}
+    for el in root.iter():
+        tag = el.tag if isinstance(el.tag, str) else ""
+        if (tag.startswith("{") and "xacro" in tag.partition("}")[0]) or \
+                tag.startswith("xacro:"):
+            raise InvalidInputError(_xacro_message(path, f"<xacro:{tag.rpartition('}')[2]}>"))
+        for key, value in (*el.attrib.items(), ("text", el.text or "")):
+            if "${" in value or "$(" in value:
+                where = f"<{tag}" + (f" name={el.get('name')!r}" if el.get("name") else "")
+                up = parent.get(el)
+                if up is not None and up.get("name") and not el.get("name"):
+                    where = f"<{up.tag} name={up.get('name')!r}> " + where
+                raise InvalidInputError(_xacro_message(
+                    path, f"{where}> {key}={value.strip()!r} is an unexpanded expression"))
+
+
+def _number(text: str, what: str, path: Path) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise InvalidInputError(f"{path}: {what} is {text!r}, not a number.") from None
+
+
+def _has_mass(link: ET.Element, path: Path) -> bool:
+    mass = link.find("inertial/mass")
+    if mass is None:
+        return False
+    return _number(mass.get("value", "0"), f"link {link.get('name')!r} <mass value>", path) > 0
 
 
 def resolve_uri(uri: str, urdf_dir: Path, package_dirs: tuple[Path, ...] = ()) -> Path:

@@ -50,7 +50,7 @@ from iloci.errors import IlociError, InvalidInputError, MissingBackendError
 from iloci.interfaces import Execution
 from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot, get_robot
-from iloci.sensorimotor.robots.urdf import resolved_urdf_text
+from iloci.sensorimotor.robots.urdf import read_urdf, resolved_urdf_text
 from iloci_mujoco import choose_opengl
 from iloci_mujoco.params import MuJoCoParams
 
@@ -139,6 +139,9 @@ class MuJoCoSimulator:
         # them or in the sibling collision directory (MuJoCo reads no .dae),
         # and every link kept as a body (fusestatic off) so frames stay named
         import xml.etree.ElementTree as ET
+        massless = read_urdf(self.robot.urdf_path).massless_message()
+        if massless:  # before MuJoCo's own "mass and inertia of moving bodies" error
+            raise InvalidInputError(massless)
         try:
             text = resolved_urdf_text(self.robot.urdf_path, self.robot.package_dirs,
                                       replace_suffix={".dae": ".stl"})

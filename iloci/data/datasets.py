@@ -1,0 +1,455 @@
+"""A user's own data set of labelled trajectories, for ``iloci evaluate --data PATH``.
+
+Two layouts (docs/guide.md, "Your own shapes"):
+
+**A folder per concept**::
+
+    shapes/
+        circle/    a.csv  b.csv  ...          files of one concept
+        square/    alice/1.csv  bob/1.csv     or one sub-folder per writer
+
+Each sub-folder of ``PATH`` is a concept (its name); the trajectory files
+in it (every format ``iloci teach`` reads: ``.npy``, ``.csv``; see
+:func:`iloci.data.files.load_trajectory`) are its samples. Files directly in
+a concept folder have no writer; a sub-folder of a concept folder names the
+writer of the files in it (deeper folders are read too, the first level
+naming the writer).
+
+**A manifest**, ``PATH`` a ``.csv`` or ``.json`` file (or a folder holding
+``manifest.csv`` / ``manifest.json``): one row per sample with ``file``
+(relative to the manifest's folder) and ``concept``, optionally ``writer``
+and ``session``. Column names are matched without case; ``path`` for
+``file``, ``label``/``class`` for ``concept``, ``user``/``subject``/
+``person`` for ``writer`` are accepted. A JSON manifest is a list of such
+objects, or ``{"samples": [...]}``.
+
+Everything is checked before any learning starts: every problem is listed
+in one :class:`~iloci.errors.InvalidInputError` naming the paths (empty
+folders, unreadable files, files missing from the manifest's folder, mixed
+units, concepts with fewer samples than folds).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+import re
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from iloci.errors import InvalidInputError
+from iloci.interfaces import Demonstration
+
+__all__ = ["Sample", "DataSet", "load_dataset", "check_protocol", "writer_folds",
+           "TRAJECTORY_SUFFIXES"]
+
+#: File suffixes read as trajectories (what ``iloci teach`` reads).
+TRAJECTORY_SUFFIXES = (".csv", ".npy")
+_MANIFESTS = ("manifest.csv", "manifest.json")
+_FILE_COLS = ("file", "path", "filename", "file_name", "trajectory")
+_CONCEPT_COLS = ("concept", "label", "class", "gesture", "shape", "category")
+_WRITER_COLS = ("writer", "user", "subject", "person", "participant", "author")
+_SESSION_COLS = ("session", "trial", "run")
+#: Lists of problems are cut at this many lines in an error message.
+_MAX_LISTED = 12
+_UNIT_RE = re.compile(r"^\s*(?:pos_|pen_)?[xy](?:_pos)?\s*(?:[_ \[(]\s*([a-z]+)\s*[\])]?)?\s*$",
+                      re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One labelled trajectory of a data set.
+
+    Attributes
+    ----------
+    path : str
+        The file, relative to the data set's folder (``/`` separated).
+    concept : str
+    writer, session : str or None
+    """
+
+    path: str
+    concept: str
+    writer: str | None = None
+    session: str | None = None
+
+
+@dataclass
+class DataSet:
+    """A loaded, checked data set.
+
+    Attributes
+    ----------
+    name : str
+        The folder's (or manifest's) name.
+    root : str
+        Absolute path of the folder the sample paths are relative to.
+    source : str
+        What ``PATH`` was (the folder or the manifest file).
+    layout : str
+        ``"folders"`` or ``"manifest"``.
+    samples : list of Sample
+    demos : list of Demonstration
+        One per sample, in the same order: ``shape`` and ``true_concept``
+        the concept, ``index`` its number within the concept (keys
+        ``"circle/0"``, ``"circle/1"``, ...).
+    checksum : str
+        SHA-256 over every sample's path, labels and file bytes.
+    """
+
+    name: str
+    root: str
+    source: str
+    layout: str
+    samples: list[Sample]
+    demos: list[Demonstration] = field(repr=False)
+    checksum: str = ""
+
+    @property
+    def concepts(self) -> dict[str, int]:
+        """Concept -> number of samples, sorted by concept."""
+        return dict(sorted(Counter(s.concept for s in self.samples).items()))
+
+    @property
+    def writers(self) -> list[str]:
+        """The writers named, sorted (empty when none are)."""
+        return sorted({s.writer for s in self.samples if s.writer is not None})
+
+    def summary(self) -> dict[str, Any]:
+        """What ``metrics.json``'s ``dataset`` records: name, path, size, checksum, ..."""
+        return {"name": self.name, "path": self.source, "layout": self.layout,
+                "samples": len(self.samples), "concepts": self.concepts,
+                "writers": len(self.writers), "checksum": self.checksum}
+
+
+def _fail(title: str, problems: Sequence[str], hint: str) -> InvalidInputError:
+    shown = list(problems[:_MAX_LISTED])
+    if len(problems) > _MAX_LISTED:
+        shown.append(f"... and {len(problems) - _MAX_LISTED} more")
+    return InvalidInputError(title + "\n  " + "\n  ".join(shown) + "\n" + hint)
+
+
+def _visible(p: Path) -> bool:
+    return not p.name.startswith((".", "_"))
+
+
+def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
+    problems: list[str] = []
+    concept_dirs = sorted(d for d in root.iterdir() if d.is_dir() and _visible(d))
+    loose = sorted(f.name for f in root.iterdir()
+                   if f.is_file() and f.suffix.lower() in TRAJECTORY_SUFFIXES)
+    if not concept_dirs:
+        hint = (f" (it holds {len(loose)} trajectory files but no concept folders)"
+                if loose else "")
+        raise InvalidInputError(
+            f"data set {root} has no concept folders{hint}: put each concept's trajectory "
+            "files in a folder named after it (shapes/circle/*.csv, shapes/square/*.csv), "
+            "or give a manifest (.csv or .json: file, concept[, writer, session]).")
+    if loose:
+        problems.append(f"{root}: trajectory files outside any concept folder "
+                        f"({', '.join(loose[:3])}{', ...' if len(loose) > 3 else ''})")
+    samples: list[Sample] = []
+    for d in concept_dirs:
+        files = sorted(f for f in d.rglob("*") if f.is_file()
+                       and f.suffix.lower() in TRAJECTORY_SUFFIXES
+                       and all(_visible(part) for part in f.relative_to(d).parents
+                               if str(part) != ".") and _visible(f))
+        if not files:
+            others = sorted(f.name for f in d.rglob("*") if f.is_file())
+            what = (f"no .csv or .npy files (it holds {', '.join(others[:3])}"
+                    f"{', ...' if len(others) > 3 else ''})" if others else "is empty")
+            problems.append(f"{d}: concept folder {what}")
+            continue
+        for f in files:
+            rel = f.relative_to(d)
+            writer = rel.parts[0] if len(rel.parts) > 1 else None
+            samples.append(Sample(f.relative_to(root).as_posix(), d.name, writer))
+    return samples, problems
+
+
+def _pick(header: Sequence[str], names: Sequence[str]) -> str | None:
+    low = {h.strip().lower(): h for h in header}
+    for n in names:
+        if n in low:
+            return low[n]
+    return None
+
+
+def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InvalidInputError(f"cannot read manifest {path}: {exc.strerror or exc}.") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    rows: list[dict[str, Any]]
+    if path.suffix.lower() == ".json":
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InvalidInputError(f"manifest {path} is not valid JSON: {exc.msg} at line "
+                                    f"{exc.lineno}, column {exc.colno}.") from None
+        if isinstance(data, dict) and isinstance(data.get("samples"), list):
+            data = data["samples"]
+        if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
+            raise InvalidInputError(
+                f"manifest {path}: expected a list of objects "
+                '[{"file": "a.csv", "concept": "circle", "writer": "w1"}, ...] '
+                '(or {"samples": [...]}).')
+        rows = data
+        header = sorted({k for r in rows for k in r})
+        where = [f"entry {i}" for i in range(len(rows))]
+    else:
+        try:
+            dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t|")
+        except csv.Error:
+            dialect = csv.excel
+        reader = csv.DictReader(io.StringIO(text), dialect=dialect)
+        header = list(reader.fieldnames or [])
+        rows = [dict(r) for r in reader]
+        where = [f"line {i + 2}" for i in range(len(rows))]
+    fcol, ccol = _pick(header, _FILE_COLS), _pick(header, _CONCEPT_COLS)
+    if fcol is None or ccol is None:
+        raise InvalidInputError(
+            f"manifest {path} needs a 'file' and a 'concept' column (optional: writer, "
+            f"session); its columns are {', '.join(map(str, header)) or 'none'}.")
+    wcol, scol = _pick(header, _WRITER_COLS), _pick(header, _SESSION_COLS)
+    samples, problems = [], []
+    for w, r in zip(where, rows):
+        f, c = r.get(fcol), r.get(ccol)
+        if f is None or str(f).strip() == "" or c is None or str(c).strip() == "":
+            problems.append(f"{path}, {w}: empty {'file' if not f else 'concept'}")
+            continue
+
+        def opt(col: str | None, row: dict[str, Any] = r) -> str | None:
+            v = row.get(col) if col else None
+            return None if v is None or str(v).strip() == "" else str(v).strip()
+
+        samples.append(Sample(Path(str(f).strip()).as_posix(), str(c).strip(), opt(wcol),
+                              opt(scol)))
+    if not samples and not problems:
+        problems.append(f"{path}: the manifest lists no samples")
+    return samples, problems
+
+
+def _position_unit(path: Path) -> str | None:
+    """The unit a CSV header names for x and y (``x_mm``, ``x [px]``), else None."""
+    if path.suffix.lower() != ".csv":
+        return None
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as fh:
+            first = fh.readline()
+    except OSError:
+        return None
+    units = set()
+    for cell in re.split(r"[,;\t|]", first):
+        m = _UNIT_RE.match(cell.strip().strip('"'))
+        if m and m.group(1):
+            units.add(m.group(1).lower())
+    return units.pop() if len(units) == 1 else None
+
+
+def load_dataset(path: str | os.PathLike[str]) -> DataSet:
+    """Read and check a data set (module docstring: the layouts).
+
+    Parameters
+    ----------
+    path : path
+        A folder of concept folders, a manifest (``.csv``/``.json``), or a
+        folder holding ``manifest.csv`` / ``manifest.json``.
+
+    Returns
+    -------
+    DataSet
+        Samples sorted by concept then path (manifest: in its order).
+
+    Raises
+    ------
+    InvalidInputError
+        One error listing every problem found, with paths: a missing path,
+        no concept folders, an empty concept folder, a manifest without
+        ``file``/``concept`` columns or naming missing files, an unreadable
+        or invalid trajectory file, mixed units (some files with time
+        stamps and some without, or CSV headers naming different position
+        units), fewer than 2 concepts.
+    """
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise InvalidInputError(f"data set {str(p)!r} does not exist: give a folder with a "
+                                "sub-folder of trajectory files per concept, or a manifest "
+                                "(.csv or .json: file, concept[, writer, session]).")
+    manifest = None
+    if p.is_file():
+        if p.suffix.lower() not in (".csv", ".json"):
+            raise InvalidInputError(f"data set {p} is a file but not a .csv or .json "
+                                    "manifest.")
+        manifest = p
+    else:
+        manifest = next((p / m for m in _MANIFESTS if (p / m).is_file()), None)
+    if manifest is not None:
+        root = manifest.parent
+        samples, problems = _read_manifest(manifest)
+        layout, name = "manifest", (p.name if p.is_dir() else manifest.stem)
+        for s in samples:
+            if not (root / s.path).is_file():
+                problems.append(f"{root / s.path}: listed in {manifest.name} but not found")
+            elif Path(s.path).suffix.lower() not in TRAJECTORY_SUFFIXES:
+                problems.append(f"{root / s.path}: not a .csv or .npy trajectory file")
+    else:
+        root = p
+        samples, problems = _scan_folders(p)
+        layout, name = "folders", p.name
+    dup = [k for k, n in Counter(s.path for s in samples).items() if n > 1]
+    problems += [f"{root / k}: listed more than once" for k in dup[:_MAX_LISTED]]
+    if problems:
+        raise _fail(f"data set {p} has problems; nothing was learned:", problems,
+                    "Fix them (or leave the files out) and run again.")
+    from iloci.data.files import load_trajectory
+
+    demos: list[Demonstration] = []
+    counter: Counter[str] = Counter()
+    timed: dict[bool, list[str]] = {True: [], False: []}
+    units: dict[str, list[str]] = {}
+    h = hashlib.sha256()
+    for s in samples:
+        f = root / s.path
+        try:
+            d = load_trajectory(f, shape=s.concept, true_concept=s.concept,
+                                index=counter[s.concept])
+        except InvalidInputError as exc:
+            problems.append(f"{f}: {exc}")
+            continue
+        counter[s.concept] += 1
+        demos.append(d)
+        timed[_has_times(d)].append(s.path)
+        unit = _position_unit(f)
+        if unit:
+            units.setdefault(unit, []).append(s.path)
+        h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode())
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+    if problems:
+        raise _fail(f"data set {p}: {len(problems)} file(s) cannot be read; nothing was "
+                    "learned:", problems,
+                    "Each file must be what `iloci teach` reads: .csv or .npy, N x 2 "
+                    "(x, y) or N x 3 (t, x, y).")
+    if timed[True] and timed[False]:
+        raise _fail(f"data set {p} mixes units of time: {len(timed[True])} file(s) have time "
+                    f"stamps and {len(timed[False])} have none (their samples are counted "
+                    "as steps), e.g.:",
+                    [f"with times: {root / timed[True][0]}",
+                     f"without: {root / timed[False][0]}"],
+                    "Give every file a time column, or none.")
+    if len(units) > 1:
+        raise _fail(f"data set {p} mixes position units:",
+                    [f"{u}: {len(fs)} file(s), e.g. {root / fs[0]}" for u, fs in units.items()],
+                    "Convert the files to one unit.")
+    if len(counter) < 2:
+        raise InvalidInputError(f"data set {p} has {len(counter)} concept(s) "
+                                f"({', '.join(counter) or 'none'}); recognition needs at "
+                                "least 2.")
+    return DataSet(name=name, root=str(root.resolve()), source=str(p.resolve()), layout=layout,
+                   samples=samples, demos=demos, checksum=h.hexdigest())
+
+
+def _has_times(demo: Demonstration) -> bool:
+    """Whether the file gave time stamps (without, the loader numbers the samples 0, 1, ...)."""
+    t = demo.times
+    return t is not None and not np.array_equal(t, np.arange(len(t), dtype=np.float64))
+
+
+def writer_folds(samples: Sequence[Sample], folds: int, seed: int
+                 ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Writer-disjoint folds: fold ``k`` learns from writer group ``k``, tests on the others.
+
+    The writers are shuffled (seeded) and dealt into ``folds`` groups, so
+    each fold is taught by about ``1/folds`` of the writers (the paper's
+    taught share) and recognizes drawings of writers it never saw.
+
+    Parameters
+    ----------
+    samples : sequence of Sample
+        Each with a writer.
+    folds : int
+        ``>= 2`` and at most the number of writers.
+    seed : int
+
+    Returns
+    -------
+    list of (learn_idx, test_idx)
+        Sorted int arrays of indices into ``samples``.
+
+    Raises
+    ------
+    InvalidInputError
+        A sample without writer, fewer writers than folds, or a writer group
+        that lacks a concept (that fold could not learn it; the error names
+        the concept and the group's writers).
+    """
+    missing = [s.path for s in samples if s.writer is None]
+    if missing:
+        raise _fail(f"--split writers needs a writer for every sample; {len(missing)} have "
+                    "none, e.g.:", missing[:3],
+                    "Put each writer's files in a sub-folder of its concept folder "
+                    "(circle/alice/1.csv) or give a manifest with a writer column.")
+    writers = sorted({str(s.writer) for s in samples})
+    if len(writers) < folds:
+        raise InvalidInputError(f"--split writers with {folds} folds needs at least {folds} "
+                                f"writers; the data set has {len(writers)}. Set [evaluation] folds "
+                                f"to at most {len(writers)}.")
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 3]))
+    order = [writers[i] for i in rng.permutation(len(writers))]
+    group = {w: i % folds for i, w in enumerate(order)}
+    of = np.array([group[str(s.writer)] for s in samples])
+    concepts = sorted({s.concept for s in samples})
+    problems = []
+    for k in range(folds):
+        have = {s.concept for s, g in zip(samples, of) if g == k}
+        lack = [c for c in concepts if c not in have]
+        if lack:
+            ws = sorted(w for w, g in group.items() if g == k)
+            problems.append(f"fold {k} (writers {', '.join(ws)}) has no sample of "
+                            f"{', '.join(lack)}")
+    if problems:
+        raise _fail("--split writers: some writer groups do not draw every concept, so "
+                    "their fold could not learn it:", problems,
+                    "Use fewer folds, or the per-concept split (--split concepts).")
+    return [(np.flatnonzero(of == k), np.flatnonzero(of != k)) for k in range(folds)]
+
+
+def check_protocol(dataset: DataSet, folds: int, split: str = "concepts", seed: int = 0
+                   ) -> None:
+    """Check that the paper's protocol can run on ``dataset`` before anything is learned.
+
+    Raises
+    ------
+    InvalidInputError
+        ``split="concepts"``: a concept with fewer samples than folds (all
+        such concepts named with their counts); ``split="writers"``: see
+        :func:`writer_folds`; an unknown split.
+    """
+    if split == "concepts":
+        few = [f"{c}: {n} sample(s) in {Path(dataset.root) / c}"
+               if dataset.layout == "folders" else f"{c}: {n} sample(s)"
+               for c, n in dataset.concepts.items() if n < folds]
+        if few:
+            raise _fail(f"data set {dataset.source}: {len(few)} concept(s) have fewer "
+                        f"samples than the {folds} folds (each fold learns from one part "
+                        "of every concept):", few,
+                        "Add samples, leave those concepts out, or use fewer folds "
+                        "([evaluation] folds).")
+    elif split == "writers":
+        writer_folds(dataset.samples, folds, seed)
+    else:
+        raise InvalidInputError(f"unknown split {split!r}: use 'concepts' (k folds per "
+                                "concept) or 'writers' (teach some writers, recognize the "
+                                "others).")

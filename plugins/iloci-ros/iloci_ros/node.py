@@ -1,0 +1,212 @@
+"""The ROS 1 adapter: topics and messages around a :class:`~iloci_ros.session.TeachingSession`.
+
+Topics (``PREFIX`` is ``iloci`` unless ``--prefix`` says otherwise):
+
+========================  ===================================  ==========================
+topic                     type                                 what
+========================  ===================================  ==========================
+``/PREFIX/drawing``       ``nav_msgs/Path`` (in)               a drawing: the poses'
+                                                               ``x, y``; their header
+                                                               stamps as time stamps when
+                                                               strictly increasing
+``/PREFIX/polygon``       ``geometry_msgs/PolygonStamped``     a drawing without times
+                          (in)
+``/PREFIX/feedback``      ``std_msgs/String`` (in)             JSON ``{"answer_id": ID,
+                                                               "value": 1 | -1}``
+``/PREFIX/guess``         ``std_msgs/String`` (out)            JSON: ``kind: "guess"``,
+                                                               ``answer_id``, ``demo``,
+                                                               ``concept``,
+                                                               ``confidence``, ``attempt``,
+                                                               ``joint_names``, ``dt``,
+                                                               ``stamp``
+``/PREFIX/joint_path``    ``trajectory_msgs/JointTrajectory``  the guess's joint path
+                          (out)                                (rad), same header stamp as
+                                                               its guess
+``/PREFIX/outcome``       ``std_msgs/String`` (out)            JSON ``kind: "placed"``: a
+                                                               drawing's turn ended
+``/PREFIX/feedback_result`` ``std_msgs/String`` (out)          JSON ``{"answer_id",
+                                                               "accepted", "error"}`` for
+                                                               every feedback
+``/PREFIX/error``         ``std_msgs/String`` (out)            JSON ``{"error"}``: a
+                                                               drawing that could not be
+                                                               used
+========================  ===================================  ==========================
+
+The guess goes out before its joint path, both with one header stamp (the
+guess's JSON carries it as ``stamp``, seconds). Every message type is a
+standard one, so ``rostopic`` and ``rosbag`` handle them without building
+anything. A feedback whose ``answer_id`` is not the pending answer's
+(duplicate, late, other drawing) is refused on ``feedback_result`` and
+changes nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+
+from iloci.errors import IlociError
+from iloci_ros.session import Guess, Placed, TeachingSession
+
+__all__ = ["RosNode", "path_to_drawing", "polygon_to_drawing", "register", "run"]
+
+
+def path_to_drawing(msg: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """A ``nav_msgs/Path`` as ``(positions (N, 2), times (N,) s or None)``.
+
+    Times are the poses' header stamps, used only when strictly increasing
+    (a path whose poses carry no stamps gives None: no time stamps).
+    """
+    poses = msg.poses
+    xy = np.array([[p.pose.position.x, p.pose.position.y] for p in poses], dtype=np.float64)
+    t = np.array([p.header.stamp.to_sec() for p in poses], dtype=np.float64)
+    times = t - t[0] if len(t) > 1 and np.all(np.diff(t) > 0) else None
+    return xy.reshape(-1, 2), times
+
+
+def polygon_to_drawing(msg: Any) -> tuple[np.ndarray, None]:
+    """A ``geometry_msgs/PolygonStamped`` as ``(positions (N, 2), None)``."""
+    xy = np.array([[p.x, p.y] for p in msg.polygon.points], dtype=np.float64)
+    return xy.reshape(-1, 2), None
+
+
+class RosNode:
+    """Subscribes to drawings and feedback, publishes guesses, joint paths and outcomes.
+
+    Parameters
+    ----------
+    session : TeachingSession
+    rospy : module
+        From :func:`iloci_ros.rospath.import_rospy`, after ``rospy.init_node``.
+    prefix : str
+        Topic namespace.
+    """
+
+    def __init__(self, session: TeachingSession, rospy: Any, prefix: str = "iloci") -> None:
+        from geometry_msgs.msg import PolygonStamped
+        from nav_msgs.msg import Path as PathMsg
+        from std_msgs.msg import String
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+        self.session = session
+        self.rospy = rospy
+        self._String = String
+        self._JointTrajectory = JointTrajectory
+        self._Point = JointTrajectoryPoint
+        p = "/" + prefix.strip("/")
+        pub = rospy.Publisher
+        self.pub_guess = pub(f"{p}/guess", String, queue_size=10)
+        self.pub_path = pub(f"{p}/joint_path", JointTrajectory, queue_size=10)
+        self.pub_outcome = pub(f"{p}/outcome", String, queue_size=10)
+        self.pub_result = pub(f"{p}/feedback_result", String, queue_size=10)
+        self.pub_error = pub(f"{p}/error", String, queue_size=10)
+        self.subs = [
+            rospy.Subscriber(f"{p}/drawing", PathMsg, self._on_path, queue_size=10),
+            rospy.Subscriber(f"{p}/polygon", PolygonStamped, self._on_polygon, queue_size=10),
+            rospy.Subscriber(f"{p}/feedback", String, self._on_feedback, queue_size=10),
+        ]
+
+    # -- in ------------------------------------------------------------------------
+    def _on_path(self, msg: Any) -> None:
+        self._drawing(*path_to_drawing(msg))
+
+    def _on_polygon(self, msg: Any) -> None:
+        self._drawing(*polygon_to_drawing(msg))
+
+    def _drawing(self, positions: np.ndarray, times: np.ndarray | None) -> None:
+        try:
+            result = self.session.drawing(positions, times)
+        except IlociError as exc:
+            self.rospy.logwarn(f"iloci: drawing refused: {exc}")
+            self._send(self.pub_error, {"error": str(exc)})
+            return
+        self._publish(result)
+
+    def _on_feedback(self, msg: Any) -> None:
+        try:
+            data = json.loads(msg.data)
+            answer_id, value = data["answer_id"], data["value"]
+        except (ValueError, TypeError, KeyError):
+            self._send(self.pub_result, {
+                "answer_id": None, "accepted": False,
+                "error": f"feedback must be JSON {{\"answer_id\": ID, \"value\": 1 | -1}}, "
+                         f"got {msg.data!r}"})
+            return
+        try:
+            result = self.session.feedback(str(answer_id), value)
+        except IlociError as exc:
+            self.rospy.logwarn(f"iloci: feedback refused: {exc}")
+            self._send(self.pub_result, {"answer_id": answer_id, "accepted": False,
+                                         "error": str(exc)})
+            return
+        self._send(self.pub_result, {"answer_id": answer_id, "accepted": True, "error": None})
+        self._publish(result)
+
+    # -- out -----------------------------------------------------------------------
+    def _send(self, pub: Any, data: dict[str, Any]) -> None:
+        pub.publish(self._String(data=json.dumps(data)))
+
+    def _publish(self, result: Guess | Placed) -> None:
+        if isinstance(result, Placed):
+            self._send(self.pub_outcome, result.to_dict())
+            return
+        stamp = self.rospy.Time.now()
+        self._send(self.pub_guess, {**result.to_dict(), "stamp": stamp.to_sec()})
+        traj = self._JointTrajectory()
+        traj.header.stamp = stamp
+        traj.joint_names = list(result.joint_names)
+        for i, q in enumerate(result.joint_path):
+            point = self._Point()
+            point.positions = [float(v) for v in q]
+            point.time_from_start = self.rospy.Duration.from_sec(i * result.dt)
+            traj.points.append(point)
+        self.pub_path.publish(traj)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "ros", help="run the robot as a ROS 1 node: drawings in, guesses and joint paths out",
+        description="A ROS 1 node (rospy) teaching the memory FILE: subscribes to "
+                    "/PREFIX/drawing (nav_msgs/Path) and /PREFIX/polygon "
+                    "(geometry_msgs/PolygonStamped), publishes /PREFIX/guess (JSON: concept, "
+                    "confidence, answer_id) and /PREFIX/joint_path "
+                    "(trajectory_msgs/JointTrajectory), takes /PREFIX/feedback (JSON "
+                    "answer_id, value) and saves the memory after each drawing placed. "
+                    "Topic details: python -c 'import iloci_ros.node as n; print(n.__doc__)'. "
+                    "Needs a running roscore (ROS_MASTER_URI).")
+    p.add_argument("--memory", metavar="FILE", required=True,
+                   help="the memory to teach (created on the first drawing placed when "
+                        "missing)")
+    p.add_argument("--config", metavar="TOML", default=None,
+                   help="config for a new memory (default: the defaults)")
+    p.add_argument("--prefix", default="iloci", help="topic namespace (default: iloci)")
+    p.add_argument("--node-name", default="iloci", help="ROS node name (default: iloci)")
+    p.add_argument("--worker", action="store_true",
+                   help="run the network in a worker process (Agent.start_worker)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import iloci
+    from iloci_ros.rospath import import_rospy
+
+    rospy = import_rospy()
+    path = Path(args.memory)
+    agent = iloci.Agent.load(path, args.config) if path.exists() else iloci.build(args.config)
+    if args.worker:
+        agent.start_worker()
+    session = TeachingSession(agent, save_to=path)
+    rospy.init_node(args.node_name, anonymous=False, disable_signals=False)
+    RosNode(session, rospy, prefix=args.prefix)
+    print(f"iloci ros: node {rospy.get_name()} on /{args.prefix.strip('/')}/*, memory {path} "
+          f"({len(agent.memory)} entries)", file=sys.stderr, flush=True)
+    try:
+        rospy.spin()
+    finally:
+        agent.close()
+    return 0

@@ -1,0 +1,223 @@
+"""The iloci-ros node end to end against a real roscore, with rostopic-level traffic.
+
+Needs ROS 1 from the system (Debian: ``apt-get install ros-core python3-rospy
+python3-nav-msgs python3-geometry-msgs python3-trajectory-msgs``; .ci/run
+installs them when it runs as root) and the iloci-ros plugin; skipped with a
+message otherwise. A real roscore on a free port, the node as ``iloci ros``
+in a subprocess, drawings published from this process with rospy, a
+feedback published with the ``rostopic`` command.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+import queue
+import shutil
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("iloci_ros", reason="the iloci-ros plugin is not installed")
+pytest.importorskip("torch")
+pytest.importorskip("pinocchio")
+
+from iloci.errors import MissingBackendError  # noqa: E402
+
+try:
+    from iloci_ros.rospath import import_rospy
+    rospy = import_rospy()
+except MissingBackendError as exc:
+    pytest.skip(f"no ROS 1 on this machine: {exc}", allow_module_level=True)
+if shutil.which("roscore") is None or shutil.which("rostopic") is None:
+    pytest.skip("no roscore/rostopic on PATH (apt-get install ros-core)",
+                allow_module_level=True)
+
+EPOCHS = 30
+SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+                                 "recognition_steps": EPOCHS},
+            "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    """A real roscore on a free port; the environment that points at it."""
+    home = tmp_path_factory.mktemp("ros-home")
+    port = _free_port()
+    env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}",
+           "ROS_HOME": str(home), "ROS_LOG_DIR": str(home / "log"),
+           "ROS_HOSTNAME": "127.0.0.1"}
+    core = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while subprocess.run(["rostopic", "list"], env=env, capture_output=True).returncode:
+        if time.monotonic() > deadline or core.poll() is not None:
+            core.kill()
+            pytest.fail("roscore did not start within 60 s")
+        time.sleep(0.5)
+    os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME")})
+    yield env
+    os.killpg(core.pid, 15)
+    core.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def memory(tmp_path_factory):
+    """A memory taught GShape and Angle, saved."""
+    import iloci
+    from iloci.data import load_lasa
+    demos = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    agent = iloci.build(SETTINGS)
+    agent.teach([demos["GShape/0"], demos["Angle/0"]])
+    path = agent.save(tmp_path_factory.mktemp("mem") / "memory.npz")
+    return path, demos
+
+
+class Listener:
+    """Every message on the node's out topics, in a queue per topic."""
+
+    def __init__(self):
+        from std_msgs.msg import String
+        from trajectory_msgs.msg import JointTrajectory
+        self.q = {name: queue.Queue() for name in ("guess", "joint_path", "outcome",
+                                                   "feedback_result", "error")}
+        for name in self.q:
+            kind = JointTrajectory if name == "joint_path" else String
+            rospy.Subscriber(f"/iloci/{name}", kind, self._put(name))
+
+    def _put(self, name):
+        def put(msg):
+            self.q[name].put((time.perf_counter(),
+                              msg if name == "joint_path" else json.loads(msg.data)))
+        return put
+
+    def get(self, name, timeout=60.0):
+        try:
+            return self.q[name].get(timeout=timeout)
+        except queue.Empty:
+            raise AssertionError(f"nothing on /iloci/{name} within {timeout} s") from None
+
+    def empty(self, name, wait=1.0):
+        time.sleep(wait)
+        return self.q[name].empty()
+
+
+def _path_msg(xy):
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Path as PathMsg
+    msg = PathMsg()
+    msg.header.frame_id = "tablet"
+    for x, y in xy:
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        pose.pose.orientation.w = 1.0
+        msg.poses.append(pose)
+    return msg
+
+
+def _wait_for_subscribers(pub, timeout=30.0):
+    deadline = time.monotonic() + timeout
+    while pub.get_num_connections() == 0:
+        assert time.monotonic() < deadline, f"no subscriber on {pub.name}"
+        time.sleep(0.1)
+
+
+def test_drawing_guess_feedback_over_a_real_roscore(ros_env, memory, tmp_path):
+    from nav_msgs.msg import Path as PathMsg
+    path, demos = memory
+    taught = tmp_path / "robot.npz"
+    taught.write_bytes(Path(path).read_bytes())
+    node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(taught)],
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        rospy.init_node("iloci_test", anonymous=True, disable_signals=True)
+        listen = Listener()
+        pub = rospy.Publisher("/iloci/drawing", PathMsg, queue_size=10)
+        _wait_for_subscribers(pub, timeout=120)
+        deadline = time.monotonic() + 30       # the node's publishers, too
+        while "/iloci/guess" not in dict(rospy.get_published_topics()):
+            assert time.monotonic() < deadline, "the node publishes no /iloci/guess"
+            time.sleep(0.2)
+        time.sleep(1.0)                        # our subscribers connect to them
+
+        # a drawing in: a guess and its joint path out
+        pub.publish(_path_msg(demos["Angle/3"].positions))
+        _, guess = listen.get("guess")
+        _, traj = listen.get("joint_path")
+        assert guess["kind"] == "guess" and guess["concept"] in ("c1", "c2")
+        assert 0 <= guess["confidence"] <= 1 and guess["attempt"] == 1
+        assert traj.joint_names == guess["joint_names"] and len(traj.points) == guess["steps"]
+        assert traj.header.stamp.to_sec() == pytest.approx(guess["stamp"])
+        q = np.array([p.positions for p in traj.points])
+        assert q.shape == (guess["steps"], 4) and np.isfinite(q).all()
+
+        # a feedback naming another answer is refused and changes nothing
+        before = taught.read_bytes()
+        bogus = json.dumps({"answer_id": "not-an-answer", "value": 1})
+        subprocess.run(["rostopic", "pub", "-1", "/iloci/feedback", "std_msgs/String",
+                        f"data: '{bogus}'"], env=ros_env, check=True, capture_output=True,
+                       timeout=60)
+        _, result = listen.get("feedback_result")
+        assert result == {"answer_id": "not-an-answer", "accepted": False,
+                          "error": result["error"]}
+        assert "refused" in result["error"] and guess["answer_id"] in result["error"]
+
+        # the right feedback, with rostopic: the drawing is placed and the memory saved
+        right = json.dumps({"answer_id": guess["answer_id"],
+                            "value": 1 if guess["concept"] == "c2" else -1})
+        subprocess.run(["rostopic", "pub", "-1", "/iloci/feedback", "std_msgs/String",
+                        f"data: '{right}'"], env=ros_env, check=True, capture_output=True,
+                       timeout=60)
+        _, result = listen.get("feedback_result")
+        assert result["accepted"] and result["answer_id"] == guess["answer_id"]
+        if guess["concept"] != "c2":            # a -1: the next guess, a new answer id
+            _, nxt = listen.get("guess")
+            listen.get("joint_path")
+            assert nxt["answer_id"] != guess["answer_id"] and nxt["attempt"] == 2
+            value = 1 if nxt["concept"] == "c2" else -1
+            subprocess.run(["rostopic", "pub", "-1", "/iloci/feedback", "std_msgs/String",
+                            "data: '" + json.dumps({"answer_id": nxt["answer_id"],
+                                                    "value": value}) + "'"],
+                           env=ros_env, check=True, capture_output=True, timeout=60)
+            listen.get("feedback_result")
+        _, placed = listen.get("outcome", timeout=120)
+        assert placed["kind"] == "placed" and placed["demo"] == guess["demo"]
+        deadline = time.monotonic() + 30
+        while taught.read_bytes() == before:
+            assert time.monotonic() < deadline, "the memory was not saved"
+            time.sleep(0.2)
+
+        # the same feedback again (a duplicate): refused, the memory unchanged
+        saved = taught.read_bytes()
+        subprocess.run(["rostopic", "pub", "-1", "/iloci/feedback", "std_msgs/String",
+                        f"data: '{right}'"], env=ros_env, check=True, capture_output=True,
+                       timeout=60)
+        _, result = listen.get("feedback_result")
+        assert not result["accepted"] and "no answer is pending" in result["error"]
+        assert listen.empty("outcome") and taught.read_bytes() == saved
+
+        # a drawing the robot cannot use: one error message, the node keeps running
+        pub.publish(_path_msg(np.zeros((20, 2))))
+        _, err = listen.get("error")
+        assert "zero extent" in err["error"]
+        assert node.poll() is None
+    finally:
+        os.killpg(node.pid, 2)
+        try:
+            out, errs = node.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(node.pid, 9)
+            out, errs = node.communicate()
+    assert "iloci ros: node /iloci" in errs, errs

@@ -1,0 +1,77 @@
+"""iloci-ros's transport-neutral core: drawings in, guesses with answer ids, stale ids refused.
+
+No ROS needed: this is the object every transport adapter (ROS 1, ROS 2, a
+web socket) drives. Real RNNPB (few epochs), real IK, real LASA drawings.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("iloci_ros", reason="the iloci-ros plugin is not installed")
+pytest.importorskip("torch")
+pytest.importorskip("pinocchio")
+
+import iloci  # noqa: E402
+from iloci.concepts.memory import entries_equal, load_memory  # noqa: E402
+from iloci.data import load_lasa  # noqa: E402
+from iloci.errors import FeedbackError, InvalidDemonstrationError  # noqa: E402
+from iloci_ros.session import Guess, Placed, StaleAnswerError, TeachingSession  # noqa: E402
+
+EPOCHS = 30
+SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+                                 "recognition_steps": EPOCHS},
+            "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
+
+
+@pytest.fixture(scope="module")
+def lasa():
+    return {d.key: d for d in load_lasa(["GShape", "Angle"])}
+
+
+def test_answer_ids_refuse_duplicate_late_and_unknown_feedback(lasa, tmp_path):
+    save = tmp_path / "m.npz"
+    session = TeachingSession(iloci.build(SETTINGS), save_to=save)
+    first = session.drawing(lasa["GShape/0"].positions)
+    assert isinstance(first, Placed) and first.action == "new_concept" and save.exists()
+    assert session.pending is None
+    with pytest.raises(StaleAnswerError, match="no answer is pending"):
+        session.feedback("anything", 1)
+
+    guess = session.drawing(lasa["Angle/0"].positions)
+    assert isinstance(guess, Guess) and session.pending is guess
+    assert guess.joint_path.shape[1] == 4 and guess.joint_names[0] == "RShoulderPitch"
+    assert guess.to_dict()["answer_id"] == guess.answer_id
+    with pytest.raises(FeedbackError):
+        session.feedback(guess.answer_id, 0)            # bad value: still pending
+    assert session.pending is guess
+    with pytest.raises(StaleAnswerError, match=guess.answer_id):
+        session.feedback("x-1", -1)
+    placed = session.feedback(guess.answer_id, -1)      # only one concept: a new one
+    assert isinstance(placed, Placed) and placed.action == "new_concept"
+    saved = load_memory(save)[0]
+    # the same feedback again (a bouncing button), and late: refused, nothing changes
+    with pytest.raises(StaleAnswerError):
+        session.feedback(guess.answer_id, -1)
+    assert entries_equal(session.agent.memory.entries, saved.entries)
+    assert session.agent.memory.demonstrations_seen == 2
+
+    # a new drawing abandons the pending turn: its id goes stale
+    g1 = session.drawing(lasa["GShape/1"].positions)
+    g2 = session.drawing(lasa["GShape/2"].positions)
+    assert g1.answer_id != g2.answer_id
+    with pytest.raises(StaleAnswerError):
+        session.feedback(g1.answer_id, 1)
+    out = session.feedback(g2.answer_id, 1 if g2.concept == "c1" else -1)
+    assert isinstance(out, (Guess, Placed))
+
+
+def test_a_bad_drawing_keeps_the_pending_answer(lasa):
+    session = TeachingSession(iloci.build(SETTINGS))
+    session.drawing(lasa["GShape/0"].positions)
+    guess = session.drawing(lasa["Angle/0"].positions)
+    with pytest.raises(InvalidDemonstrationError, match="zero extent"):
+        session.drawing(np.zeros((30, 2)))
+    assert session.pending is guess
+    assert isinstance(session.feedback(guess.answer_id, -1), Placed)

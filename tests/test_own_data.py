@@ -1,0 +1,255 @@
+"""A user's own data set: the baselines, the UNIPEN reader, data set folders and
+manifests with their errors, and the oracle on data that is not LASA."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iloci.data import load_lasa
+from iloci.data.datasets import check_protocol, load_dataset, writer_folds
+from iloci.data.unipen import read_unipen, unipen_digits, unipen_letters
+from iloci.errors import InvalidInputError
+from iloci.interfaces import Demonstration
+
+UNIPEN = Path(__file__).parent / "data" / "unipen" / "train_r01_v07"
+
+
+def _circle(i: int, n: int = 60, r: float = 1.0, centre=(0.0, 0.0)) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi * (0.9 + 0.02 * i), n)
+    return np.column_stack([centre[0] + r * np.cos(t), centre[1] + r * np.sin(t)])
+
+
+def _line(i: int, n: int = 60, length: float = 2.0) -> np.ndarray:
+    s = np.linspace(0, length, n)
+    return np.column_stack([s, (0.3 + 0.05 * i) * s + 0.02 * np.sin(3 * s)])
+
+
+# ---------------------------------------------------------------- baselines
+
+def test_normalised_dtw_does_not_care_where_or_how_large_a_shape_is_drawn():
+    from iloci.evaluation.baselines import dtw_normalised_1nn, dtw_raw_1nn
+
+    learn = [Demonstration(_circle(0), shape="circle", true_concept="circle"),
+             Demonstration(_line(0) + [10, 10], shape="line", true_concept="line")]
+    # a small circle drawn in the middle of where the line was drawn
+    far = Demonstration(_circle(1, r=0.1, centre=(11.0, 10.3)), shape="q")
+    assert dtw_normalised_1nn(learn, [far]) == ["circle"]
+    assert dtw_raw_1nn(learn, [far]) == ["line"]  # why the raw one is kept only by name
+
+
+def test_dollar1_is_rotation_invariant_and_names_the_nearest_template():
+    from iloci.evaluation.baselines import (_dollar1_distances, dollar1_1nn,
+                                            dollar1_template)
+
+    c = _circle(0)
+    th = np.radians(30)
+    rot = c @ np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
+    a, b = dollar1_template(c), dollar1_template(rot * 3 + 5)
+    assert _dollar1_distances(b, a[None])[0] < 1.0  # of a 250-unit square
+    learn = [Demonstration(_circle(0), shape="circle", true_concept="circle"),
+             Demonstration(_line(0), shape="line", true_concept="line")]
+    test = [Demonstration(rot, shape="q"), Demonstration(_line(2) * 4, shape="q", index=1)]
+    assert dollar1_1nn(learn, test) == ["circle", "line"]
+
+
+def test_dollar1_golden_section_matches_the_papers_scalar_search():
+    """The vectorised search is the paper's DISTANCE-AT-BEST-ANGLE, template by template."""
+    from iloci.evaluation import baselines as bl
+
+    rng = np.random.default_rng(0)
+    cand = bl.dollar1_template(np.cumsum(rng.normal(size=(40, 2)), axis=0))
+    temps = np.stack([bl.dollar1_template(np.cumsum(rng.normal(size=(40, 2)), axis=0))
+                      for _ in range(5)])
+
+    def scalar(t):
+        d = lambda th: bl._path_distance(cand, t[None], np.array([th]))[0]  # noqa: E731
+        a, b, phi = -bl.DOLLAR1_ANGLE, bl.DOLLAR1_ANGLE, bl._PHI
+        x1, x2 = phi * a + (1 - phi) * b, (1 - phi) * a + phi * b
+        f1, f2 = d(x1), d(x2)
+        while abs(b - a) > bl.DOLLAR1_THRESHOLD:
+            if f1 < f2:
+                b, x2, f2 = x2, x1, f1
+                x1 = phi * a + (1 - phi) * b
+                f1 = d(x1)
+            else:
+                a, x1, f1 = x1, x2, f2
+                x2 = (1 - phi) * a + phi * b
+                f2 = d(x2)
+        return min(f1, f2)
+
+    np.testing.assert_allclose(bl._dollar1_distances(cand, temps),
+                               [scalar(t) for t in temps], rtol=1e-12)
+
+
+def test_baselines_run_side_by_side_on_one_fold_of_lasa():
+    from iloci.evaluation.baselines import BASELINE_NAMES, best_baseline, run_baselines
+
+    demos = load_lasa(["GShape", "Angle", "Sine"])
+    learn = [d for d in demos if d.index < 2]
+    test = [d for d in demos if d.index >= 2]
+    out = run_baselines(learn, test)
+    assert list(out) == list(BASELINE_NAMES)
+    for row in out.values():
+        assert len(row["predicted"]) == len(test) and 0 <= row["ccr"] <= 100
+    name, ccr = best_baseline({k: v["ccr"] for k, v in out.items()})
+    assert ccr == max(v["ccr"] for v in out.values()) and name in out
+    with pytest.raises(InvalidInputError, match="true_concept"):
+        run_baselines([Demonstration(_line(0))], test)
+    with pytest.raises(InvalidInputError, match="unknown baseline"):
+        run_baselines(learn, test, ["nearest"])
+
+
+# ---------------------------------------------------------------- UNIPEN
+
+def test_unipen_reader_finds_labelled_single_stroke_digits_of_each_writer():
+    digits = unipen_digits(UNIPEN)
+    assert {s.label for s in digits} <= set("0123456789")
+    assert len({s.label for s in digits}) >= 8
+    assert {s.writer for s in digits} == {"aga/amywldrp", "aga/crlmtchl", "aga/greghunt"}
+    assert all(s.single_stroke for s in digits)
+    every = read_unipen(UNIPEN, "1a", labels="0123456789", single_stroke=False)
+    assert len(every) > len(digits) and any(not s.single_stroke for s in every)
+    # the file's first segment: component 73 of amywldrp, a "1" (a near-vertical stroke,
+    # drawn downwards: the tablet's y is up), in mm (856.7 points per inch)
+    one = next(s for s in digits if s.writer == "aga/amywldrp" and s.label == "1")
+    p = one.strokes[0]
+    assert len(p) == 20 and np.ptp(p[:, 1]) > 3 * np.ptp(p[:, 0]) and p[-1, 1] < p[0, 1]
+    assert 2 < np.ptp(p[:, 1]) < 30
+    d = one.demonstration(4)
+    assert d.key == "1/4" and d.true_concept == "1" and d.times[1] == pytest.approx(0.01)
+
+
+def test_unipen_letters_and_clear_errors():
+    letters = unipen_letters(UNIPEN)
+    assert letters and {s.label for s in letters} <= set("acelos")
+    with pytest.raises(InvalidInputError, match="git clone"):
+        unipen_digits(UNIPEN / "data")
+    with pytest.raises(InvalidInputError, match="category '2'"):
+        read_unipen(UNIPEN, "2")
+
+
+# ---------------------------------------------------------------- data sets
+
+def _write(path: Path, xy: np.ndarray, header: str = "x,y") -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(path, xy, delimiter=",", header=header, comments="")
+
+
+def _shapes(root: Path, per: int = 5, writers: tuple[str, ...] = ()) -> Path:
+    for i in range(per):
+        w = f"{writers[i % len(writers)]}/" if writers else ""
+        _write(root / "circle" / f"{w}{i}.csv", _circle(i))
+        _write(root / "line" / f"{w}{i}.csv", _line(i))
+    return root
+
+
+def test_a_folder_per_concept_is_a_data_set_with_a_checksum(tmp_path):
+    ds = load_dataset(_shapes(tmp_path / "shapes"))
+    assert ds.concepts == {"circle": 5, "line": 5} and ds.layout == "folders"
+    assert [d.key for d in ds.demos[:2]] == ["circle/0", "circle/1"]
+    assert all(d.true_concept == s.concept for d, s in zip(ds.demos, ds.samples))
+    assert len(ds.checksum) == 64 and load_dataset(tmp_path / "shapes").checksum == ds.checksum
+    _write(tmp_path / "shapes" / "line" / "0.csv", _line(3))
+    assert load_dataset(tmp_path / "shapes").checksum != ds.checksum
+    check_protocol(ds, 5)
+    with pytest.raises(InvalidInputError, match=r"fewer samples than the 6 folds(.|\n)*circle: 5"):
+        check_protocol(ds, 6)
+
+
+def test_writer_sub_folders_give_writer_disjoint_folds(tmp_path):
+    ds = load_dataset(_shapes(tmp_path / "s", per=8, writers=("ann", "bob", "cy", "di")))
+    assert ds.writers == ["ann", "bob", "cy", "di"]
+    plan = writer_folds(ds.samples, 2, seed=0)
+    for learn, test in plan:
+        seen = {ds.samples[i].writer for i in learn}
+        assert seen.isdisjoint({ds.samples[i].writer for i in test})
+        assert {ds.samples[i].concept for i in learn} == {"circle", "line"}
+    assert writer_folds(ds.samples, 2, seed=0)[0][0].tolist() == plan[0][0].tolist()
+    with pytest.raises(InvalidInputError, match="at least 5 writers"):
+        writer_folds(ds.samples, 5, seed=0)
+    flat = load_dataset(_shapes(tmp_path / "flat"))
+    with pytest.raises(InvalidInputError, match="needs a writer"):
+        check_protocol(flat, 2, "writers")
+
+
+def test_a_manifest_names_files_concepts_and_writers(tmp_path):
+    root = _shapes(tmp_path / "any")
+    rows = [{"file": f"{c}/{i}.csv", "concept": c.upper(), "writer": f"w{i % 2}"}
+            for c in ("circle", "line") for i in range(5)]
+    (root / "list.json").write_text(json.dumps(rows))
+    (root / "list.csv").write_text("File;Label;Subject\n" + "".join(
+        f"{r['file']};{r['concept']};{r['writer']}\n" for r in rows))
+    for m in ("list.json", "list.csv"):
+        ds = load_dataset(root / m)
+        assert ds.concepts == {"CIRCLE": 5, "LINE": 5} and ds.writers == ["w0", "w1"]
+        assert ds.layout == "manifest"
+    (root / "manifest.json").write_text(json.dumps({"samples": rows}))
+    assert load_dataset(root).layout == "manifest"
+
+
+@pytest.mark.parametrize("breakage, message", [
+    ("empty", r"square: concept folder is empty"),
+    ("unreadable", r"circle/3.csv"),
+    ("units", r"mixes position units(.|\n)*mm: 1 file"),
+    ("times", r"mixes units of time"),
+    ("manifest", r"line/9.csv: listed in manifest.csv but not found"),
+    ("columns", r"needs a 'file' and a 'concept' column"),
+    ("missing", r"does not exist"),
+    ("one", r"1 concept"),
+])
+def test_bad_data_sets_get_one_clear_error_naming_paths(tmp_path, breakage, message):
+    root = _shapes(tmp_path / "d")
+    if breakage == "empty":
+        (root / "square").mkdir()
+    elif breakage == "unreadable":
+        (root / "circle" / "3.csv").write_text("x,y\n1,2\nthree,4\n5,6\n")
+    elif breakage == "units":
+        _write(root / "circle" / "0.csv", _circle(0), "x_mm,y_mm")
+        _write(root / "line" / "0.csv", _line(0), "x_px,y_px")
+    elif breakage == "times":
+        _write(root / "circle" / "0.csv", np.column_stack([np.linspace(0, 1, 60), _circle(0)]),
+               "t,x,y")
+    elif breakage == "manifest":
+        (root / "manifest.csv").write_text("file,concept\ncircle/0.csv,circle\n"
+                                           "line/9.csv,line\n")
+    elif breakage == "columns":
+        (root / "manifest.csv").write_text("name,kind\ncircle/0.csv,circle\n")
+    elif breakage == "missing":
+        root = root / "nope"
+    elif breakage == "one":
+        import shutil
+        shutil.rmtree(root / "line")
+    with pytest.raises(InvalidInputError, match=message):
+        load_dataset(root)
+
+
+# ---------------------------------------------------------------- the oracle
+
+def test_the_oracle_knows_the_founding_demonstration_of_a_concept_outside_lasa():
+    """Two circles and two lines: the first circle founds a concept without a question,
+    so the oracle never judged it and, looking 'circle/0' up by LASA shape name, said
+    "no" to the right guess on the second circle, which founded a third concept."""
+    import iloci
+    from iloci.teachers import OracleTeacher
+
+    oracle = OracleTeacher()
+    first = Demonstration(_circle(0), shape="circle", true_concept="circle")
+    oracle.show(first)
+    assert oracle.concept_of_key("circle/0") == "circle"
+    assert OracleTeacher().concept_of_key("GShape/0") is None  # nothing from LASA names
+    with pytest.raises(Exception, match="does not know the concept"):
+        oracle.show(Demonstration(_line(0), shape="nameless"))
+
+    demos = [Demonstration(_circle(i, r=0.05), shape="circle", index=i, true_concept="circle")
+             for i in range(2)]
+    demos += [Demonstration(_line(i, length=0.1), shape="line", index=i, true_concept="line")
+              for i in range(2)]
+    agent = iloci.build()
+    report = agent.teach([demos[0], demos[2], demos[1], demos[3]])
+    members = agent.memory.concept_members(lambda k: k.split("/")[0])
+    assert sorted(sorted(set(v)) for v in members.values()) == [["circle"], ["line"]]
+    assert len(report.outcomes) == 4

@@ -1,0 +1,124 @@
+"""Faults of the world around the method (issue 29), one test per kind, on inputs made here.
+
+Robot descriptions (mimic joints, unexpanded xacro, missing limits, continuous joints,
+massless links, relative paths), Ray sweeps (tests/plugins/test_ray.py), huge strokes,
+files from a newer iloci, unwritable output folders, file names that are not UTF-8, and
+plugin hooks that return the wrong type.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iloci.cli import main
+from iloci.config import load_config
+from iloci.errors import InvalidInputError
+from iloci.sensorimotor.robots import check_robot, describe_robot
+
+
+# -- robot descriptions ------------------------------------------------------------------
+
+def _arm(path: Path, *, limit: str = 'lower="-2" upper="2"', j3_kind: str = "revolute",
+         j3_extra: str = "", mass: str = "0.4", lim_j2: str | None = None) -> Path:
+    """A 3-joint planar arm (base, a, b, c, pen) whose joints can be spoiled one by one."""
+    def link(name: str) -> str:
+        inertial = (f'<inertial><mass value="{mass}"/><inertia ixx="1e-3" ixy="0" ixz="0" '
+                    'iyy="1e-3" iyz="0" izz="1e-3"/></inertial>') if mass else ""
+        return f'<link name="{name}">{inertial}</link>'
+
+    def joint(name: str, parent: str, child: str, x: float, kind: str = "revolute",
+              lim: str = limit, extra: str = "") -> str:
+        return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+                f'<child link="{child}"/><origin xyz="{x} 0 0.1"/><axis xyz="0 1 0"/>'
+                f'<limit {lim} effort="1" velocity="1"/>{extra}</joint>')
+
+    path.write_text(
+        '<?xml version="1.0"?>\n<robot name="spoilt">'
+        + "".join(link(n) for n in ("base", "a", "b", "c")) + '<link name="pen"/>'
+        + joint("s1", "base", "a", 0.0) + joint("s2", "a", "b", 0.2, lim=lim_j2 or limit)
+        + joint("s3", "b", "c", 0.2, kind=j3_kind, extra=j3_extra)
+        + '<joint name="tip" type="fixed"><parent link="c"/><child link="pen"/>'
+          '<origin xyz="0.1 0 0"/></joint></robot>\n')
+    return path
+
+
+def _toml(path: Path, urdf: str, simulator: str = "none") -> Path:
+    path.write_text(f'[robot]\nname = "spoilt"\nurdf = "{urdf}"\ntip_frame = "pen"\n'
+                    f'[simulator]\nname = "{simulator}"\n')
+    return path
+
+
+@pytest.mark.parametrize("spoil, simulator, names", [
+    ({"j3_extra": '<mimic joint="s2" multiplier="-0.5" offset="0.1"/>'}, "none",
+     ["'s3' mimics joint 's2'", "fixed joint"]),
+    ({"lim_j2": 'lower="${-pi/2}" upper="${pi/2}"'}, "none",
+     ["<joint name='s2'>", "${-pi/2}", "run xacro"]),
+    ({"limit": ""}, "none", ["'s1' (revolute), 's2' (revolute), 's3' (revolute)",
+                              "<limit lower="]),
+    ({"lim_j2": 'lower="0.5" upper="0.5"'}, "none", ["'s2' [0.5, 0.5]", "lower < upper"]),
+    ({"j3_kind": "continuous"}, "none", ["'s3' are continuous", 'type="revolute"']),
+    ({"mass": ""}, "mujoco", ["'a', 'b', 'c'", "<inertial>", "pybullet"]),
+], ids=["mimic", "xacro", "no-limits", "zero-range", "continuous", "no-inertials"])
+def test_urdf_faults_are_named_by_config_check_and_robots(tmp_path, capsys, spoil, simulator,
+                                                         names):
+    urdf = _arm(tmp_path / "arm.urdf", **spoil)
+    cfg = _toml(tmp_path / "arm.toml", "arm.urdf", simulator)
+    for argv in (["config", "check", str(cfg)], ["robots", "--show", "--config", str(cfg)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert str(urdf) in err and "Traceback" not in err
+        for name in names:
+            assert name in err, (argv, name, err)
+
+
+def test_xacro_tags_and_substitution_args_are_caught(tmp_path):
+    ns = _arm(tmp_path / "ns.urdf.xacro").read_text().replace(
+        '<robot name="spoilt">',
+        '<robot name="spoilt" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+        '<xacro:property name="L" value="0.2"/>')
+    (tmp_path / "ns.urdf.xacro").write_text(ns)
+    with pytest.raises(InvalidInputError, match=r"<xacro:property>.*xacro ns.urdf.xacro > ns.urdf"):
+        describe_robot(tmp_path / "ns.urdf.xacro", tip_frame="pen")
+    undeclared = ns.replace(' xmlns:xacro="http://www.ros.org/wiki/xacro"', "")
+    (tmp_path / "bare.urdf").write_text(undeclared)
+    with pytest.raises(InvalidInputError, match="xacro: tags.*run xacro"):
+        describe_robot(tmp_path / "bare.urdf", tip_frame="pen")
+    arg = _arm(tmp_path / "arg.urdf").read_text().replace('xyz="0.2 0 0.1"',
+                                                          'xyz="$(arg reach) 0 0.1"', 1)
+    (tmp_path / "arg.urdf").write_text(arg)
+    with pytest.raises(InvalidInputError, match=r"\$\(arg reach\).*run xacro"):
+        describe_robot(tmp_path / "arg.urdf", tip_frame="pen")
+
+
+def test_mimic_joint_off_the_pen_chain_is_accepted(tmp_path):
+    # a gripper finger mimicking another, hanging off the arm: no effect on the pen tip
+    text = _arm(tmp_path / "g.urdf").read_text().replace("</robot>", (
+        '<link name="f1"/><link name="f2"/>'
+        '<joint name="g1" type="prismatic"><parent link="c"/><child link="f1"/>'
+        '<axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/></joint>'
+        '<joint name="g2" type="prismatic"><parent link="c"/><child link="f2"/>'
+        '<axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/>'
+        '<mimic joint="g1"/></joint></robot>'))
+    (tmp_path / "g.urdf").write_text(text)
+    robot = describe_robot(tmp_path / "g.urdf", tip_frame="pen")
+    assert robot.joint_names == ("s1", "s2", "s3")
+
+
+def test_relative_urdf_is_read_beside_the_config_from_any_folder(tmp_path, monkeypatch):
+    (tmp_path / "robots").mkdir()
+    _arm(tmp_path / "robots" / "arm.urdf")
+    cfg_file = _toml(tmp_path / "robots" / "arm.toml", "arm.urdf")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    cfg = load_config(cfg_file)
+    assert cfg.robot.urdf == str((tmp_path / "robots" / "arm.urdf").resolve())
+    assert check_robot(cfg.robot).joint_names == ("s1", "s2", "s3")
+    # what a memory stores: the absolute path, so the saved config loads from anywhere
+    saved = cfg.to_dict()
+    monkeypatch.chdir(tmp_path)
+    assert load_config(saved).robot.urdf == cfg.robot.urdf
+    assert np.isfinite(check_robot(load_config(saved).robot).lower).all()
