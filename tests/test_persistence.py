@@ -326,7 +326,8 @@ class _HdbscanLike:
 def test_a_memory_recognizes_without_its_teaching_only_plugins(tmp_path):
     """Taught with a clusterer plugin that is then not installed: recognition still loads."""
     pytest.importorskip("iloci_scipy")
-    pytest.importorskip("torch")
+    pytest.importorskip({"native-rnnpb": "iloci_native", "torch-rnnpb": "torch",
+                         "jax-rnnpb": "jax"}[RNNPB])
     pytest.importorskip("pinocchio")
     from iloci.data import load_lasa
     from iloci.errors import NotLoadedError, UnknownComponentError
