@@ -70,7 +70,8 @@ def run_fold(backend: str, epochs: int, fold_index: int, seed: int, extra: dict)
     t0 = time.perf_counter()
     answers = agent.recognize(test)
     rec_s = time.perf_counter() - t0
-    names = agent.memory.label_concepts(agent.teacher.concept_of_key)
+    from iloci.data.concepts import majority_names
+    names = majority_names(agent.memory.concept_members(agent.teacher.concept_of_key))
     ccr = float(np.mean([names[a.concept] == d.true_concept for a, d in zip(answers, test)]))
     reh = report.rehearsals
     by_reason: dict[str, int] = {}

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from iloci.agent import Agent, build
+from iloci.agent import Agent, build, preload
 from iloci.config import Config, load_config
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration
@@ -24,4 +24,4 @@ except PackageNotFoundError:  # running from a source tree without install
     __version__ = "0+unknown"
 
 __all__ = ["Agent", "Config", "Demonstration", "build", "hookimpl", "load_config",
-           "__version__"]
+           "preload", "__version__"]

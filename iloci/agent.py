@@ -30,7 +30,7 @@ from iloci.interfaces import Demonstration
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.registry import Registry
 
-__all__ = ["Agent", "build", "NotLoaded", "PURPOSES", "TeachReport",
+__all__ = ["Agent", "build", "preload", "NotLoaded", "PURPOSES", "TeachReport",
            "SkippedDemonstrationWarning", "learn_and_recognize"]
 
 
@@ -637,6 +637,47 @@ class Agent:
                                       f"configured perceptual model: {exc}") from None
         agent.memory = memory
         return agent
+
+
+def preload(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = None
+            ) -> tuple[str, ...]:
+    """Import the configured components' back ends now, building nothing.
+
+    ``import iloci`` imports no back end; :func:`build` imports the
+    configured ones (torch, pinocchio, ...), and a native library's import
+    holds the GIL for its whole loading (torch: 0.3 to 1 s), stalling every
+    other thread of the process. A program with a control loop calls this
+    before the loop starts, so that building and loading later, in any
+    thread, imports nothing heavy (see docs/embedding.md, "Keeping a control
+    loop on time").
+
+    Parameters
+    ----------
+    config, plugin_manager
+        As for :func:`build`.
+
+    Returns
+    -------
+    tuple of str
+        ``"section=name"`` of each component whose back end was imported.
+
+    Raises
+    ------
+    ConfigError, UnknownComponentError, MissingBackendError
+        As :func:`build`.
+    """
+    from iloci.interfaces import COMPONENT_KINDS
+    pm = plugin_manager or get_plugin_manager()
+    registry = get_registry(pm)
+    cfg = load_config(config, registry=registry)
+    done = []
+    for sec in COMPONENT_KINDS:
+        name = getattr(cfg, sec).name
+        if name == "none":
+            continue
+        registry.load_factory(registry.get(sec, name))
+        done.append(f"{sec}={name}")
+    return tuple(done)
 
 
 def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = None,

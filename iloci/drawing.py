@@ -65,9 +65,9 @@ def resolve_concept(memory: Any, name: str) -> str:
                                 "(`iloci teach`).")
     if name in labels:
         return name
-    from iloci.data.concepts import concept_of_key
+    from iloci.data.concepts import concept_of_key, majority_names
 
-    named = memory.label_concepts(concept_of_key)
+    named = majority_names(memory.concept_members(concept_of_key))
     matches = [label for label, true in named.items() if true == name]
     if matches:
         return max(matches, key=memory.num_samples_of)

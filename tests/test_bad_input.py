@@ -480,5 +480,6 @@ def test_evaluate_checks_every_back_end_before_fold_0(monkeypatch):
         raise AssertionError("LASA was loaded before the back ends were checked")
 
     monkeypatch.setattr("iloci.data.load_lasa", no_data)
+    monkeypatch.setattr("iloci.evaluation.evaluate.load_lasa", no_data)
     with pytest.raises(MissingBackendError, match="teacher 'needy' needs no_such_module_xyz"):
         ev.evaluate(config, plugin_manager=pm, jobs=1)

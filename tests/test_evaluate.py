@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import tomllib
@@ -17,6 +16,7 @@ pytest.importorskip("matplotlib")
 from iloci.cli import main  # noqa: E402
 from iloci.errors import InvalidInputError, MissingBackendError  # noqa: E402
 from iloci.evaluation.evaluate import FoldResult, evaluate  # noqa: E402
+from iloci.evaluation.results import FOLD_KEYS  # noqa: E402
 
 SMALL = """
 [perceptual_model]
@@ -69,7 +69,7 @@ def test_every_output_file_exists_and_parses(run_dir):
         # every learning demo got at least one interaction; each test demo one answer
         assert len(f["predicted"]) == len(f["true_concepts"]) == len(f["test"]) > 0
         assert f["entries"] >= f["concepts"] >= 1
-        assert set(f) == {fl.name for fl in dataclasses.fields(FoldResult)}
+        assert tuple(f) == FOLD_KEYS
         assert set(f["shapes"]) <= {"GShape", "Angle", "Sshape"}
         # the robot's own labels are scored; an oracle keeps every robot concept pure
         assert len(f["robot_predicted"]) == len(f["test"])

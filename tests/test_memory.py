@@ -203,14 +203,14 @@ def test_memory_views():
     assert empty.pbs.shape == (0, 0) and empty.concepts() == []
 
 
-def test_label_concepts_takes_the_majority_true_concept():
-    from iloci.data.concepts import concept_of
+def test_majority_names_of_a_memory_take_the_majority_true_concept():
+    from iloci.data.concepts import GroundTruth, majority_names
     mem = make_memory()
-    names = mem.label_concepts(lambda key: concept_of(key.rsplit("/", 1)[0]))
+    names = majority_names(mem.concept_members(GroundTruth()))
     # c1: GShape/0 and JShape_2/4 tie, the first seen wins; c2: 2 Angle, 1 Sine
     assert names == {"c1": "GShape", "c2": "Angle"}
-    assert Memory([entry([0, 0, 0, 0], key="x/0")]).label_concepts(lambda k: None) == \
-        {"c1": None}
+    assert majority_names(Memory([entry([0, 0, 0, 0], key="x/0")]).concept_members(
+        lambda k: None)) == {"c1": None}
 
 
 def test_memory_arrays_round_trip():

@@ -291,24 +291,6 @@ class Memory:
                         for key in self.entries[i].sources]
                 for label in self.concepts()}
 
-    def label_concepts(self, concept_of_key: Any) -> dict[str, str | None]:
-        """Name each of the robot's concepts by its demonstrations' true concepts.
-
-        Parameters
-        ----------
-        concept_of_key : callable
-            As for :meth:`concept_members`.
-
-        Returns
-        -------
-        dict
-            Robot label -> the most frequent true concept among the sources
-            of its entries (ties: the first seen), ``None`` if none is known
-            (:func:`iloci.evaluation.metrics.majority_names`).
-        """
-        from iloci.evaluation.metrics import majority_names
-        return majority_names(self.concept_members(concept_of_key))
-
     def copy(self) -> Memory:
         enc = None
         if self.encoder is not None and self.encoder.scale_ is not None:

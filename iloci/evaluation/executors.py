@@ -23,7 +23,8 @@ from typing import Any, Protocol
 
 from iloci.errors import InvalidInputError, MissingBackendError
 
-__all__ = ["FoldExecutor", "LocalExecutor", "make_executor", "KNOWN_EXECUTORS"]
+__all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "make_executor",
+           "KNOWN_EXECUTORS"]
 
 #: Executors iloci knows of, and where each comes from (for error messages).
 KNOWN_EXECUTORS = {"local": "the kernel", "ray": "./plugins/iloci-ray"}
@@ -133,6 +134,32 @@ class LocalExecutor:
             # or a caller that stopped iterating
             pool.shutdown(wait=finished, kill_workers=not finished)
             manager.shutdown()
+
+
+class _Relay:
+    """A queue whose ``put`` hands the message to ``emit`` at once (no process between)."""
+
+    def __init__(self, emit: Callable[[dict], None]) -> None:
+        self.put = emit
+
+
+class InProcessExecutor:
+    """Folds one after the other in this process: ``jobs == 1`` on the local executor.
+
+    The same calls the worker processes get, made here: the caller's plugin
+    manager (and its observers) can be handed to them, as nothing needs to
+    pickle.
+    """
+
+    name = "local"
+    jobs = 1
+
+    def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
+            emit: Callable[[dict], None]) -> Iterator[Any]:
+        """Call ``fn(*args, queue)`` for each ``args`` of ``calls`` in order; yield results."""
+        queue = _Relay(emit)
+        for args in calls:
+            yield fn(*args, queue)
 
 
 def make_executor(name: str, jobs: int, *, address: str | None = None,

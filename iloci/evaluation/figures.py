@@ -264,7 +264,7 @@ def plot_robustness(rob: Mapping[str, Mapping], path: str | Path) -> Path:
     """Horizontal bars: CCR per perturbation, iloci beside DTW 1-NN (mean ± std over folds).
 
     ``rob`` is metrics.json's ``robustness`` (see
-    :func:`iloci.evaluation.evaluate.summarize_robustness`).
+    :func:`iloci.evaluation.robustness.summarize_robustness`).
     """
     plt = _plt()
     rows = list(rob.values())

@@ -15,10 +15,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from iloci.config import Config
+from iloci.data.concepts import GroundTruth
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["lasa_folds"]
+__all__ = ["fold_memory_name", "fold_plan", "lasa_folds", "untaught_concepts"]
 
 
 def lasa_folds(demos: Sequence[Demonstration], folds: int = 5, seed: int = 0
@@ -79,3 +81,61 @@ def lasa_folds(demos: Sequence[Demonstration], folds: int = 5, seed: int = 0
         test = np.flatnonzero(partition != k)
         out.append((learn, test))
     return out
+
+
+def untaught_concepts(demos: Sequence[Demonstration], config: Config, fold: int) -> list[str]:
+    """The concepts left out of fold ``fold``'s learning set (``[evaluation] untaught``).
+
+    The sorted true concepts are shuffled once per seed and fold ``k``
+    leaves out the ``untaught`` concepts after the first ``k * untaught``
+    (cyclically), so 5 folds of 4 leave out 20 different concepts.
+
+    Raises
+    ------
+    InvalidInputError
+        ``untaught`` leaves fewer than two concepts to learn.
+    """
+    n = config.evaluation.untaught
+    if not n:
+        return []
+    truth = GroundTruth()
+    concepts = sorted({truth.of(d) for d in demos})
+    if n > len(concepts) - 2:
+        raise InvalidInputError(f"[evaluation] untaught = {n} leaves fewer than 2 of the "
+                                f"{len(concepts)} concepts to learn; use at most "
+                                f"{len(concepts) - 2}.")
+    order = list(np.random.default_rng([config.evaluation.seed, 2]).permutation(concepts))
+    return [str(order[(fold * n + i) % len(order)]) for i in range(n)]
+
+
+def fold_plan(demos: Sequence[Demonstration], config: Config) -> list[tuple[list[int], list[int]]]:
+    """(learning indices in presentation order, test indices) per fold.
+
+    With ``[evaluation] untaught``, the learning demonstrations of each
+    fold's :func:`untaught_concepts` move to the end of its test set.
+    """
+    ev = config.evaluation
+    truth = GroundTruth()
+    plan = []
+    for k, (learn, test) in enumerate(lasa_folds(demos, ev.folds, ev.seed)):
+        # presentation order: seeded per fold, independent of the split's draws
+        rng = np.random.default_rng([ev.seed, k, 1])
+        order = [int(i) for i in rng.permutation(learn)]
+        if ev.order == "blocked":
+            # concept by concept, in the order each concept first appears in
+            # the shuffled stream (so concepts and their members stay seeded)
+            concepts = list(dict.fromkeys(truth.of(demos[i]) for i in order))
+            order = [i for c in concepts for i in order if truth.of(demos[i]) == c]
+        test_idx = [int(i) for i in test]
+        left_out = set(untaught_concepts(demos, config, k))
+        if left_out:
+            out = [i for i in order if truth.of(demos[i]) in left_out]
+            order = [i for i in order if i not in set(out)]
+            test_idx += sorted(out)
+        plan.append((order, test_idx))
+    return plan
+
+
+def fold_memory_name(fold: int) -> str:
+    """File name of fold ``fold``'s saved agent in ``--memories`` (``fold-K.npz``)."""
+    return f"fold-{fold}.npz"

@@ -10,6 +10,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from iloci.data.concepts import _counts, majority_names
+
 __all__ = [
     "correct_classification_rate",
     "confusion_matrix",
@@ -79,37 +81,6 @@ def mean_std(values: Sequence[float]) -> tuple[float, float]:
     """Mean and population standard deviation (ddof=0, as over the 5 folds)."""
     a = np.asarray(values, dtype=np.float64)
     return float(np.mean(a)), float(np.std(a))
-
-
-def _counts(members: Mapping[str, Sequence[str | None]]) -> dict[str, dict[str, int]]:
-    out: dict[str, dict[str, int]] = {}
-    for robot, truths in members.items():
-        c: dict[str, int] = {}
-        for t in truths:
-            if t is not None:
-                c[t] = c.get(t, 0) + 1
-        out[robot] = c
-    return out
-
-
-def majority_names(members: Mapping[str, Sequence[str | None]]) -> dict[str, str | None]:
-    """Name each of the robot's concepts by the true concept of most of its demonstrations.
-
-    Parameters
-    ----------
-    members : mapping of str to sequence of str
-        Robot concept label -> the true concept of each demonstration its
-        memory entries stand for (``None`` for an unknown one).
-
-    Returns
-    -------
-    dict
-        Robot label -> most frequent true concept (ties: the first seen);
-        ``None`` when none is known. Two robot concepts may get the same
-        name (a concept the robot split in two).
-    """
-    return {robot: (max(c, key=c.__getitem__) if c else None)
-            for robot, c in _counts(members).items()}
 
 
 def matched_names(members: Mapping[str, Sequence[str | None]]) -> dict[str, str | None]:

@@ -1,18 +1,20 @@
-"""Evaluation folds in worker processes.
+"""Evaluation folds on an executor: in this process, in worker processes or on Ray.
 
-:func:`run_folds_in_processes` runs folds of :func:`iloci.evaluation.evaluate.evaluate`
-on an executor (:mod:`iloci.evaluation.executors`: joblib's loky pool here, or a
-plugin's, e.g. Ray) and relays their progress messages. A worker
-cannot receive the caller's plugin manager (plugin objects and modules do
-not pickle); when the caller has one, the worker gets the registry entries
-it resolved the config's component names to (:func:`resolved_specs`) and
-registers them alone (:class:`ResolvedComponents`).
+:func:`run_folds` runs folds of :func:`iloci.evaluation.evaluate.evaluate`
+on an executor (:mod:`iloci.evaluation.executors`: this process, joblib's
+loky pool, or a plugin's, e.g. Ray) and relays their progress messages; it
+is the one code path of serial and parallel runs (the same task functions;
+in this process they get the caller's plugin manager, :class:`LocalContext`).
+A worker cannot receive the caller's plugin manager (plugin objects and
+modules do not pickle); when the caller has one, the worker gets the
+registry entries it resolved the config's component names to
+(:func:`resolved_specs`) and registers them alone (:class:`ResolvedComponents`).
 
-On the local executor a fold is two tasks: its learning
-(:func:`~iloci.evaluation.evaluate.learn_fold`, which saves the learned
+On the local pool a fold is two tasks: its learning
+(:func:`~iloci.evaluation.fold.learn_fold`, which saves the learned
 agent) and, queued when that ends, the recognition of its test set by the
 saved agent in whichever worker is free; results are those of
-:func:`~iloci.evaluation.evaluate.run_fold`. A worker converts each
+:func:`~iloci.evaluation.fold.run_fold`. A worker converts each
 demonstration (preprocessing + IK) once for all the folds it runs
 (:class:`~iloci.sensorimotor.pipeline.MotionCache`).
 """
@@ -20,14 +22,26 @@ demonstration (preprocessing + IK) once for all the folds it runs
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+import json
 import os
+import pickle
+import tempfile
+import time
 from typing import Any
 
+from iloci.agent import Agent
+from iloci.data import load_lasa
 from iloci.errors import InvalidInputError
+from iloci.evaluation.fold import LearnedFold, learn_fold, run_fold
+from iloci.evaluation.folds import fold_memory_name
 from iloci.hookspecs import hookimpl
+from iloci.interfaces import COMPONENT_KINDS
+from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager, get_registry
+from iloci.sensorimotor.pipeline import MotionCache
 
-__all__ = ["FoldTask", "ResolvedComponents", "resolved_specs", "run_folds_in_processes"]
+__all__ = ["FoldTask", "LocalContext", "ResolvedComponents", "resolved_specs", "run_folds",
+           "run_folds_in_processes"]
 
 
 @dataclass(frozen=True)
@@ -101,10 +115,6 @@ def resolved_specs(config: Any, pm: Any) -> list[Any]:
         (e.g. a lambda or a class defined in a function as its factory or
         schema).
     """
-    import pickle
-
-    from iloci.interfaces import COMPONENT_KINDS
-    from iloci.plugins import get_registry
     registry = get_registry(pm)
     specs, problems = [], []
     for sec, kind in COMPONENT_KINDS.items():
@@ -134,10 +144,23 @@ def resolved_specs(config: Any, pm: Any) -> list[Any]:
 _MOTION_CACHES: dict[str, Any] = {}
 
 
-def _motion_cache(config_dict: dict, specs: Sequence[Any] | None) -> Any:
-    import json
+@dataclass(frozen=True)
+class LocalContext:
+    """What folds run in this process share: the caller's demonstrations and plugin manager.
 
-    from iloci.sensorimotor.pipeline import MotionCache
+    Passed where a worker gets ``specs`` (:class:`~iloci.evaluation.executors.InProcessExecutor`
+    needs nothing pickled): the caller's observers see every learning event,
+    and the folds share one motion cache.
+    """
+
+    demos: list[Any]
+    plugin_manager: Any
+    motion_cache: MotionCache = field(default_factory=MotionCache)
+
+
+def _motion_cache(config_dict: dict, specs: Sequence[Any] | LocalContext | None) -> Any:
+    if isinstance(specs, LocalContext):
+        return specs.motion_cache
     key = json.dumps(config_dict, sort_keys=True, default=repr) + repr(
         None if specs is None else [(s.kind, s.name, s.plugin, s.factory) for s in specs])
     if key not in _MOTION_CACHES:
@@ -147,9 +170,8 @@ def _motion_cache(config_dict: dict, specs: Sequence[Any] | None) -> Any:
 
 
 def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
-                        specs: Sequence[Any] | None, queue: Any) -> Any:
+                        specs: Sequence[Any] | LocalContext | None, queue: Any) -> Any:
     """One fold in an executor's worker; ``queue.put`` receives its progress messages."""
-    from iloci.evaluation.evaluate import run_fold
     demos, pm = _worker_context(config_dict, shapes, specs)
     send = _fold_started(task, queue)
     return run_fold(config_dict, task.fold, [demos[i] for i in task.learn],
@@ -159,10 +181,10 @@ def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], ba
 
 
 def _worker_context(config_dict: dict, shapes: list[str],
-                    specs: Sequence[Any] | None) -> tuple[list[Any], Any]:
+                    specs: Sequence[Any] | LocalContext | None) -> tuple[list[Any], Any]:
     """A worker's demonstrations and plugin manager (None: the default one)."""
-    from iloci.data import load_lasa
-    from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager
+    if isinstance(specs, LocalContext):
+        return specs.demos, specs.plugin_manager
     demos = load_lasa(shapes or None)
     # specs: what the caller's plugin manager resolved; None: the default manager's
     pm = None if specs is None else get_plugin_manager(
@@ -184,14 +206,14 @@ def _fold_started(task: FoldTask, queue: Any) -> Callable[[dict], None]:
 
 
 def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
-                          specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
+                          specs: Sequence[Any] | LocalContext | None, agent_path: str,
+                          queue: Any) -> Any:
     """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``.
 
     ``agent_path`` is the fold's file in ``task.memory_dir`` when the
-    evaluation keeps memories (:func:`~iloci.evaluation.evaluate.fold_memory_name`),
+    evaluation keeps memories (:func:`~iloci.evaluation.folds.fold_memory_name`),
     else one in a temporary directory: the agent is saved once, there.
     """
-    from iloci.evaluation.evaluate import learn_fold
     demos, pm = _worker_context(config_dict, shapes, specs)
     send = _fold_started(task, queue)
     learned, agent = learn_fold(config_dict, task.fold, [demos[i] for i in task.learn],
@@ -210,11 +232,9 @@ class _Recognized:
 
 
 def _recognize_in_worker(config_dict: dict, fold: int, test: list[int], shapes: list[str],
-                         specs: Sequence[Any] | None, agent_path: str, queue: Any) -> Any:
+                         specs: Sequence[Any] | LocalContext | None, agent_path: str,
+                          queue: Any) -> Any:
     """Recognize a fold's test set with its saved agent, in a worker."""
-    import time
-
-    from iloci.agent import Agent
     demos, pm = _worker_context(config_dict, shapes, specs)
     agent = Agent.load(agent_path, config_dict, plugin_manager=pm)
     agent.motion_cache = _motion_cache(config_dict, specs)
@@ -223,10 +243,10 @@ def _recognize_in_worker(config_dict: dict, fold: int, test: list[int], shapes: 
     return _Recognized(fold, recs, time.perf_counter() - t0)
 
 
-def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
-                           runner: Any, *, baseline: bool, specs: Sequence[Any] | None,
-                           emit: Callable[[dict], None],
-                           on_result: Callable[[Any], None]) -> None:
+def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
+              runner: Any, *, baseline: bool, specs: Sequence[Any] | LocalContext | None,
+              emit: Callable[[dict], None],
+              on_result: Callable[[Any], None]) -> None:
     """Run ``tasks`` on ``runner``, an executor (:mod:`iloci.evaluation.executors`).
 
     Parameters
@@ -237,17 +257,19 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
     shapes : list of str
         ``[data] shapes``, so each worker loads the same demonstrations.
     runner : FoldExecutor
-        ``local`` (joblib's loky pool) or a plugin's (e.g. Ray).
+        :class:`~iloci.evaluation.executors.InProcessExecutor` (this
+        process), ``local`` (joblib's loky pool) or a plugin's (e.g. Ray).
     baseline : bool
         Run the DTW 1-NN baseline in each fold too.
-    specs : sequence of ComponentSpec, optional
+    specs : sequence of ComponentSpec or LocalContext, optional
         What the caller's plugin manager resolved (see :func:`resolved_specs`);
-        ``None``: each worker builds the default plugin manager.
+        ``None``: each worker builds the default plugin manager; a
+        :class:`LocalContext` for an executor running the folds in this process.
     emit : callable
         Receives every progress message (``fold_queued``, ``fold_start``,
         ``interaction``, ``rehearsal``), in the parent process.
     on_result : callable
-        Called in the parent with each :class:`~iloci.evaluation.evaluate.FoldResult`
+        Called in the parent with each :class:`~iloci.evaluation.results.FoldResult`
         as its fold finishes.
 
     Raises
@@ -267,9 +289,6 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
     # its own, queued when the learning ends, behind the learning tasks not
     # yet started: with 5 folds on 2 workers, the worker with 2 folds
     # recognizes the others' test sets while the other learns its third.
-    import tempfile
-
-    from iloci.evaluation.evaluate import LearnedFold, fold_memory_name
     with tempfile.TemporaryDirectory(prefix="iloci-evaluate-") as tmp:
         def agent_path(task: FoldTask) -> str:
             return os.path.join(task.memory_dir or tmp, fold_memory_name(task.fold))
@@ -291,3 +310,7 @@ def run_folds_in_processes(config_dict: dict, tasks: Sequence[FoldTask], shapes:
                 learned[res.result.fold] = res
             else:
                 on_result(learned.pop(res.fold).complete(res.recognitions, res.seconds))
+
+
+#: The name :func:`run_folds` had before serial runs took the same path.
+run_folds_in_processes = run_folds

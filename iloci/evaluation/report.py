@@ -11,7 +11,7 @@ import numpy as np
 
 from iloci.data.files import write_text_atomic
 from iloci.errors import MissingBackendError
-from iloci.evaluation.evaluate import FoldResult
+from iloci.evaluation.results import FoldResult
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
 
 __all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
@@ -146,7 +146,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         (:meth:`FoldResult.to_dict` of each fold), ``report.md`` and
         ``figures/*.png``.
     metrics : dict
-        :func:`~iloci.evaluation.evaluate.summarize`'s result.
+        :func:`~iloci.evaluation.summary.summarize`'s result.
     results : sequence of FoldResult
         As :func:`~iloci.evaluation.evaluate.evaluate` returns them.
     """

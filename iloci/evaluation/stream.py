@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from iloci.config import Config, load_config
-from iloci.evaluation.metrics import majority_names, mean_std, purity
+from iloci.data.concepts import GroundTruth, majority_names
+from iloci.evaluation.metrics import mean_std, purity
 
 __all__ = ["StreamStep", "stream_order", "run_stream", "summarize_stream", "FIRST_SCORED"]
 
@@ -105,7 +106,6 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     """
     from iloci.agent import build
     from iloci.data import load_lasa
-    from iloci.evaluation.evaluate import _true_concept
     from iloci.plugins import get_plugin_manager, get_registry
 
     pm = plugin_manager or get_plugin_manager()
@@ -115,10 +115,7 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     if limit is not None:
         order = order[:limit]
     stream = [demos[i] for i in order]
-    known = {d.key: d.true_concept for d in stream if d.true_concept}
-
-    def truth(key: str) -> str:
-        return _true_concept(key, known)
+    truth = GroundTruth(stream)
 
     t0 = time.perf_counter()
     agent = build(config, plugin_manager=pm)
@@ -129,7 +126,7 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     for i, (demo, motion) in enumerate(zip(stream, motions)):
         ts = time.perf_counter()
         seq, start = agent._encode(motion)
-        true = demo.true_concept or truth(demo.key)
+        true = truth.of(demo)
         mem = agent.memory
         names = majority_names(mem.concept_members(truth)) if len(mem) else {}
         seen = true in set(names.values())

@@ -188,6 +188,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--node-name", default="iloci", help="ROS node name (default: iloci)")
     p.add_argument("--worker", action="store_true",
                    help="run the network in a worker process (Agent.start_worker)")
+    # roslaunch appends remappings (__name:=..., __log:=...); rospy reads them from sys.argv
+    p.add_argument("remappings", nargs="*", metavar="NAME:=VALUE",
+                   help="ROS remappings, as roslaunch passes them")
     p.set_defaults(func=run)
 
 
@@ -195,6 +198,11 @@ def run(args: argparse.Namespace) -> int:
     import iloci
     from iloci_ros.rospath import import_rospy
 
+    from iloci.errors import InvalidInputError
+    bad = [r for r in args.remappings if ":=" not in r]
+    if bad:
+        raise InvalidInputError(f"iloci ros: unexpected argument(s) {bad}; only ROS "
+                                "remappings NAME:=VALUE may follow the options.")
     rospy = import_rospy()
     path = Path(args.memory)
     agent = iloci.Agent.load(path, args.config) if path.exists() else iloci.build(args.config)

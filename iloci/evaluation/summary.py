@@ -1,0 +1,101 @@
+"""``metrics.json``: the folds' results, their means over folds and the run's provenance."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from iloci.config import Config
+from iloci.evaluation.metrics import auroc, mean_std
+from iloci.evaluation.provenance import machine, versions
+from iloci.evaluation.results import FoldResult
+from iloci.evaluation.robustness import summarize_robustness
+
+__all__ = ["summarize"]
+
+
+def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
+              jobs: int, *, plugin_manager: Any = None) -> dict[str, Any]:
+    """The content of ``metrics.json``: per-fold results, their means and provenance.
+
+    Parameters
+    ----------
+    folds : sequence of FoldResult
+    config : Config
+    wall_seconds : float
+        Wall time of the whole evaluation (s).
+    jobs : int
+    plugin_manager : pluggy.PluginManager, optional
+        Whose plugin distributions :func:`versions` lists.
+
+    Returns
+    -------
+    dict
+        ``ccr_mean``, ``ccr_std``, ``ccr_folds``, mean and std of every
+        per-fold count, ``folds`` (per-fold rows), ``paper``, ``baseline``
+        (when every fold ran it), ``seed``, ``config``, ``versions``,
+        ``machine``.
+    """
+    results = [f.to_dict() for f in sorted(folds, key=lambda f: f.fold)]
+
+    def ms(key: str) -> dict[str, float]:
+        m, s = mean_std([r[key] for r in results])
+        return {"mean": m, "std": s}
+
+    ccr_m, ccr_s = mean_std([r["ccr"] for r in results])
+    out: dict[str, Any] = {
+        "ccr_mean": ccr_m,
+        "ccr_std": ccr_s,
+        "ccr_folds": [r["ccr"] for r in results],
+        "wall_seconds": wall_seconds,
+        "jobs": jobs,
+        "ccr_matched": ms("ccr_matched"),
+        "ccr_source": ms("ccr_source"),
+        "purity": ms("purity"),
+        "named_concepts": ms("named_concepts"),
+        "interactions_per_demo": ms("interactions_per_demo"),
+        "exemplars": ms("exemplars"),
+        "prototypes": ms("prototypes"),
+        "entries": ms("entries"),
+        "concepts": ms("concepts"),
+        "generation_error": ms("generation_error"),
+        "fold_wall_seconds": [r["wall_seconds"] for r in results],
+        "folds": [{k: r[k] for k in ("fold", "ccr", "ccr_matched", "ccr_source", "purity",
+                                       "named_concepts", "interactions_per_demo", "exemplars",
+                                       "prototypes", "entries", "concepts",
+                                       "generation_error", "rehearsals", "rehearsal_seconds",
+                                       "wall_seconds", "baseline_ccr", "skipped")}
+                  | {"learn": len(r["learn"]), "test": len(r["test"])} for r in results],
+        "paper": {"ccr_mean": 0.91346, "ccr_std": 0.03511},
+        "seed": config.seed,
+        "config": config.to_dict(),
+        "versions": versions(plugin_manager),
+        "machine": machine(),
+    }
+    taught = [t for r in results for t in r.get("taught", [])]
+    if taught and not all(taught):
+        fam = [x for r in results for x in r["familiarity"]]
+        unk = [u for r in results for u in r["unknown"]]
+        out["untaught"] = {
+            "concepts": config.evaluation.untaught,
+            "familiarity_auroc": auroc([f for f, t in zip(fam, taught) if t],
+                                       [f for f, t in zip(fam, taught) if not t]),
+            "margin_auroc": auroc(
+                [c for r in results for c, t in zip(r["confidence"], r["taught"]) if t],
+                [c for r in results for c, t in zip(r["confidence"], r["taught"]) if not t]),
+            "untaught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught)
+                                                        if not t])),
+            "taught_answered_unknown": float(np.mean([u for u, t in zip(unk, taught) if t])),
+            "taught_demos": int(sum(taught)), "untaught_demos": int(len(taught) - sum(taught)),
+        }
+    if all(r.get("robustness") for r in results):
+        out["robustness"] = summarize_robustness(results)
+    if all(r.get("baseline_predicted") for r in results):
+        bm, bs = mean_std([r["baseline_ccr"] for r in results])
+        out["baseline"] = {"method": "DTW 1-NN (dtaidistance), positions resampled to 50",
+                           "ccr_mean": bm, "ccr_std": bs,
+                           "ccr_folds": [r["baseline_ccr"] for r in results],
+                           "seconds": [r["baseline_seconds"] for r in results]}
+    return out
