@@ -1,4 +1,4 @@
-"""native-rnnpb's kernel on aarch64 (NEON) computes the x86 paths' bits: cross-built, run under qemu.
+"""native-rnnpb's kernel on aarch64 (NEON) computes the x86 bits: cross-built, run under qemu.
 
 ``native_check.c`` trains a fixed batch (integer-generated data, so both
 machines start from the same bits), recognizes and scores it, and prints
