@@ -28,7 +28,13 @@ The knobs, one run each, at both priorities:
     are done before.
 ``all``
     ``preload`` + ``switch`` + the network in a worker process
-    (``Agent.start_worker``): what docs/embedding.md recommends.
+    (``Agent.start_worker``).
+``process``
+    The phases run in a separate process (a ``multiprocessing`` spawn
+    child, as the ``iloci ros`` node or ``iloci serve`` run beside a robot's
+    controller); the loop's process does nothing else, so no GIL is shared.
+    Phase times come back over a pipe (``time.perf_counter`` is the
+    system-wide monotonic clock on Linux, comparable across processes).
 
 Per phase: lateness p50 / p99 / max (ms) and the phase's seconds; ``span``
 is every tick from ``build`` to the end of ``arm``. Target (issue 30): p99
@@ -38,7 +44,8 @@ each run: on a shared machine every normal-priority thread wakes late
 whatever the process does, and the SCHED_FIFO runs separate what the
 library does to the loop (the GIL) from that.
 
-    python benchmarks/control_loop.py [--knobs none switch preload all] [--priorities normal rt]
+    python benchmarks/control_loop.py [--knobs none switch preload all process]
+                                      [--priorities normal rt]
 """
 
 from __future__ import annotations
@@ -114,6 +121,37 @@ def child(knob: str, rt: bool, memory: str) -> dict:
     thread = threading.Thread(target=loop, name="control-loop")
     thread.start()
     time.sleep(0.5)
+    if knob == "process":
+        import multiprocessing as mp
+        ctx = mp.get_context("spawn")
+        here, there = ctx.Pipe()
+        worker = ctx.Process(target=_phases_to_pipe, args=(knob, memory, there))
+        worker.start()
+        phases = here.recv()
+        worker.join()
+    else:
+        phases = run_phases(knob, memory)
+    time.sleep(0.3)
+    stop.set()
+    thread.join()
+    out: dict = {"knob": knob, "priority": "SCHED_FIFO 10" if rt else "normal",
+                 "switch_interval_s": sys.getswitchinterval()}
+    for name, a, b in phases:
+        out[name] = {"seconds": round(b - a, 2),
+                     **stats([late for t, late in ticks if a <= t <= b + 0.02])}
+    start = next(a for n, a, _ in phases if n == "build")
+    end = phases[-1][2]
+    out["span"] = {"seconds": round(end - start, 1),
+                   **stats([late for t, late in ticks if start <= t <= end + 0.02])}
+    return out
+
+
+def _phases_to_pipe(knob: str, memory: str, conn) -> None:
+    conn.send(run_phases(knob, memory))
+
+
+def run_phases(knob: str, memory: str) -> list[tuple[str, float, float]]:
+    """import, build, load, learn, arm: ``(name, start, end)`` in perf_counter seconds."""
     phases: list[tuple[str, float, float]] = []
 
     def phase(name, fn):
@@ -150,19 +188,7 @@ def child(knob: str, rt: bool, memory: str) -> dict:
 
     phase("arm", arm)
     agent.close()
-    time.sleep(0.3)
-    stop.set()
-    thread.join()
-    out: dict = {"knob": knob, "priority": "SCHED_FIFO 10" if rt else "normal",
-                 "switch_interval_s": sys.getswitchinterval()}
-    for name, a, b in phases:
-        out[name] = {"seconds": round(b - a, 2),
-                     **stats([late for t, late in ticks if a <= t <= b + 0.02])}
-    start = next(a for n, a, _ in phases if n == "build")
-    end = phases[-1][2]
-    out["span"] = {"seconds": round(end - start, 1),
-                   **stats([late for t, late in ticks if start <= t <= end + 0.02])}
-    return out
+    return phases
 
 
 def make_memory(path: Path) -> dict:
@@ -177,7 +203,8 @@ def make_memory(path: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--knobs", nargs="+", default=["none", "switch", "preload", "all"])
+    ap.add_argument("--knobs", nargs="+",
+                    default=["none", "switch", "preload", "all", "process"])
     ap.add_argument("--priorities", nargs="+", default=["normal", "rt"],
                     choices=["normal", "rt"])
     ap.add_argument("--child", nargs=3, metavar=("KNOB", "RT", "MEMORY"),
@@ -193,6 +220,11 @@ def main(argv=None) -> int:
                     "settings": SETTINGS,
                     "targets": {"span_p99_ms": 5, "span_max_ms": 20, "priority": "normal"},
                     "runs": []}
+    if RESULTS.exists():  # runs of other knobs or priorities are kept
+        previous = json.loads(RESULTS.read_text()).get("runs", [])
+        ran = {(k, "SCHED_FIFO 10" if p == "rt" else "normal")
+               for k in args.knobs for p in args.priorities}
+        result["runs"] = [r for r in previous if (r["knob"], r["priority"]) not in ran]
     with tempfile.TemporaryDirectory() as tmp:
         memory = Path(tmp) / "memory.npz"
         result["memory"] = make_memory(memory)

@@ -11,7 +11,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+import dataclasses
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -23,12 +24,15 @@ import warnings
 import numpy as np
 import pluggy
 
+from iloci.concepts.rehearsal import regenerate
 from iloci.config import Config, load_config
-from iloci.errors import (InvalidDemonstrationError, InvalidInputError, MemoryFileError,
-                          NotFittedError, ObserverError)
+from iloci.errors import (ConfigError, InvalidDemonstrationError, InvalidInputError,
+                          MemoryFileError, NotFittedError, ObserverError)
 from iloci.interfaces import Demonstration
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.registry import Registry
+from iloci.sensorimotor.encoding import feature_names
+from iloci.sensorimotor.robots import robot_and_ik
 
 __all__ = ["Agent", "build", "preload", "NotLoaded", "PURPOSES", "TeachReport",
            "SkippedDemonstrationWarning", "learn_and_recognize"]
@@ -153,6 +157,8 @@ class Agent:
         #: Called with each RehearsalProgress (see Learner); None for none.
         self.on_progress: Callable[[Any], None] | None = None
         self._worker: Any = None
+        # the turn of the last observe(): Agent.feedback judges its answers
+        self._turn: Any = None
         # one learning step at a time (threads, asyncio.to_thread)
         self._lock = threading.RLock()
 
@@ -250,7 +256,7 @@ class Agent:
         Turn
             ``turn.answer``: the guess (concept, confidence, attempt, the
             drawing in the demonstration's frame, joint path, dt, start
-            posture) to judge with ``turn.feedback(+1 | -1)``; or, for the
+            posture) to judge with ``turn.feedback(+1 | -1, turn.answer.id)``; or, for the
             first demonstration of an empty memory, ``turn.outcome`` at once
             (a new concept, nothing asked).
 
@@ -269,7 +275,62 @@ class Agent:
             seq, start = self._encode(motion)
             frame = TeacherFrame.of(demo, motion.plane_points)
             turn = self.learner.observe(demo, seq, start, motion.dt, frame)
+            self._turn = turn
         return turn
+
+    @property
+    def pending(self):
+        """The answer of the last :meth:`observe` waiting for a feedback, or ``None``.
+
+        Returns
+        -------
+        Answer or None
+            Its :attr:`~iloci.concepts.learner.Answer.id` is what
+            :meth:`feedback` must name.
+        """
+        turn = self._turn
+        return None if turn is None else turn.answer
+
+    def feedback(self, value: int, answer_id: Any):
+        """Judge the answer ``answer_id`` of the last :meth:`observe`: +1 or -1.
+
+        For event-driven stacks (buttons, ROS topics, web hooks) that keep
+        no turn object: the feedback is routed by the answer's id.
+        ``turn.feedback(value, answer_id)`` on the turn :meth:`observe`
+        returned does the same.
+
+        Parameters
+        ----------
+        value : int
+            +1 (reward) or -1 (punishment).
+        answer_id : str or Answer
+            :attr:`Answer.id <iloci.concepts.learner.Answer.id>` of the
+            answer judged.
+
+        Returns
+        -------
+        Answer or LearnOutcome
+            The next answer, or the demonstration's place in the memory.
+
+        Raises
+        ------
+        StaleAnswerError
+            ``answer_id`` is not the pending answer's (a duplicate, a late
+            feedback, one for an earlier turn, or no turn is under way);
+            nothing changed.
+        FeedbackError
+            ``value`` is not +1 or -1; nothing changed.
+        """
+        turn = self._turn
+        if turn is None:
+            from iloci.errors import StaleAnswerError
+            shown = getattr(answer_id, "id", answer_id)
+            raise StaleAnswerError(
+                f"answer {shown!r} is not waiting for a feedback (no demonstration has been "
+                "observed); the feedback was refused and nothing changed. Call "
+                "agent.observe(demo) and judge the answer it shows.",
+                answer_id=str(shown), pending=None)
+        return turn.feedback(value, answer_id)
 
     async def aobserve(self, demo: Demonstration):
         """:meth:`observe` from asyncio code: runs in a thread, the event loop stays free.
@@ -308,14 +369,8 @@ class Agent:
             An observer hook raised after the demonstration was learned
             (its ``outcome`` says how); do not teach it again.
         """
-        from iloci.concepts.learner import show_to_teacher
-        from iloci.interfaces import check_feedback
-        show_to_teacher(self.teacher, demo)
-        turn = self.observe(demo, motion)
-        while turn.answer is not None:
-            value = self.teacher.feedback(demo, turn.answer.response)
-            turn.feedback(check_feedback(value, self.teacher))
-        return turn.outcome
+        from iloci.concepts.learner import run_turn
+        return run_turn(self.teacher, demo, lambda: self.observe(demo, motion))
 
     def teach(self, demos: Iterable[Any], *,
               on_change: Callable[[Any], None] | None = None) -> TeachReport:
@@ -457,6 +512,27 @@ class Agent:
 
         return readings
 
+    def entry_drawings(self, entries: Sequence[Any] | None = None) -> list[np.ndarray]:
+        """Memory entries regenerated by the network, as pen paths in the drawing plane.
+
+        Parameters
+        ----------
+        entries : sequence of Entry, optional
+            Default: every entry of the memory.
+
+        Returns
+        -------
+        list of ndarray, each (T_i + 1, 2)
+            Pen positions (m), from :func:`~iloci.concepts.rehearsal.regenerate`
+            decoded by the memory's encoder; empty before the first demonstration.
+        """
+        mem = self.memory
+        entries = list(mem.entries if entries is None else entries)
+        if not entries or mem.encoder is None:
+            return []
+        seqs = regenerate(self.perceptual_model, entries)
+        return [mem.encoder.decode(s, e.start)[0] for s, e in zip(seqs, entries)]
+
     def respond(self, concept: str):
         """Perform ``concept``: its entry of lowest generation error, as a Response.
 
@@ -525,10 +601,22 @@ class Agent:
 
         See :mod:`iloci.concepts.memory` for the format. ``extra``: more
         JSON-able header values (``iloci teach`` keeps its progress through
-        a stream there). Returns the path.
+        a stream there). Returns the path (a symlink's target is written
+        through, the link kept).
+
+        Raises
+        ------
+        MemoryLockedError
+            Another process (``iloci serve``, ``iloci teach``) holds the
+            memory's lock (:func:`iloci.progress.memory_lock`); nothing is
+            written.
+        OSError
+            The file cannot be written (disk full, permissions); the file
+            on disk is the previous one, untouched.
         """
         from iloci.concepts.memory import save_memory
-        with self._lock:
+        from iloci.progress import saving
+        with self._lock, saving(path):
             return save_memory(path, self.memory, self.perceptual_model.state(),
                                extra={**dict(extra or {}), "config": self.config.to_dict(),
                                       "robot": _robot_record(self.robot),
@@ -718,7 +806,6 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
     from iloci.interfaces import COMPONENT_KINDS
     unknown = set(overrides) - set(COMPONENT_KINDS)
     if unknown:
-        from iloci.errors import ConfigError
         raise ConfigError(f"build() got unknown component override(s) {sorted(unknown)}; "
                           f"valid: {', '.join(COMPONENT_KINDS)}.")
     _check_overrides({sec: obj for sec, obj in overrides.items()
@@ -726,10 +813,6 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config, registry=registry, supplied=overrides)
-    from iloci.sensorimotor.robots import place_robot, robot_from_config
-    robot, mode = robot_from_config(cfg.robot, pm)
-    cfg = _size_network(cfg, robot, overrides)
-    components: dict[str, Any] = {}
 
     def make(sec: str, robot: Any) -> Any:
         cc = getattr(cfg, sec)
@@ -740,11 +823,13 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         return registry.build(sec, cc.name, cc.params, seed=cfg.seed,
                               **extra)
 
-    ik = overrides["ik"] if "ik" in overrides else make("ik", robot)
-    placed = place_robot(robot, mode, ik, cfg.robot)
-    if placed is not robot and "ik" not in overrides:
-        ik = make("ik", placed)  # with its start posture at the placed plane
-    robot = placed
+    def sized(robot: Any) -> None:  # before the plane search: fails fast
+        nonlocal cfg
+        cfg = size_network(cfg, robot, overrides)
+
+    robot, ik = robot_and_ik(cfg.robot, lambda r: make("ik", r), plugin_manager=pm,
+                             ik=overrides.get("ik"), before_placing=sized)
+    components: dict[str, Any] = {}
     for sec in COMPONENT_KINDS:
         if sec in overrides:
             components[sec] = overrides[sec]
@@ -756,11 +841,29 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
     return Agent(cfg, components, pm, registry)
 
 
-def _size_network(cfg: Config, robot: Any, overrides: dict[str, Any]) -> Config:
-    """The config with the perceptual model's ``input_size`` set to the robot's 2 + J."""
-    import dataclasses
-    from iloci.errors import ConfigError
-    width = 2 + len(robot.joint_names)
+def size_network(cfg: Config, robot: Any, overrides: Mapping[str, Any] | None = None
+                 ) -> Config:
+    """The config with the perceptual model's ``input_size`` set to the robot's 2 + J.
+
+    Parameters
+    ----------
+    cfg : Config
+    robot : Robot
+    overrides : mapping, optional
+        Component objects given to :func:`build`; a given perceptual model
+        must take 2 + J inputs.
+
+    Raises
+    ------
+    ConfigError
+        ``[perceptual_model] input_size`` is set and is not the robot's
+        2 + J features per step (:func:`~iloci.sensorimotor.encoding.feature_names`).
+    InvalidInputError
+        A given perceptual model takes another number of inputs.
+    """
+    overrides = overrides or {}
+    names = feature_names(len(robot.joint_names))
+    width = len(names)
     if "perceptual_model" in overrides:
         got = getattr(overrides["perceptual_model"], "input_size", width)
         if got != width:
@@ -775,10 +878,10 @@ def _size_network(cfg: Config, robot: Any, overrides: dict[str, Any]) -> Config:
                     if f.name == "input_size"), None)
     if params.input_size != default:
         raise ConfigError(
-            f"[perceptual_model] input_size = {params.input_size} does not fit robot "
-            f"{robot.name!r}: its input is 2 + J = 2 + {len(robot.joint_names)} = {width} "
-            "(leave input_size out; it is set from the robot).", source=cfg.source,
-            key="perceptual_model.input_size")
+            f"perceptual_model.input_size is {params.input_size}, but robot {robot.name!r} "
+            f"gives every encoded demonstration {width} features per step "
+            f"({', '.join(names)}): set it to {width} or leave it out (it is sized "
+            "from the robot).", source=cfg.source, key="perceptual_model.input_size")
     sized = dataclasses.replace(params, input_size=width)
     return dataclasses.replace(
         cfg, perceptual_model=dataclasses.replace(cfg.perceptual_model, params=sized))

@@ -329,7 +329,7 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     from iloci.concepts.memory import load_memory
     from iloci.config import EvaluationConfig, RobotConfig, SensorimotorConfig
     from iloci.registry import validate_dataclass
-    from iloci.sensorimotor.robots import place_robot, robot_from_config
+    from iloci.sensorimotor.robots import robot_and_ik
 
     source = str(memory_path)
     if registry is None:
@@ -343,7 +343,6 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     saved = _upgrade_config(saved)
     robot_cfg = validate_dataclass(RobotConfig, dict(saved.get("robot") or {}),
                                    section="robot", source=source)
-    robot, mode = robot_from_config(robot_cfg)
 
     def why(section: str, name: object) -> str:
         return f"{source} {_NEEDED[section].format(name)}, so drawing needs it: "
@@ -358,20 +357,17 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
                                       section="sensorimotor", source=source)
     seed = validate_dataclass(EvaluationConfig, dict(saved.get("evaluation") or {}),
                               section="evaluation", source=source).seed
-    components = {}
-    for section, (spec, params) in specs.items():
+    def build(section: str, robot: Any = None) -> Any:
+        spec, params = specs[section]
         try:
             # the IK solver draws with the memory's robot
             extra = {"robot": robot} if section == "ik" else {}
-            components[section] = registry.build(spec.kind, spec.name, params, seed=seed,
-                                                 **extra)
+            return registry.build(spec.kind, spec.name, params, seed=seed, **extra)
         except MissingBackendError as exc:  # registered, but its library is missing
             raise exc.with_context(why(section, spec.name)) from None
-    placed = place_robot(robot, mode, components["ik"], robot_cfg)
-    if placed is not robot:  # its start posture at the placed plane
-        spec, params = specs["ik"]
-        components["ik"] = registry.build(spec.kind, spec.name, params, seed=seed,
-                                          robot=placed)
+
+    components = {section: build(section) for section in specs if section != "ik"}
+    _, components["ik"] = robot_and_ik(robot_cfg, lambda robot: build("ik", robot))
     model = components["perceptual_model"]
     if net_state:
         try:

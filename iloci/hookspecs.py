@@ -35,8 +35,8 @@ import pluggy
 if TYPE_CHECKING:  # pragma: no cover - for annotations only
     import argparse
 
-    from iloci.evaluation.executors import FoldExecutor
     from iloci.events import FoldEvent, InteractionEvent, RehearsalEvent
+    from iloci.interfaces import FoldExecutor
     from iloci.registry import KindRegistry
 
 PROJECT = "iloci"
@@ -151,5 +151,5 @@ def iloci_make_executor(name: str, jobs: int, address: str | None) -> FoldExecut
     first non-None result is used. ``jobs`` is the number of folds to run at
     once, ``address`` where the executor's engine runs (None: start one on
     this machine). The result follows
-    :class:`iloci.evaluation.executors.FoldExecutor`.
+    :class:`iloci.interfaces.FoldExecutor`.
     """

@@ -13,7 +13,7 @@ four joint deltas), ``P`` size of a parametric-bias (PB) vector (4),
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 import warnings
@@ -26,6 +26,7 @@ from iloci.validation import check_array
 
 __all__ = [
     "Demonstration",
+    "FoldExecutor",
     "Response",
     "Execution",
     "PerceptualModel",
@@ -614,3 +615,25 @@ def unmet_members(obj: Any, protocol: type) -> list[str]:
     out = [n for n in attributes - methods if not hasattr(obj, n)]
     out += [n for n in methods if not callable(getattr(obj, n, None))]
     return sorted(out)
+
+
+@runtime_checkable
+class FoldExecutor(Protocol):
+    """Runs evaluation folds (or any picklable calls) in parallel: ``iloci_make_executor``'s result.
+
+    :mod:`iloci.evaluation.executors` has the kernel's (``local``); ``iloci-ray`` adds ``ray``.
+    """
+
+    #: Short name, as ``iloci evaluate --executor`` takes it.
+    name: str
+
+    def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
+            emit: Callable[[dict], None]) -> Iterator[Any]:
+        """Call ``fn(*args, queue)`` for each ``args`` of ``calls``; yield results.
+
+        Results come in the order the calls finish. ``queue.put(msg)`` in a
+        call passes ``msg`` (a picklable dict) to ``emit`` in the caller.
+        An exception raised by a call is raised here, after the other calls
+        are cancelled; so is ``KeyboardInterrupt``.
+        """
+        ...

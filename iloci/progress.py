@@ -1,4 +1,5 @@
-"""Progress through a learning stream, kept in the memory file, and the memory's lock.
+"""Progress through a learning stream, kept in the memory file, and the memory's lock;
+progress of one long step (:func:`long_step`).
 
 ``iloci teach`` saves the memory after every demonstration that changed it
 (atomically: a kill at any moment leaves the previous file or the new one).
@@ -19,8 +20,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import os
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +35,15 @@ from iloci.errors import IlociError
 __all__ = [
     "PROGRESS_KEY",
     "MemoryLockedError",
+    "SHOW_AFTER",
+    "acquire_memory_lock",
+    "lock_path_of",
+    "memory_lock",
+    "saving",
+    "why_not_saved",
     "item_digest",
+    "long_step",
+    "progress_sink",
     "prefix_digest",
     "progress_record",
     "resume_point",
@@ -106,34 +118,218 @@ def resume_point(record: Any, digests: Sequence[str]) -> int:
     return n if record.get("digest") == prefix_digest(digests, n) else 0
 
 
+def why_not_saved(path: str | os.PathLike[str], exc: OSError) -> str:
+    """``"could not save the memory to PATH: the disk is full (...)."``: a failed save in words."""
+    import errno
+    why = exc.strerror or str(exc)
+    if exc.errno in (errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", -1)):
+        what = "the disk is full (or the file size limit is reached)"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        what = "it may not be written (permissions, or a read-only disk)"
+    else:
+        what = "the system refused"
+    target = os.path.realpath(path)
+    where = str(path) if target == os.fspath(path) else f"{path} (a link to {target})"
+    return f"could not save the memory to {where}: {what} ({why})."
+
+
+#: Memory locks this process holds: real path of the memory -> (lock, holder record).
+_HELD: dict[str, tuple[Any, dict[str, Any]]] = {}
+_HELD_GUARD = threading.Lock()
+
+
+def lock_path_of(memory: str | os.PathLike[str]) -> Path:
+    """The lock file of a memory: ``TARGET.lock`` beside the file a symlink points to."""
+    target = Path(os.path.realpath(os.fspath(memory)))
+    return target.with_name(target.name + ".lock")
+
+
+def _holder_path(lock_path: Path) -> Path:
+    # the lock file itself is truncated by whoever tries it, so the holder's
+    # record is kept beside it
+    return lock_path.with_name(lock_path.name + ".json")
+
+
+def _holder_text(lock_path: Path) -> str:
+    """``"iloci serve, pid 123, since 2026-12-01 21:40:03 UTC"`` or a vaguer phrase."""
+    try:
+        rec = json.loads(_holder_path(lock_path).read_text(encoding="utf-8"))
+        when = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(float(rec["since"])))
+        return f"{str(rec['command'])[:60]}, pid {int(rec['pid'])}, since {when}"
+    except (OSError, ValueError, KeyError, TypeError, OverflowError):
+        return "another process (it did not say which)"
+
+
+def _locked_error(memory: str | os.PathLike[str], lock_path: Path) -> MemoryLockedError:
+    return MemoryLockedError(
+        f"the memory {memory} is being taught by another process or session: "
+        f"{_holder_text(lock_path)} (it holds {lock_path}). Stop that one first, or "
+        "use another --memory file. Nothing was changed.")
+
+
+def acquire_memory_lock(memory: str | os.PathLike[str],
+                        command: str = "iloci") -> Callable[[], None]:
+    """Lock ``memory`` for one writer (``iloci teach``, ``iloci serve``); never wait.
+
+    The lock is an OS file lock (:mod:`filelock`) on ``TARGET.lock``, where
+    TARGET is the file a symlinked memory path points to, so every path to
+    one file shares one lock. The kernel releases it when the process dies,
+    even by ``kill -9``: a crashed session never leaves the memory locked.
+    Beside it, ``TARGET.lock.json`` names the holder (``command``, pid,
+    since when) for the error a second writer gets. While it is held,
+    :meth:`Agent.save <iloci.agent.Agent.save>` in this process writes
+    ``memory``, and any other process's save of it is refused.
+
+    Returns
+    -------
+    callable
+        Releases the lock (idempotent).
+
+    Raises
+    ------
+    MemoryLockedError
+        Another process, or another session of this one, holds it; the
+        message names the holder.
+    """
+    from filelock import FileLock, Timeout
+    lock_path = lock_path_of(memory)
+    key = str(lock_path)
+    with _HELD_GUARD:
+        if key in _HELD:
+            raise _locked_error(memory, lock_path)
+        lock = FileLock(lock_path, timeout=0, thread_local=False)
+        try:
+            lock.acquire()
+        except Timeout:
+            raise _locked_error(memory, lock_path) from None
+        except OSError as exc:
+            raise MemoryLockedError(f"cannot lock the memory {memory} ({lock_path}: "
+                                    f"{exc.strerror or exc}).") from None
+        record = {"command": command, "pid": os.getpid(), "since": time.time()}
+        with contextlib.suppress(OSError):
+            _holder_path(lock_path).write_text(json.dumps(record), encoding="utf-8")
+        _HELD[key] = (lock, record)
+
+    def release() -> None:
+        with _HELD_GUARD:
+            held = _HELD.pop(key, None)
+            if held is None:
+                return
+            with contextlib.suppress(OSError):
+                _holder_path(lock_path).unlink()
+            held[0].release()
+    return release
+
+
+@contextlib.contextmanager
+def memory_lock(memory: str | os.PathLike[str], command: str = "iloci") -> Iterator[Path]:
+    """:func:`acquire_memory_lock` as a context manager; yields the lock file's path."""
+    release = acquire_memory_lock(memory, command)
+    try:
+        yield lock_path_of(memory)
+    finally:
+        release()
+
+
 @contextlib.contextmanager
 def teaching_lock(memory: str | os.PathLike[str]) -> Iterator[Path]:
-    """Hold ``MEMORY.lock`` while teaching ``memory``; never wait for it.
-
-    The lock is an OS file lock (:mod:`filelock`), released by the kernel
-    when its process dies, even by ``kill -9``: a crashed session never
-    leaves the memory locked. The empty lock file itself may stay.
+    """Hold the memory's lock while ``iloci teach`` teaches it (see :func:`memory_lock`).
 
     Raises
     ------
     MemoryLockedError
         Another process holds the lock.
     """
+    with memory_lock(memory, "iloci teach") as path:
+        yield path
+
+
+@contextlib.contextmanager
+def saving(memory: str | os.PathLike[str]) -> Iterator[None]:
+    """Around one save of ``memory``: the lock this process holds, or the lock for the save.
+
+    Raises
+    ------
+    MemoryLockedError
+        Another process (``iloci serve``, ``iloci teach``) holds the
+        memory's lock: its work would be overwritten. Nothing is written.
+    """
+    key = str(lock_path_of(memory))
+    with _HELD_GUARD:
+        mine = key in _HELD
+    if mine or not os.path.exists(key):
+        # held here, or never locked by anyone (a writer's lock file stays after
+        # it ends): no lock file is made for a plain save
+        yield
+        return
     from filelock import FileLock, Timeout
-    path = Path(os.fspath(memory))
-    lock_path = path.with_name(path.name + ".lock")
-    lock = FileLock(lock_path, timeout=0)
+    lock = FileLock(key, timeout=0, thread_local=False)
     try:
         lock.acquire()
     except Timeout:
-        raise MemoryLockedError(
-            f"the memory {path} is being taught by another process (it holds {lock_path}); "
-            "wait for it to finish, or teach another --memory file. Nothing was changed."
-        ) from None
-    except OSError as exc:
-        raise MemoryLockedError(f"cannot lock the memory {path} ({lock_path}: "
-                                f"{exc.strerror or exc}).") from None
+        raise _locked_error(memory, Path(key)) from None
+    except OSError:
+        # a directory where no lock file can be made: the save itself reports it
+        yield
+        return
     try:
-        yield lock_path
+        yield
     finally:
         lock.release()
+
+
+# -- progress of one long step ---------------------------------------------------------
+
+#: Seconds a step runs before its progress is shown (a quick one shows nothing).
+SHOW_AFTER = 1.0
+#: Shortest time between two reports of one step (s).
+_EVERY = 1.0
+_SINKS: list[Callable[[str, float, float], None]] = []
+
+
+@contextlib.contextmanager
+def progress_sink(sink: Callable[[str, float, float], None]) -> Iterator[None]:
+    """Tell ``sink(what, fraction, seconds)`` the progress of every :func:`long_step`
+    run inside the block (the command line prints it to stderr).
+
+    ``fraction`` is in [0, 1] (1: the step is done); ``seconds`` the time it
+    has run. A step is reported once it has run :data:`SHOW_AFTER` seconds,
+    then at most once a second, and when it ends.
+    """
+    _SINKS.append(sink)
+    try:
+        yield
+    finally:
+        _SINKS.remove(sink)
+
+
+@contextlib.contextmanager
+def long_step(what: str) -> Iterator[Callable[[float], None]]:
+    """A step that may take seconds (reading a huge file, preprocessing a huge stroke).
+
+    Yields ``report(fraction)``, to call as the work advances; it costs a
+    clock reading when nobody listens (:func:`progress_sink`).
+
+    Parameters
+    ----------
+    what : str
+        What is being done, e.g. ``"reading stroke.csv (1,000,000 samples)"``.
+    """
+    start = time.monotonic()
+    last = [start - _EVERY]
+    shown = [False]
+
+    def report(fraction: float) -> None:
+        if not _SINKS:
+            return
+        now = time.monotonic()
+        if now - start >= SHOW_AFTER and now - last[0] >= _EVERY:
+            last[0] = now
+            shown[0] = True
+            for sink in list(_SINKS):
+                sink(what, min(max(float(fraction), 0.0), 1.0), now - start)
+
+    yield report
+    if shown[0] or (_SINKS and time.monotonic() - start >= SHOW_AFTER):
+        for sink in list(_SINKS):
+            sink(what, 1.0, time.monotonic() - start)

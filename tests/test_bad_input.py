@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import iloci
+
 from iloci.config import _PLAIN_SECTIONS, load_config
 from iloci.data import load_trajectory
 from iloci.data.files import shared_stems, trajectory_files
@@ -119,7 +121,7 @@ def test_input_size_must_match_the_encoding():
     if not models:
         pytest.skip("no perceptual model installed")
     with pytest.raises(ConfigError, match="input_size is 5.*6 features"):
-        load_config({"perceptual_model": {"name": models[0], "input_size": 5}})
+        iloci.build({"perceptual_model": {"name": models[0], "input_size": 5}})
 
 
 # ------------------------------------------------------------------ trajectory files

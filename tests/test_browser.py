@@ -12,8 +12,11 @@ serve instead of the small one here (the guide's screenshot uses
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 from pathlib import Path
+import re
 import shutil
 import socket
 import threading
@@ -39,7 +42,9 @@ CONFIG = os.environ.get("ILOCI_SERVE_TEST_CONFIG") or {
 #: Debian's chromium; a browser is never downloaded.
 CHROMIUM = os.environ.get("ILOCI_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--no-first-run"]
+        "--disable-component-update", "--no-first-run",
+        # a DNS-rebinding attacker's name that resolves to this computer
+        "--host-resolver-rules=MAP rebind.test 127.0.0.1"]
 WAIT = 180_000  # ms: rehearsals on a loaded 2-core machine
 
 
@@ -49,12 +54,12 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.fixture
-def server(tmp_path):
+@contextlib.contextmanager
+def serving(memory, config=CONFIG, protocol="paper"):
+    """``iloci serve`` of ``memory`` in a thread of this process: yields (url, classroom)."""
     import uvicorn
 
-    memory = tmp_path / "memory.npz"
-    classroom = build_classroom(memory, CONFIG)
+    classroom = build_classroom(memory, config, protocol=protocol)
     port = free_port()
     srv = uvicorn.Server(uvicorn.Config(create_app(classroom), host="127.0.0.1", port=port,
                                         log_level="warning"))
@@ -64,10 +69,19 @@ def server(tmp_path):
     while not srv.started and time.monotonic() < deadline:
         time.sleep(0.05)
     assert srv.started, "uvicorn did not start"
-    yield f"http://127.0.0.1:{port}/", memory
-    srv.should_exit = True
-    thread.join(10)
-    classroom.agent.close()
+    try:
+        yield f"http://127.0.0.1:{port}/", classroom
+    finally:
+        srv.should_exit = True
+        thread.join(10)
+        classroom.close()
+
+
+@pytest.fixture
+def server(tmp_path):
+    memory = tmp_path / "memory.npz"
+    with serving(memory) as (url, _):
+        yield url, memory
 
 
 @pytest.fixture
@@ -157,3 +171,257 @@ def test_teach_in_the_browser(server, browser, tmp_path):
     assert not outside, f"the page fetched from elsewhere: {outside}"
     from iloci.agent import Agent
     assert Agent.load(memory).memory.concepts() == ["G", "c2"]
+
+
+def teach_first(page, lasa, key="GShape/0"):
+    draw(page, lasa[key], "slow")
+    sync_api.expect(page.locator("#message")).to_contain_text("new concept", timeout=WAIT)
+
+
+@contextlib.contextmanager
+def attacker_site(html: str):
+    """Another web site on this computer (another port: another origin) serving ``html``."""
+    import http.server
+
+    class Page(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 (http.server's name)
+            body = html.encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Page)
+    thread = threading.Thread(target=srv.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{srv.server_address[1]}/"
+    finally:
+        srv.shutdown()
+
+
+def test_another_site_cannot_teach_rename_or_read(server, browser):
+    """A page on another origin tries what the issue's attacker did: fetch (JSON and
+    'simple' text/plain), a top-level form POST, an iframe of the page; a rebinding
+    host name. The memory file is unchanged and nothing was read."""
+    url, memory = server
+    lasa = {d.key: d for d in load_lasa(["GShape"])}
+    page = browser.new_page(viewport={"width": 1000, "height": 900})
+    page.goto(url)
+    teach_first(page, lasa)
+    before = memory.read_bytes()
+    pts = [[10 + i, 10 + (i * 7) % 50, i / 50] for i in range(60)]
+    html = f"""<!doctype html><body>
+<iframe id="f" src="{url}"></iframe>
+<form id="form" method="POST" action="{url}api/rename" enctype="text/plain">
+<input name='{{"concept": "c1", "name": "pwned", "x": "' value='"}}'></form>
+<script>
+const results = {{}};
+async function go() {{
+  for (const [name, opts] of [
+      ["json", {{method: "POST", headers: {{"Content-Type": "application/json"}},
+                body: JSON.stringify({{concept: "c1", name: "pwned"}})}}],
+      ["simple", {{method: "POST", mode: "no-cors", headers: {{"Content-Type": "text/plain"}},
+                  body: JSON.stringify({{concept: "c1", name: "pwned"}})}}]]) {{
+    try {{ const r = await fetch("{url}api/rename", opts);
+           results[name] = r.type + " " + r.status; }}
+    catch (e) {{ results[name] = "blocked"; }}
+  }}
+  try {{ const r = await fetch("{url}api/observe", {{method: "POST", mode: "no-cors",
+         headers: {{"Content-Type": "text/plain"}}, body: JSON.stringify({{points: {pts}}})}});
+         results.observe = r.type + " " + r.status; }} catch (e) {{ results.observe = "blocked"; }}
+  try {{ const r = await fetch("{url}api/state"); results.read = await r.text(); }}
+  catch (e) {{ results.read = "blocked"; }}
+  document.title = "done";
+}}
+go();
+</script></body>"""
+    with attacker_site(html) as evil:
+        attack = browser.new_page()
+        attack.goto(evil)
+        sync_api.expect(attack).to_have_title("done", timeout=20_000)
+        results = attack.evaluate("results")
+        assert results["read"] == "blocked"                   # reads nothing
+        assert results["json"] == "blocked"                   # preflight refused
+        # sent blind (the server refuses it: no token, text/plain); the browser
+        # withholds even the opaque answer (Cross-Origin-Resource-Policy)
+        assert results["simple"] == "blocked" or results["simple"].startswith("opaque")
+        assert results["observe"] == "blocked" or results["observe"].startswith("opaque")
+        # the iframe of the page is refused by the browser (frame-ancestors 'none')
+        frame = attack.frame_locator("#f")
+        assert frame.locator("#pad").count() == 0
+        # a top-level form POST from the other site
+        with attack.expect_navigation():
+            attack.evaluate("document.getElementById('form').submit()")
+        assert "another site" in attack.content() or "refused" in attack.content()
+    assert memory.read_bytes() == before
+    # DNS rebinding: the attacker's name, resolving to this computer
+    rebind = browser.new_page()
+    response = rebind.goto(url.replace("127.0.0.1", "rebind.test"))
+    assert response.status == 403 and "--allow-host" in rebind.content()
+    r = rebind.evaluate("""async () => (await fetch('/api/state')).status""")
+    assert r == 403
+    assert memory.read_bytes() == before
+    page.reload()
+    sync_api.expect(page.locator('.concept[data-concept="c1"]')).to_have_count(1)
+
+
+def test_two_tabs_each_keep_their_guess(server, browser):
+    url, memory = server
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    context = browser.new_context(viewport={"width": 1000, "height": 900})
+    a, b = context.new_page(), context.new_page()
+    a.goto(url)
+    teach_first(a, lasa)
+    b.goto(url)
+    expect = sync_api.expect
+    draw(a, lasa["Angle/0"], "fast")
+    expect(a.locator("#guess")).to_contain_text('Is it "c1"?', timeout=WAIT)
+    draw(b, lasa["GShape/1"], "slow")
+    expect(b.locator("#guess")).to_contain_text('Is it "c1"?', timeout=WAIT)
+    b.locator("#yes").click()                                  # B's turn ends: c1 grows
+    expect(b.locator("#message")).to_contain_text("Learned", timeout=WAIT)
+    a.bring_to_front()
+    expect(a.locator("#judge")).to_be_visible()               # A's guess was not dropped
+    a.locator("#no").click()
+    # A is told the memory changed and its drawing was looked at again, or it learns
+    expect(a.locator("#message")).to_contain_text(
+        re.compile("looked at your drawing again|Learned"), timeout=WAIT)
+    if a.locator("#judge").is_visible():
+        a.locator("#new").click()
+    expect(a.locator("#message")).to_contain_text('new concept, "c2"', timeout=WAIT)
+    expect(a.locator("#error")).to_be_hidden()
+    # a reload of a tab restores its own turn (its drawing and guess)
+    draw(a, lasa["Angle/1"], "fast")
+    expect(a.locator("#guess")).to_contain_text("Is it", timeout=WAIT)
+    guess = a.locator("#guess").inner_text()
+    a.reload()
+    expect(a.locator("#guess")).to_have_text(guess, timeout=WAIT)
+    inked = a.evaluate("""() => { const c = document.getElementById('pad');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n; }""")
+    assert inked > 100, "the reloaded tab does not show the drawing its guess answers"
+    b.reload()
+    expect(b.locator("#judge")).to_be_hidden()                 # B has no guess waiting
+    context.close()
+
+
+def test_a_second_finger_does_not_take_over_the_stroke(server, browser):
+    url, _ = server
+    context = browser.new_context(has_touch=True, viewport={"width": 1000, "height": 900})
+    page = context.new_page()
+    sent = []
+    page.on("request", lambda r: sent.append(json.loads(r.post_data))
+            if r.url.endswith("/api/observe") else None)
+    page.goto(url)
+    page.wait_for_timeout(500)
+    box = page.locator("#pad").bounding_box()
+    cdp = context.new_cdp_session(page)
+
+    def touch(kind, pts):
+        cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": [
+            {"x": box["x"] + x, "y": box["y"] + y, "id": i} for i, x, y in pts]})
+        page.wait_for_timeout(15)
+    touch("touchStart", [(0, 40, 60)])
+    for k in range(1, 8):
+        touch("touchMove", [(0, 40 + 30 * k, 60 + 3 * k)])
+    touch("touchStart", [(0, 250, 81), (1, 100, 300)])          # a palm lands
+    for k in range(8, 12):
+        touch("touchMove", [(0, 40 + 30 * k, 60 + 3 * k), (1, 100 + 5 * k, 300)])
+    touch("touchEnd", [(0, 40 + 30 * 11, 93)])                  # the palm lifts
+    for k in range(12, 14):
+        touch("touchMove", [(0, 40 + 30 * k, 60 + 3 * k)])
+    touch("touchEnd", [])
+    page.wait_for_timeout(1500)
+    assert len(sent) == 1, sent
+    scale = page.evaluate("document.getElementById('pad').width") / box["width"]
+    ys = [box["height"] - p[1] / scale for p in sent[0]["points"]]
+    assert max(ys) < 120, f"the palm's points (y = 300) were sent: {sorted(ys)[-3:]}"
+    assert len(sent[0]["points"]) >= 10                         # finger A's line, all of it
+    context.close()
+
+
+def test_undo_export_and_import_in_the_browser(server, browser, tmp_path):
+    url, memory = server
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    expect = sync_api.expect
+    page = browser.new_page(viewport={"width": 1000, "height": 900}, accept_downloads=True)
+    page.goto(url)
+    teach_first(page, lasa)
+    draw(page, lasa["Angle/0"], "fast")
+    expect(page.locator("#new")).to_be_visible(timeout=WAIT)
+    page.locator("#new").click()                               # one click: a new concept
+    expect(page.locator("#message")).to_contain_text('new concept, "c2"', timeout=WAIT)
+    expect(page.locator(".concept")).to_have_count(2)
+    page.locator("#undo").click()
+    expect(page.locator(".concept")).to_have_count(1)
+    expect(page.locator("#message")).to_contain_text("Undone")
+    from iloci.agent import Agent
+    assert Agent.load(memory).memory.concepts() == ["c1"]
+    with page.expect_download() as info:
+        page.locator("#export").click()
+    exported = tmp_path / "exported.npz"
+    info.value.save_as(exported)
+    assert Agent.load(exported).memory.concepts() == ["c1"]
+    with serving(tmp_path / "fresh.npz") as (url2, fresh):
+        other = browser.new_page(viewport={"width": 1000, "height": 900})
+        other.goto(url2)
+        expect(other.locator("#concepts")).to_contain_text("Empty")
+        bad = tmp_path / "bad.npz"
+        bad.write_bytes(b"\x80\x04\x95 a pickle, not a memory")
+        other.locator("#import").set_input_files(str(bad))
+        expect(other.locator("#error")).to_contain_text("not imported", timeout=WAIT)
+        other.locator("#import").set_input_files(str(exported))
+        expect(other.locator('.concept[data-concept="c1"]')).to_have_count(1, timeout=WAIT)
+        assert fresh.agent.memory.concepts() == ["c1"]
+        other.screenshot(path=str(Path(os.environ.get("ILOCI_SCREENSHOT_DIR") or tmp_path)
+                                  / "imported.png"), full_page=True)
+
+
+def test_a_full_disk_is_shown_and_the_page_keeps_what_the_file_holds(server, browser):
+    import resource
+
+    url, memory = server
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    expect = sync_api.expect
+    page = browser.new_page(viewport={"width": 1000, "height": 900})
+    page.goto(url)
+    teach_first(page, lasa)
+    before = memory.read_bytes()
+    draw(page, lasa["Angle/0"], "fast")
+    expect(page.locator("#judge")).to_be_visible(timeout=WAIT)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (len(before) // 2, hard))   # as `ulimit -f`
+    try:
+        page.locator("#new").click()
+        expect(page.locator("#error")).to_contain_text("could not save", timeout=WAIT)
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    expect(page.locator("#error")).to_contain_text("still holds")
+    expect(page.locator(".concept")).to_have_count(1)           # not c2: it was not saved
+    assert memory.read_bytes() == before
+    page.reload()
+    expect(page.locator(".concept")).to_have_count(1)
+    expect(page.locator("#error")).to_contain_text("could not save")
+
+
+def test_the_page_fits_a_phone(server, browser, tmp_path):
+    url, _ = server
+    context = browser.new_context(viewport={"width": 390, "height": 844}, has_touch=True,
+                                  device_scale_factor=3, is_mobile=True)
+    page = context.new_page()
+    page.goto(url)
+    sync_api.expect(page.locator("#concepts")).to_contain_text("Empty")
+    width = page.evaluate("document.documentElement.scrollWidth")
+    assert width <= 390, f"the page is {width} px wide on a 390 px phone"
+    pad = page.evaluate("""() => { const c = document.getElementById('pad');
+        const r = c.getBoundingClientRect(); return [c.width, r.width]; }""")
+    page.locator("#pad").tap()
+    page.screenshot(path=str(Path(os.environ.get("ILOCI_SCREENSHOT_DIR") or tmp_path)
+                             / "phone.png"), full_page=True)
+    assert pad[1] <= 390 and pad[0] >= 2 * pad[1] - 2        # high-DPI backing store
+    context.close()

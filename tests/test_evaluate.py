@@ -104,9 +104,12 @@ def test_robustness_section(run_dir):
     # the unperturbed suite entry is the fold's own recognition
     assert rob["clean"]["ccr_folds"] == metrics["ccr_folds"]
     assert rob["clean"]["baseline"]["ccr_folds"] == metrics["baseline"]["ccr_folds"]
-    # DTW 1-NN reads raw positions: a drawing at 1 % of the size defeats it; iloci
-    # scales every drawing into its plane, so it does not notice
+    for name, b in metrics["baselines"].items():  # every baseline beside iloci
+        assert rob["clean"]["baselines"][name]["ccr_folds"] == b["ccr_folds"]
+    # iloci scales every drawing into its plane, so a drawing at 1 % of the size does
+    # not change its answers; nor those of DTW on normalised paths (scaled to unit size)
     assert rob["scale_0.01"]["ccr_folds"] == rob["clean"]["ccr_folds"]
+    assert rob["scale_0.01"]["baseline"]["ccr_folds"] == rob["clean"]["baseline"]["ccr_folds"]
     report = (run_dir / "report.md").read_text()
     assert "## Robustness" in report and "sampled at 25 points" in report
 

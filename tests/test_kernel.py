@@ -380,3 +380,23 @@ def test_versions_list_every_plugin_distribution_and_what_it_requires():
                 assert md.metadata(name)["Name"] in out, (dist, name)
             except md.PackageNotFoundError:
                 pass
+
+
+def test_preload_imports_the_configured_back_ends_and_nothing_is_built():
+    """`import iloci` imports no back end; iloci.preload imports the configured ones."""
+    pytest.importorskip("iloci_torch")
+    pytest.importorskip("iloci_pinocchio")
+    pytest.importorskip("iloci_scipy")
+    code = textwrap.dedent("""
+        import sys, iloci
+        assert "torch" not in sys.modules and "pinocchio" not in sys.modules
+        done = iloci.preload({"perceptual_model": {"name": "torch-rnnpb"}})
+        print(",".join(done))
+        assert "torch" in sys.modules and "pinocchio" in sys.modules
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["perceptual_model=torch-rnnpb,clusterer=scipy,"
+                                  "teacher=oracle,ik=pinocchio"]
+    with pytest.raises(ConfigError):
+        iloci.preload({"learner": {"k_cutoff": "high"}})

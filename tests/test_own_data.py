@@ -253,3 +253,71 @@ def test_the_oracle_knows_the_founding_demonstration_of_a_concept_outside_lasa()
     members = agent.memory.concept_members(lambda k: k.split("/")[0])
     assert sorted(sorted(set(v)) for v in members.values()) == [["circle"], ["line"]]
     assert len(report.outcomes) == 4
+
+
+# ---------------------------------------------------------------- iloci evaluate --data
+
+TINY = """
+[perceptual_model]
+name = "torch-rnnpb"
+epochs = 150
+recognition_steps = 40
+[learner]
+rehearsal_epochs = 80
+[evaluation]
+folds = 2
+seed = 1
+"""
+
+
+def _square(i: int, n: int = 60) -> np.ndarray:
+    s = np.linspace(0, 4, n)
+    side = np.minimum(np.floor(s), 3)
+    f = s - side
+    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=float)
+    return (corners[side.astype(int)] * (1 - f[:, None]) + corners[side.astype(int) + 1]
+            * f[:, None]) * (1 + 0.05 * i)
+
+
+def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
+    root = _shapes(tmp_path / "shapes", per=4, writers=("ann", "bob", "cy", "di"))
+    for i in range(4):
+        _write(root / "square" / ("ann", "bob", "cy", "di")[i] / f"{i}.csv", _square(i))
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(TINY)
+    out = tmp_path / "run"
+    done = cli("evaluate", "--data", str(root), "--split", "writers", "--config", str(cfg),
+               "--out", str(out), "--jobs", "1", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert "data set shapes (12 samples, 3 concepts, 4 writers)" in done.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    ds = load_dataset(root)
+    assert metrics["dataset"]["checksum"] == ds.checksum
+    assert metrics["dataset"]["samples"] == 12 and metrics["split"] == "writers"
+    assert set(metrics["baselines"]) == {"dtw_normalised", "dollar1", "dtw_raw"}
+    assert metrics["best_baseline"] in metrics["baselines"]
+    folds = json.loads((out / "folds.json").read_text())
+    for f in folds:  # writer-disjoint: no writer on both sides
+        writer = {d.key: s.writer for d, s in zip(ds.demos, ds.samples)}
+        assert {writer[k] for k in f["learn"]}.isdisjoint({writer[k] for k in f["test"]})
+        assert set(f["true_concepts"]) == {"circle", "line", "square"}
+    report = (out / "report.md").read_text()
+    assert "on shapes (writer-disjoint folds)" in report and ds.checksum in report
+    assert "$1 recognizer" in report and "best baseline" in report
+
+
+def test_iloci_evaluate_data_refuses_a_bad_data_set_before_learning(tmp_path, cli):
+    root = _shapes(tmp_path / "shapes", per=3)
+    (root / "line" / "2.csv").write_text("x,y\n0,0\n")
+    (root / "empty").mkdir()
+    done = cli("evaluate", "--data", str(root), "--out", str(tmp_path / "run"), "--quiet")
+    assert done.returncode != 0
+    assert "Traceback" not in done.stderr
+    assert "empty: concept folder is empty" in done.stderr
+    assert not (tmp_path / "run" / "metrics.json").exists()
+    (root / "empty").rmdir()
+    done = cli("evaluate", "--data", str(root), "--out", str(tmp_path / "run"), "--quiet")
+    assert "line/2.csv" in done.stderr and "Traceback" not in done.stderr
+    (root / "line" / "2.csv").unlink()
+    done = cli("evaluate", "--data", str(root), "--out", str(tmp_path / "run"), "--quiet")
+    assert "line: 2 sample(s)" in done.stderr and "fewer samples than the 5 folds" in done.stderr

@@ -20,14 +20,29 @@ pytest.importorskip("pinocchio")
 from starlette.testclient import TestClient  # noqa: E402
 
 import iloci  # noqa: E402
+from iloci.progress import MemoryLockedError  # noqa: E402
 from iloci.commands.serve import build_classroom  # noqa: E402
 from iloci.data import load_lasa  # noqa: E402
-from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, create_app  # noqa: E402
+from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, TOKEN_HEADER, create_app  # noqa: E402
 
 EPOCHS = 30
 CONFIG = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                "recognition_steps": EPOCHS},
           "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
+
+
+
+def judge(client, answer, value):
+    """POST /api/feedback judging ``answer`` (its turn and its id) with ``value``."""
+    return client.post("/api/feedback", json={"turn": answer["turn"], "answer": answer["id"],
+                                              "value": value})
+
+def page_client(classroom, **app_options) -> TestClient:
+    """A client as the page is one: this computer's address, the server's token."""
+    app = create_app(classroom, **app_options)
+    client = TestClient(app, base_url="http://127.0.0.1:8000")
+    client.headers[TOKEN_HEADER] = app.state.token
+    return client
 
 
 def stroke(demo, n: int = 120, seconds: float = 1.3) -> list[list[float]]:
@@ -49,9 +64,12 @@ def lasa():
 @pytest.fixture
 def served(tmp_path):
     memory = tmp_path / "memory.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False)
-    with TestClient(create_app(classroom)) as client:
-        yield client, classroom, memory
+    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
+    try:
+        with page_client(classroom) as client:
+            yield client, classroom, memory
+    finally:
+        classroom.close()
 
 
 def test_the_page_and_its_files_are_served_and_fetch_nothing_from_elsewhere(served):
@@ -81,12 +99,14 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     # a new shape: the robot guesses c1, the person says no: a new concept
     data = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()
     answer = data["answer"]
-    assert (answer["concept"], answer["attempt"], answer["confidence"]) == ("c1", 1, 1.0)
+    # the only concept there is: no confidence is claimed for the last guess left
+    assert (answer["concept"], answer["attempt"], answer["confidence"]) == ("c1", 1, None)
+    assert answer["last_guess"] is True
     assert len(answer["drawing"]) == len(answer["joint_path"]) == 50
     assert answer["dt"] > 0 and len(answer["start_posture"]) == 4
     assert client.get("/api/state").json()["pending"]["turn"] == answer["turn"]
     assert client.get("/api/progress").json() == {"progress": None}
-    done = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}).json()
+    done = judge(client, answer, -1).json()
     assert done["outcome"]["action"] == "new_concept" and done["outcome"]["concept"] == "c2"
     assert [c["name"] for c in done["memory"]["concepts"]] == ["c1", "c2"]
 
@@ -97,7 +117,7 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     # its drawing is shown where the stroke was drawn (pixels, y up)
     drawing = np.array(answer["drawing"])
     assert np.all(drawing.min(axis=0) > -200) and np.all(drawing.max(axis=0) < 600)
-    done = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1}).json()
+    done = judge(client, answer, 1).json()
     assert done["outcome"]["action"] in ("strengthen", "new_exemplar")
     assert done["outcome"]["feedbacks"] == [1]
 
@@ -109,12 +129,17 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     assert iloci.Agent.load(memory).memory.concepts() == ["G", "c2"]
     assert classroom.agent.memory.demonstrations_seen == 3
 
+    # a second server on the same file is refused, naming the first
+    with pytest.raises(MemoryLockedError, match=r"iloci serve, pid \d+, since"):
+        build_classroom(memory, worker=False)
     # a restarted server goes on from the file
+    classroom.close()
     again = build_classroom(memory, worker=False)
-    with TestClient(create_app(again)) as client2:
+    with page_client(again) as client2:
         state = client2.get("/api/state").json()["memory"]
         assert [c["name"] for c in state["concepts"]] == ["G", "c2"]
         assert state["demonstrations_seen"] == 3
+    again.close()
 
 
 def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
@@ -125,9 +150,9 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
     lasa = {d.key: d for d in load_lasa(shapes)}
     cfg = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.8,
                                  "unknown_below": 0.8, "confirm_rewards": True}}
-    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False)
+    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False, protocol="paper")
     novel = None
-    with TestClient(create_app(classroom)) as client:
+    with page_client(classroom) as client:
         for shape in shapes:
             r = client.post("/api/observe", json={"points": stroke(lasa[f"{shape}/0"])})
             assert r.status_code == 200, r.text
@@ -137,13 +162,16 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
                 if answer["novel"]:
                     assert answer["confidence"] is None
                     novel = answer
-                    r = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1})
+                    r = judge(client, answer, 1)
                     outcome = r.json()["outcome"]
                     assert (outcome["action"], outcome["concept"]) == ("new_concept",
                                                                        answer["concept"])
                     break
-                assert 0 <= answer["confidence"] <= 1
-                r = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1})
+                if answer["last_guess"]:                  # no margin claimed then
+                    assert answer["confidence"] is None
+                else:
+                    assert 0 <= answer["confidence"] <= 1
+                r = judge(client, answer, -1)
                 assert r.status_code == 200, r.text
             assert client.get("/api/state").status_code == 200
         assert novel is not None, "no novelty answer in six new shapes"
@@ -158,10 +186,12 @@ def test_feedback_refused_without_a_matching_guess(served, lasa):
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
     answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
     before = memory.read_bytes()
-    cases = [({"turn": answer["turn"] + 1, "value": 1}, 409),
-             ({"turn": answer["turn"], "value": 0}, 422),
-             ({"turn": answer["turn"], "value": True}, 422),
-             ({"turn": answer["turn"], "value": "yes"}, 422),
+    cases = [({"turn": answer["turn"] + 1, "answer": answer["id"], "value": 1}, 409),
+             ({"turn": answer["turn"], "answer": answer["id"] + "x", "value": 1}, 409),
+             ({"turn": answer["turn"], "value": 1}, 400),
+             ({"turn": answer["turn"], "answer": answer["id"], "value": 0}, 422),
+             ({"turn": answer["turn"], "answer": answer["id"], "value": True}, 422),
+             ({"turn": answer["turn"], "answer": answer["id"], "value": "yes"}, 422),
              ({"value": 1}, 400), ([1], 400)]
     for body, status in cases:
         r = client.post("/api/feedback", json=body)
@@ -169,10 +199,8 @@ def test_feedback_refused_without_a_matching_guess(served, lasa):
         assert r.json()["error"]
     assert memory.read_bytes() == before
     # the guess still waits: answered now, once
-    assert client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}
-                       ).status_code == 200
-    assert client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}
-                       ).status_code == 409
+    assert judge(client, answer, -1).status_code == 200
+    assert judge(client, answer, -1).status_code == 409
 
 
 def test_every_bad_drawing_is_a_4xx_json_error_and_the_memory_is_untouched(served, lasa):
@@ -182,6 +210,8 @@ def test_every_bad_drawing_is_a_4xx_json_error_and_the_memory_is_untouched(serve
     seen = classroom.agent.memory.demonstrations_seen
     good = stroke(lasa["Angle/0"])
     flat = [[5.0, 5.0, 1.0 + i / 10] for i in range(20)]
+    # a short move, then the pen rests: 3 samples once the rest is trimmed
+    resting = [[5.0 + 10 * min(i, 2), 5.0, 1.0 + i / 10] for i in range(20)]
     backwards = [list(p) for p in good]
     backwards[7][2] = backwards[6][2]
     many = [[float(i % 300), float(i // 300), i / 1000] for i in range(MAX_POINTS + 1)]
@@ -191,9 +221,10 @@ def test_every_bad_drawing_is_a_4xx_json_error_and_the_memory_is_untouched(serve
         (json.dumps({"points": "abc"}), 400, "list"),
         (json.dumps({"points": [[1, 2]] * 5}), 400, "three numbers"),
         (json.dumps({"points": [[1, 2, "t"]] * 5}), 400, "three numbers"),
-        (json.dumps({"points": good[:2]}), 422, "at least 3"),
+        (json.dumps({"points": good[:4]}), 422, "at least 5"),
         (json.dumps({"points": many}), 422, f"at most {MAX_POINTS}"),
-        (json.dumps({"points": flat}), 422, "zero extent"),
+        (json.dumps({"points": flat}), 422, "does not move"),
+        (json.dumps({"points": resting}), 422, "too short"),
         (json.dumps({"points": backwards}), 422, "times must increase"),
         (json.dumps({"points": [[float("nan"), 1.0, 1.0]] + good[1:]}), 422, "not finite"),
         (json.dumps({"points": [[1e300, 1.0, 1.0]] + good[1:]}), 422, "exceeds"),
@@ -204,6 +235,7 @@ def test_every_bad_drawing_is_a_4xx_json_error_and_the_memory_is_untouched(serve
             r = client.post(path, content=body, headers={"content-type": "application/json"})
             assert r.status_code == status, (path, body[:40], r.text)
             assert words in r.json()["error"], r.json()
+            assert "[sensorimotor]" not in r.json()["error"]     # a person's words
     assert memory.read_bytes() == before
     assert classroom.agent.memory.demonstrations_seen == seen
 
@@ -228,8 +260,8 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
     assert r.status_code == 404 and "simulator" in r.json()["error"]
     pytest.importorskip("pybullet")
     cfg = {**CONFIG, "simulator": {"name": "pybullet"}}
-    classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False)
-    with TestClient(create_app(classroom)) as sim:
+    classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False, protocol="paper")
+    with page_client(classroom) as sim:
         sim.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
         answer = sim.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}
                           ).json()["answer"]
@@ -240,17 +272,17 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
 
 
 def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
-    classroom = build_classroom(tmp_path / "w.npz", CONFIG)        # worker=True
+    classroom = build_classroom(tmp_path / "w.npz", CONFIG, protocol="paper")   # a worker
     try:
         assert type(classroom.agent.perceptual_model).__name__ == "WorkerModel"
-        with TestClient(create_app(classroom)) as client:
+        with page_client(classroom) as client:
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
             answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}
                                  ).json()["answer"]
-            out = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}).json()
+            out = judge(client, answer, -1).json()
             assert out["outcome"]["concept"] == "c2"
     finally:
-        classroom.agent.close()
+        classroom.close()
     assert iloci.Agent.load(tmp_path / "w.npz").memory.concepts() == ["c1", "c2"]
 
 
@@ -264,3 +296,304 @@ def test_the_command_refuses_a_bad_port_and_a_corrupt_memory(tmp_path, capsys):
     assert main(["serve", "--memory", str(bad), "--port", "8765"]) == 2
     assert "cannot read memory file" in capsys.readouterr().err
     assert bad.read_bytes() == b"not a memory"
+
+
+# -- safe by default (issue 26) ------------------------------------------------------
+def test_writes_need_the_token_json_and_no_foreign_origin(served, lasa):
+    client, classroom, memory = served
+    good = stroke(lasa["GShape/0"])
+    body = json.dumps({"points": good})
+    token = client.headers[TOKEN_HEADER]
+    page = client.get("/").text
+    assert token in page and len(token) >= 32            # the page has it, and only the page
+    attacks = [
+        ({TOKEN_HEADER: ""}, 403, "token"),
+        ({TOKEN_HEADER: token[:-1] + "x"}, 403, "token"),
+        ({"content-type": "text/plain"}, 415, "application/json"),
+        ({"content-type": "application/x-www-form-urlencoded"}, 415, "application/json"),
+        ({"origin": "http://127.0.0.1:9999"}, 403, "another page"),
+        ({"origin": "null"}, 403, "another page"),
+        ({"sec-fetch-site": "cross-site"}, 403, "another site"),
+        ({"sec-fetch-site": "same-site"}, 403, "another site"),
+        ({"host": "evil.example:8000"}, 403, "--allow-host"),
+        ({"host": "127.0.0.1.evil.example"}, 403, "--allow-host"),
+    ]
+    for path in ("/api/observe", "/api/rename", "/api/undo", "/api/reset", "/api/forget"):
+        for headers, status, words in attacks:
+            h = {"content-type": "application/json", **headers}
+            r = client.post(path, content=body, headers=h)
+            assert r.status_code == status, (path, headers, r.text)
+            assert words in r.json()["error"], r.json()
+    assert not memory.exists()                           # nothing was learned or saved
+    # reads: another site (or a rebinding Host) reads nothing
+    for path in ("/api/state", "/api/export", "/api/progress"):
+        assert client.get(path, headers={"sec-fetch-site": "cross-site"}).status_code == 403
+        assert client.get(path, headers={"host": "evil.example"}).status_code == 403
+    assert client.get("/", headers={"host": "evil.example"}).status_code == 403
+    r = client.get("/")
+    assert r.headers["x-frame-options"] == "DENY"
+    assert "frame-ancestors 'none'" in r.headers["content-security-policy"]
+    assert "access-control-allow-origin" not in r.headers
+    assert client.get("/api/state").headers["cross-origin-resource-policy"] == "same-origin"
+    # the page itself (same origin) teaches
+    r = client.post("/api/observe", content=body, headers={
+        "content-type": "application/json; charset=utf-8", "origin": "http://127.0.0.1:8000",
+        "sec-fetch-site": "same-origin"})
+    assert r.status_code == 200, r.text
+    assert memory.exists()
+
+
+def test_allow_host_names_another_host(tmp_path, lasa):
+    classroom = build_classroom(tmp_path / "m.npz", CONFIG, worker=False)
+    try:
+        with page_client(classroom, hosts=["robot.local"]) as client:
+            assert client.get("/api/state", headers={"host": "robot.local:8000"}
+                              ).status_code == 200
+            assert client.get("/api/state", headers={"host": "other.local"}).status_code == 403
+        with page_client(classroom, hosts=["*"]) as client:
+            assert client.get("/api/state", headers={"host": "other.local"}).status_code == 200
+    finally:
+        classroom.close()
+
+
+def test_malformed_requests_are_4xx_with_a_message_and_no_traceback(served, lasa, caplog):
+    client, _, memory = served
+    good = stroke(lasa["GShape/0"])
+    deep = b'{"points": ' + b"[" * 100_000 + b"]" * 100_000 + b"}"
+    huge = json.dumps({"points": [[int("9" * 400), 1, 1]] + good[1:]})
+    cases = [(deep, (400, 413), "JSON"), (huge, (422,), "exceeds"),
+             (b'{"points": [[1, 2, 3]]' + b" " * 10, (400,), "not JSON"),
+             (b"\xff\xfe", (400,), "not JSON")]
+    r = client.post("/api/observe", json={"points": good, "client": "../x"})
+    assert r.status_code == 400 and "client" in r.json()["error"]
+    for body, statuses, _words in cases:
+        for path in ("/api/observe", "/api/recognize"):
+            r = client.post(path, content=body, headers={"content-type": "application/json"})
+            assert r.status_code in statuses, (path, body[:30], r.text)
+            assert r.json()["error"]
+    for body in [{"turn": int("9" * 400), "value": 1}, {"turn": "1", "value": 1},
+                 {"turn": 1, "value": [1]}, {"turn": 1, "value": {"a": 1}}]:
+        r = client.post("/api/feedback", json=body)
+        assert 400 <= r.status_code < 500 and r.json()["error"], (body, r.text)
+    for body in [{"entry": int("9" * 400)}, {"entry": -1}, {"entry": True}, {"concept": 3}, []]:
+        r = client.post("/api/forget", json=body)
+        assert 400 <= r.status_code < 500 and r.json()["error"], (body, r.text)
+    assert client.get("/api/arm.png?turn=" + "9" * 400 + "&attempt=1").status_code == 404
+    assert "Traceback" not in caplog.text
+    assert not memory.exists()
+
+
+# -- each tab its own turn -------------------------------------------------------------
+def test_each_client_has_its_own_turn(served, lasa):
+    client, classroom, _ = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"]), "client": "a"})
+    a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"]),
+                                          "client": "a"}).json()["answer"]
+    b = client.post("/api/observe", json={"points": stroke(lasa["GShape/1"]),
+                                          "client": "b"}).json()["answer"]
+    assert a["turn"] != b["turn"]
+    # a reload of tab A finds its guess and its drawing; B's is B's
+    sa = client.get("/api/state?client=a").json()["pending"]
+    assert sa["turn"] == a["turn"] and len(sa["points"]) == 120
+    assert client.get("/api/state?client=b").json()["pending"]["turn"] == b["turn"]
+    # B's drawing did not drop A's guess; B ends its turn (the memory changes) ...
+    out = judge(client, b, 1).json()
+    assert out["outcome"]["concept"] == "c1"
+    # ... and A's answer is not lost: its drawing is looked at again, A is told why
+    again = judge(client, a, -1).json()
+    assert "notice" in again and "looked at your drawing again" in again["notice"]
+    done = judge(client, again["answer"], -1).json()
+    assert done["outcome"]["action"] == "new_concept"
+    # a tab's new drawing replaces only its own guess
+    a2 = client.post("/api/observe", json={"points": stroke(lasa["Angle/1"]),
+                                           "client": "a"}).json()["answer"]
+    client.post("/api/observe", json={"points": stroke(lasa["Angle/2"]), "client": "a"})
+    assert judge(client, a2, 1).status_code == 409
+
+
+def test_something_new_founds_a_concept_in_one_click(served, lasa):
+    client, _, _ = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+    client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])})
+    a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
+    out = judge(client, a, "new").json()
+    assert out["outcome"]["action"] == "new_concept"
+    assert all(f == -1 for f in out["outcome"]["feedbacks"])
+
+
+# -- a person's controls -----------------------------------------------------------------
+def _state(agent):
+    arrays, meta = agent.memory.to_arrays()
+    return arrays, meta, agent.perceptual_model.state()
+
+
+def _same(s1, s2):
+    (a1, m1, n1), (a2, m2, n2) = s1, s2
+    assert m1 == m2 and a1.keys() == a2.keys() and n1.keys() == n2.keys()
+    for k in a1:
+        np.testing.assert_array_equal(a1[k], a2[k])
+    for k in n1:
+        np.testing.assert_array_equal(n1[k], n2[k])
+
+
+def test_undo_puts_memory_and_network_back_exactly(served, lasa):
+    client, classroom, memory = served
+    assert client.post("/api/undo", json={}).status_code == 409       # nothing yet
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+    before, file_before = _state(classroom.agent), memory.read_bytes()
+    a = client.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}).json()["answer"]
+    out = judge(client, a, 1).json()
+    assert out["memory"]["undo"].startswith("drawing")
+    with pytest.raises(AssertionError):
+        _same(before, _state(classroom.agent))                       # the step changed it
+    r = client.post("/api/undo", json={})
+    assert r.status_code == 200, r.text
+    _same(before, _state(classroom.agent))
+    saved = iloci.Agent.load(memory)
+    _same(before, _state(saved))
+    assert memory.read_bytes() != b"" and len(memory.read_bytes()) == len(file_before)
+    # forget, rename, start over: each undone the same way
+    for path, body in [("/api/rename", {"concept": "c1", "name": "G"}),
+                       ("/api/forget", {"concept": "c1"}), ("/api/reset", {})]:
+        r = client.post(path, json=body)
+        assert r.status_code == 200, (path, r.text)
+        client.post("/api/undo", json={})
+        _same(before, _state(classroom.agent))
+
+
+def test_forget_an_entry_and_a_concept(served, lasa):
+    client, classroom, memory = served
+    for key in ("GShape/0", "Angle/0"):
+        r = client.post("/api/observe", json={"points": stroke(lasa[key])}).json()
+        if "answer" in r:
+            judge(client, r["answer"], -1)
+    assert classroom.agent.memory.concepts() == ["c1", "c2"]
+    r = client.post("/api/forget", json={"concept": "c9"})
+    assert r.status_code == 404
+    r = client.post("/api/forget", json={"entry": 0}).json()
+    assert [c["name"] for c in r["memory"]["concepts"]] == ["c2"]
+    r = client.post("/api/forget", json={"concept": "c2"}).json()
+    assert r["memory"]["concepts"] == [] and iloci.Agent.load(memory).memory.entries == []
+
+
+def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
+    client, classroom, _ = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+    exported = client.get("/api/export")
+    assert exported.status_code == 200
+    assert "attachment" in exported.headers["content-disposition"]
+    fresh = build_classroom(tmp_path / "fresh.npz", CONFIG, worker=False, protocol="paper")
+    try:
+        with page_client(fresh) as other:
+            for bad in (b"", b"PK\x03\x04 not a zip", b"\x80\x04\x95 pickle"):
+                r = other.post("/api/import", content=bad,
+                               headers={"content-type": "application/octet-stream"})
+                assert r.status_code in (400, 422) and r.json()["error"], r.text
+            r = other.post("/api/import", content=exported.content,
+                           headers={"content-type": "application/json"})
+            assert r.status_code == 415
+            r = other.post("/api/import", content=exported.content,
+                           headers={"content-type": "application/octet-stream"})
+            assert r.status_code == 200, r.text
+            assert [c["name"] for c in r.json()["memory"]["concepts"]] == ["c1"]
+            _same(_state(classroom.agent), _state(fresh.agent))
+            assert iloci.Agent.load(tmp_path / "fresh.npz").memory.concepts() == ["c1"]
+            assert other.post("/api/undo", json={}).json()["memory"]["concepts"] == []
+    finally:
+        fresh.close()
+
+
+# -- one writer per memory file ---------------------------------------------------------
+def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
+    import resource
+
+    target = tmp_path / "real" / "robot.npz"
+    target.parent.mkdir()
+    link = tmp_path / "link.npz"
+    link.symlink_to(target)
+    classroom = build_classroom(link, CONFIG, worker=False, protocol="paper")
+    try:
+        # another writer of the same file, by any path, is refused
+        with pytest.raises(MemoryLockedError, match="iloci serve, pid"):
+            build_classroom(target, CONFIG, worker=False)
+        with page_client(classroom) as client:
+            client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+            assert link.is_symlink() and target.is_file()       # written through the link
+            size = target.stat().st_size
+            before = target.read_bytes()
+            a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}
+                            ).json()["answer"]
+            soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (size // 2, hard))   # the disk is full
+            try:
+                r = judge(client, a, -1)
+            finally:
+                resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+            assert r.status_code == 507, r.text
+            err = r.json()
+            assert "could not save" in err["error"] and str(target) in err["error"]
+            assert "still holds" in err["error"] and err["saved"] is False
+            # the page shows what the file holds: one concept, not the refused c2
+            assert [c["name"] for c in err["memory"]["concepts"]] == ["c1"]
+            state = client.get("/api/state").json()["memory"]
+            assert [c["name"] for c in state["concepts"]] == ["c1"] and state["save_error"]
+            assert target.read_bytes() == before and link.is_symlink()
+            # space again: the same drawing is learned and saved
+            a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}
+                            ).json()["answer"]
+            out = judge(client, a, -1).json()
+            assert out["outcome"]["concept"] == "c2" and out["memory"]["save_error"] is None
+    finally:
+        classroom.close()
+    assert iloci.Agent.load(target).memory.concepts() == ["c1", "c2"]
+
+
+def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
+    import subprocess
+    import sys
+
+    memory = tmp_path / "m.npz"
+    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
+    try:
+        with page_client(classroom) as client:
+            client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+        before = memory.read_bytes()
+        out = cli("teach", "--memory", str(memory), "Angle/0")
+        assert out.returncode == 2, out.stderr
+        assert "iloci serve, pid" in out.stderr and "Traceback" not in out.stderr
+        code = ("import sys, iloci\nfrom iloci.progress import MemoryLockedError\n"
+                "a = iloci.Agent.load(sys.argv[1])\n"
+                "try:\n    a.save(sys.argv[1])\n"
+                "except MemoryLockedError as e:\n    print('REFUSED', e)\n")
+        r = subprocess.run([sys.executable, "-c", code, str(memory)], capture_output=True,
+                           text=True, timeout=300)
+        assert "REFUSED" in r.stdout and "iloci serve, pid" in r.stdout, r.stdout + r.stderr
+        assert memory.read_bytes() == before
+    finally:
+        classroom.close()
+    # released: teach goes on from the served memory
+    assert cli("teach", "--memory", str(memory), "Angle/0").returncode == 0
+
+
+def test_the_interactive_protocol_is_the_default_where_the_config_is_silent(tmp_path):
+    from iloci.commands.teach import INTERACTIVE
+
+    classroom = build_classroom(tmp_path / "a.npz", CONFIG, worker=False)
+    try:
+        learner = classroom.agent.config.learner
+        assert all(getattr(learner, k) == v for k, v in INTERACTIVE.items())
+    finally:
+        classroom.close()
+    own = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.0}}
+    classroom = build_classroom(tmp_path / "b.npz", own, worker=False)
+    try:
+        assert classroom.agent.config.learner.novelty_below == 0.0     # the config's word
+        assert classroom.agent.config.learner.unknown_below == 0.8
+    finally:
+        classroom.close()
+    classroom = build_classroom(tmp_path / "c.npz", CONFIG, worker=False, protocol="paper")
+    try:
+        assert classroom.agent.config.learner.novelty_below == 0.0
+        assert classroom.agent.config.learner.confirm_rewards is False
+    finally:
+        classroom.close()

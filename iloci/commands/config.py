@@ -26,10 +26,11 @@ def run_show(args: argparse.Namespace) -> int:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    from iloci.agent import size_network
     from iloci.sensorimotor.robots import check_robot
     cfg = load_config(args.file)
     check_installed(cfg)
-    check_robot(cfg.robot, cfg.simulator.name)
+    size_network(cfg, check_robot(cfg.robot, cfg.simulator.name))
     names = ", ".join(f"{sec}={getattr(cfg, sec).name}" for sec in
                       ("perceptual_model", "clusterer", "teacher", "ik", "simulator"))
     print(f"{args.file}: ok ({names})")

@@ -1,4 +1,4 @@
-"""``iloci evaluate``: the paper's k-fold LASA experiment, with a report."""
+"""``iloci evaluate``: the paper's k-fold experiment on LASA or your own data set, with a report."""
 
 from __future__ import annotations
 
@@ -18,8 +18,17 @@ def _jobs(args: argparse.Namespace, config) -> str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("evaluate", help="run the k-fold LASA evaluation and write a report")
+    p = sub.add_parser("evaluate", help="run the k-fold evaluation (LASA or --data) and write "
+                       "a report")
     p.add_argument("--config", "-c", help="TOML config (default: the paper's settings)")
+    p.add_argument("--data", metavar="PATH",
+                   help="your own data set instead of LASA: a folder with a sub-folder of "
+                   "trajectory files (.csv, .npy) per concept, optionally a sub-folder per "
+                   "writer in each, or a manifest (.csv/.json: file, concept[, writer, "
+                   "session]) (default: [data] path)")
+    p.add_argument("--split", choices=("concepts", "writers"), default=None,
+                   help="concepts: k folds per concept (the paper's); writers: teach some "
+                   "writers, recognize the others (default: evaluation.split)")
     p.add_argument("--out", "-o", default="runs/lasa", help="output directory "
                    "(default: runs/lasa)")
     p.add_argument("--jobs", "-j", type=int, default=None,
@@ -33,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default: start Ray on this machine)")
     p.add_argument("--folds", type=int, nargs="+", metavar="K",
                    help="run only these folds (0-based)")
-    p.add_argument("--no-baseline", action="store_true", help="skip the DTW 1-NN baseline")
+    p.add_argument("--no-baseline", action="store_true",
+                   help="skip the baselines (DTW 1-NN on normalised paths, $1, raw DTW)")
     p.add_argument("--memories", metavar="DIR",
                    help="also save each fold's learned robot as DIR/fold-K.npz")
     p.add_argument("--protocol", choices=("folds", "stream"), default=None,
@@ -82,8 +92,12 @@ def run(args: argparse.Namespace) -> int:
         changes["robustness"] = True
     if args.order:
         changes["order"] = args.order
+    if args.split:
+        changes["split"] = args.split
     if changes:
         config = config.replace(evaluation=changes)
+    if args.data:
+        config = config.replace(data={"path": args.data})
     if args.protocol is not None and args.protocol != config.evaluation.protocol:
         config = config.replace(evaluation={"protocol": args.protocol})
     # fail now, not after the first fold: the report's libraries, a writable --out
@@ -92,7 +106,18 @@ def run(args: argparse.Namespace) -> int:
     _check_out_dir(args.out)
     if config.evaluation.protocol == "stream":
         return _run_stream(args, config)
-    print(f"iloci evaluate: {config.evaluation.folds}-fold LASA, seed {config.seed}, "
+    if config.data.path and config.evaluation.protocol == "folds":
+        # read and checked before anything runs (evaluate() checks again, cheaply)
+        from iloci.data.datasets import check_protocol, load_dataset
+        dataset = load_dataset(config.data.path)
+        check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
+                       config.evaluation.seed)
+        what = (f"data set {dataset.name} ({len(dataset.samples)} samples, "
+                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} writers)")
+    else:
+        what = "LASA"
+    split = ", writer-disjoint" if config.evaluation.split == "writers" else ""
+    print(f"iloci evaluate: {config.evaluation.folds}-fold {what}{split}, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
           f"{config.clusterer.name}, teacher {config.teacher.name}, "
           f"jobs {_jobs(args, config)}, executor {args.executor}",
@@ -126,7 +151,8 @@ def _run_stream(args: argparse.Namespace, config) -> int:
     from iloci.evaluation.report import stream_headline, write_stream_outputs
     from iloci.evaluation.stream import run_stream
 
-    print(f"iloci evaluate: stream protocol (test-then-learn) over LASA, seed "
+    print(f"iloci evaluate: stream protocol (test-then-learn) over "
+          f"{config.data.path or 'LASA'}, seed "
           f"{config.seed}, perceptual model {config.perceptual_model.name}, teacher "
           f"{config.teacher.name}", file=sys.stderr)
     last = [-1]

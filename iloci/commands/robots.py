@@ -83,7 +83,7 @@ def describe(name: str | None, config: str | None) -> dict:
     """The description of robot ``name`` (or the config's), its plane placed."""
     from iloci.config import load_config
     from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import check_robot, place_robot, robot_from_config
+    from iloci.sensorimotor.robots import check_robot, robot_and_ik
 
     pm = get_plugin_manager()
     registry = get_registry(pm)
@@ -93,6 +93,6 @@ def describe(name: str | None, config: str | None) -> dict:
         import dataclasses
         robot_cfg = dataclasses.replace(robot_cfg, name=name, urdf="")
     check_robot(robot_cfg, cfg.simulator.name, pm)
-    robot, mode = robot_from_config(robot_cfg, pm)
-    ik = registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot)
-    return place_robot(robot, mode, ik, robot_cfg).describe()
+    robot, _ = robot_and_ik(robot_cfg, lambda robot: registry.build(
+        "ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot), plugin_manager=pm)
+    return robot.describe()

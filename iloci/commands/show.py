@@ -66,22 +66,14 @@ def _components(config_file: str | None):
     """The configured IK solver, sensorimotor settings and robot (plane placed)."""
     from iloci.config import load_config
     from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import place_robot, robot_from_config
+    from iloci.sensorimotor.robots import robot_and_ik
 
     pm = get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config_file, registry=registry)
-    robot, mode = robot_from_config(cfg.robot, pm)
-
-    def make(robot):
-        return registry.build("ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed,
-                              robot=robot)
-
-    ik = make(robot)
-    placed = place_robot(robot, mode, ik, cfg.robot)
-    if placed is not robot:
-        ik = make(placed)
-    return ik, cfg.sensorimotor, placed
+    robot, ik = robot_and_ik(cfg.robot, lambda robot: registry.build(
+        "ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot), plugin_manager=pm)
+    return ik, cfg.sensorimotor, robot
 
 
 def run(args: argparse.Namespace) -> int:

@@ -48,7 +48,7 @@ import numpy as np
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["Sample", "DataSet", "load_dataset", "check_protocol", "writer_folds",
+__all__ = ["Sample", "DataSet", "load_dataset", "check_protocol", "writer_folds", "demos_checksum",
            "TRAJECTORY_SUFFIXES"]
 
 #: File suffixes read as trajectories (what ``iloci teach`` reads).
@@ -359,6 +359,16 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                                 "least 2.")
     return DataSet(name=name, root=str(root.resolve()), source=str(p.resolve()), layout=layout,
                    samples=samples, demos=demos, checksum=h.hexdigest())
+
+
+def demos_checksum(demos: Sequence[Demonstration]) -> str:
+    """SHA-256 over the demonstrations' keys, true concepts, times and positions."""
+    h = hashlib.sha256()
+    for d in demos:
+        h.update(f"{d.key}\0{d.true_concept or ''}\0".encode())
+        h.update(np.ascontiguousarray(d.times, dtype="<f8").tobytes())
+        h.update(np.ascontiguousarray(d.positions, dtype="<f8").tobytes())
+    return h.hexdigest()
 
 
 def _has_times(demo: Demonstration) -> bool:

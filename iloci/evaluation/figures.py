@@ -275,7 +275,7 @@ def plot_robustness(rob: Mapping[str, Mapping], path: str | Path) -> Path:
             xerr=[100 * r["ccr_std"] for r in rows], label="iloci", color="tab:blue")
     if all("baseline" in r for r in rows):
         ax.barh(y + 0.2, [100 * r["baseline"]["ccr_mean"] for r in rows], 0.38,
-                xerr=[100 * r["baseline"]["ccr_std"] for r in rows], label="DTW 1-NN",
+                xerr=[100 * r["baseline"]["ccr_std"] for r in rows], label="DTW 1-NN, normalised",
                 color="tab:gray")
     ax.set_yticks(y, [r["label"] for r in rows], fontsize=8)
     ax.invert_yaxis()

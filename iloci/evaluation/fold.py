@@ -1,6 +1,6 @@
 """One fold of the paper's experiment: teach a fresh agent, recognize the test set.
 
-:func:`learn_fold` teaches (and runs the DTW baseline and the robustness
+:func:`learn_fold` teaches (and runs the baselines and the robustness
 suite); :meth:`LearnedFold.complete` scores the recognitions of the test
 set. :func:`run_fold` is the two in one process; a parallel evaluation runs
 them as two tasks (:mod:`iloci.evaluation.parallel`), with the same results.
@@ -70,7 +70,7 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
     send : callable, optional
         Receives progress dicts (from the observer hooks).
     baseline : bool
-        Also run the DTW 1-NN baseline on this fold.
+        Also run the baselines of :mod:`iloci.evaluation.baselines` on this fold.
     details : bool
         Keep PB points and regenerated shapes for the figures.
     plugin_manager : pluggy.PluginManager, optional
@@ -121,7 +121,7 @@ class LearnedFold:
     true, taught : lists
         Per test demonstration: true concept; was it in the learning set.
     baseline_predicted : list of str or None
-        The DTW 1-NN baseline's answers (None: not run).
+        The answers of DTW 1-NN on normalised paths (None: not run).
     majority, matched : dict
         Robot concept -> true concept name
         (:func:`~iloci.data.concepts.majority_names`,
@@ -192,7 +192,7 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
                motion_cache: Any = None) -> tuple[LearnedFold, Agent]:
     """:func:`run_fold` up to the recognition of ``test``: the learned fold and its agent.
 
-    Parameters as for :func:`run_fold`. The DTW baseline and the robustness
+    Parameters as for :func:`run_fold`. The baselines and the robustness
     suite (which recognizes perturbed copies of ``test``) run here.
     Recognizing ``test`` with the returned agent (or with one loaded from
     its saved file: the same answers) and passing the recognitions to
@@ -238,11 +238,15 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
             # what the robot drew: executed in the simulator when one is configured
             shapes[name] = np.asarray(agent.respond(label).drawing).tolist()
     baseline_predicted, baseline_seconds = None, float("nan")
+    baselines: dict[str, dict[str, Any]] = {}
     if baseline:
-        from iloci.evaluation.baseline import dtw_1nn  # dtaidistance: [report], checked first
-        tb = time.perf_counter()
-        baseline_predicted = dtw_1nn(list(learn), list(test))
-        baseline_seconds = time.perf_counter() - tb
+        # dtaidistance: [report], checked first
+        from iloci.evaluation.baselines import run_baselines
+        baselines = run_baselines(list(learn), list(test)) if len(test) else {}
+        if baselines:
+            # the answers' baseline: the strongest, DTW 1-NN on normalised paths
+            baseline_predicted = list(baselines["dtw_normalised"]["predicted"])
+            baseline_seconds = float(baselines["dtw_normalised"]["seconds"])
     rob: dict[str, dict[str, Any]] = {}
     if config.evaluation.robustness if robustness is None else robustness:
         rob = robustness_suite(agent, list(learn), list(test), true, truth,
@@ -266,6 +270,7 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
         memory_other_distance=_other_concept_distances(mem),
         memory_generation_error=[float(e.generation_error) for e in entries],
         baseline_seconds=baseline_seconds,
+        baselines=baselines,
         pb_points=pb_points, pb_concepts=pb_concepts, pb_kinds=pb_kinds, shapes=shapes,
         robustness=rob,
     )

@@ -12,6 +12,7 @@ instead of two folds learning from 52 and three from 26.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -108,16 +109,36 @@ def untaught_concepts(demos: Sequence[Demonstration], config: Config, fold: int)
     return [str(order[(fold * n + i) % len(order)]) for i in range(n)]
 
 
-def fold_plan(demos: Sequence[Demonstration], config: Config) -> list[tuple[list[int], list[int]]]:
+def fold_plan(demos: Sequence[Demonstration], config: Config,
+              samples: Sequence[Any] | None = None) -> list[tuple[list[int], list[int]]]:
     """(learning indices in presentation order, test indices) per fold.
 
-    With ``[evaluation] untaught``, the learning demonstrations of each
-    fold's :func:`untaught_concepts` move to the end of its test set.
+    The split is ``[evaluation] split``: ``"concepts"`` (:func:`lasa_folds`,
+    by ``demo.shape``) or ``"writers"``
+    (:func:`~iloci.data.datasets.writer_folds` over ``samples``, the data
+    set's :class:`~iloci.data.datasets.Sample` of each demonstration). With
+    ``[evaluation] untaught``, the learning demonstrations of each fold's
+    :func:`untaught_concepts` move to the end of its test set.
+
+    Raises
+    ------
+    InvalidInputError
+        ``split = "writers"`` without ``samples`` (LASA names no writers),
+        or what the split function raises.
     """
     ev = config.evaluation
     truth = GroundTruth()
+    if ev.split == "writers":
+        from iloci.data.datasets import writer_folds
+        if samples is None:
+            raise InvalidInputError(
+                "[evaluation] split = 'writers' needs a data set that names writers "
+                "([data] path, or iloci evaluate --data PATH); LASA names none.")
+        split = writer_folds(samples, ev.folds, ev.seed)
+    else:
+        split = lasa_folds(demos, ev.folds, ev.seed)
     plan = []
-    for k, (learn, test) in enumerate(lasa_folds(demos, ev.folds, ev.seed)):
+    for k, (learn, test) in enumerate(split):
         # presentation order: seeded per fold, independent of the split's draws
         rng = np.random.default_rng([ev.seed, k, 1])
         order = [int(i) for i in rng.permutation(learn)]

@@ -185,7 +185,12 @@ def _worker_context(config_dict: dict, shapes: list[str],
     """A worker's demonstrations and plugin manager (None: the default one)."""
     if isinstance(specs, LocalContext):
         return specs.demos, specs.plugin_manager
-    demos = load_lasa(shapes or None)
+    path = (config_dict.get("data") or {}).get("path")
+    if path:  # a data set of the user's own ([data] path), read as the parent read it
+        from iloci.data.datasets import load_dataset
+        demos = load_dataset(path).demos
+    else:
+        demos = load_lasa(shapes or None)
     # specs: what the caller's plugin manager resolved; None: the default manager's
     pm = None if specs is None else get_plugin_manager(
         autoload=False, block=DEFAULT_PLUGINS, plugins=[ResolvedComponents(specs)])

@@ -62,6 +62,12 @@ def _pct(x: float) -> str:
     return f"{100 * x:.2f}"
 
 
+#: Names of the baselines in tables (iloci.evaluation.baselines has the details).
+BASELINE_LABELS = {"dtw_normalised": "DTW 1-NN, normalised paths",
+                   "dollar1": "$1 recognizer",
+                   "dtw_raw": "raw DTW 1-NN (positions as drawn)"}
+
+
 def _pct_or_none(x: float) -> str:
     """``x`` as "12.34 %", or "none" for the NaN of an empty selection."""
     return "none" if x != x else f"{_pct(x)} %"
@@ -76,11 +82,25 @@ def headline(metrics: dict[str, Any]) -> str:
         + ", ".join(_pct(c) for c in metrics["ccr_folds"]) + " |",
         "| paper (Alibeigi et al.) | 91.35 ± 3.51 | |",
     ]
-    b = metrics.get("baseline")
-    if b:
-        rows.append(f"| DTW 1-NN baseline | {_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])} | "
-                    + ", ".join(_pct(c) for c in b["ccr_folds"]) + " |")
+    bases = metrics.get("baselines") or {}
+    for name, b in bases.items():
+        tag = " (best baseline)" if name == metrics.get("best_baseline") else ""
+        rows.append(f"| {BASELINE_LABELS.get(name, name)}{tag} | {_pct(b['ccr_mean'])} ± "
+                    f"{_pct(b['ccr_std'])} | " + ", ".join(_pct(c) for c in b["ccr_folds"])
+                    + " |")
     m = metrics
+    best = metrics.get("best_baseline")
+    if best:
+        gap = m["ccr_mean"] - bases[best]["ccr_mean"]
+        rows += ["", f"iloci {'reaches' if gap >= 0 else 'trails'} the best baseline "
+                 f"({BASELINE_LABELS.get(best, best)}) by {100 * abs(gap):.2f} points of CCR "
+                 "on the same folds."]
+    d = metrics.get("dataset")
+    if d:
+        writers = f", {d['writers']} writers" if d.get("writers") else ""
+        rows += ["", f"data set: {d['name']} ({d['samples']} samples, {len(d['concepts'])} "
+                 f"concepts{writers}; sha256 {d['checksum'][:16]}...)"
+                 + (", writer-disjoint folds" if metrics.get("split") == "writers" else "")]
     if "purity" in m:
         rows += [
             "",
@@ -112,15 +132,22 @@ def headline(metrics: dict[str, Any]) -> str:
 
 
 def robustness_table(rob: dict[str, Any]) -> list[str]:
-    """Markdown rows: per perturbation, iloci and DTW 1-NN CCR (mean ± std, %)."""
-    rows = ["| the test demonstrations, drawn … | iloci CCR % | DTW 1-NN CCR % |",
-            "|---|---|---|"]
+    """Markdown rows: per perturbation, iloci and each baseline's CCR (mean ± std, %)."""
+    names = next((list(r["baselines"]) for r in rob.values() if r.get("baselines")), [])
+    if not names and any(r.get("baseline") for r in rob.values()):
+        names = ["dtw_normalised"]  # older metrics: the one baseline
+    rows = ["| the test demonstrations, drawn … | iloci CCR % | "
+            + "".join(f"{BASELINE_LABELS.get(n, n)} % | " for n in names),
+            "|---|---|" + "---|" * len(names)]
     for row in rob.values():
-        b = row.get("baseline")
-        base = f"{_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])}" if b else "-"
+        cells = []
+        for n in names:
+            b = (row.get("baselines") or {}).get(n) or (row.get("baseline")
+                                                        if n == "dtw_normalised" else None)
+            cells.append(f"{_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])}" if b else "-")
         rows.append(f"| {row['label']} | {_pct(row['ccr_mean'])} ± {_pct(row['ccr_std'])} | "
-                    f"{base} |")
-    return rows
+                    + "".join(f"{c} | " for c in cells))
+    return [r.rstrip() for r in rows]
 
 
 def _sparse_table(concepts: Sequence[str], conf: np.ndarray, cmat: np.ndarray) -> list[str]:
@@ -184,16 +211,19 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         bpred = [p for r in results for p in r.baseline_predicted]
         figures.plot_matrix(confusion_matrix(true, bpred, concepts), concepts,
                             fig_dir / "baseline_confusion.png",
-                            title="DTW 1-NN baseline: normalised confusion",
+                            title="DTW 1-NN on normalised paths: normalised confusion",
                             cbar_label="fraction of row")
         baseline_rows = ["", "![baseline confusion](figures/baseline_confusion.png)"]
 
     m = metrics
+    d = m.get("dataset") or {"name": "LASA"}
+    split = " (writer-disjoint folds)" if m.get("split") == "writers" else ""
     lines = [
         "# iloci evaluation report",
         "",
-        f"{len(results)}-fold LASA evaluation, the protocol of iloci's docs/method.md "
-        "(\"Evaluation protocol\"; the method of Alibeigi, Nili Ahmadabadi and Araabi, "
+        f"{len(results)}-fold evaluation on {d['name']}{split}, the protocol of iloci's "
+        "docs/method.md (\"Evaluation protocol\"; the method of Alibeigi, Nili "
+        "Ahmadabadi and Araabi, "
         "\"Incremental learning of high-level concepts by imitation\", IROS 2017, with "
         "Tani's RNNPB): per fold the learning set is "
         "shown one demonstration at a time with teacher feedback, then the test set is "
@@ -208,7 +238,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         "",
         "## Per fold",
         "",
-        "| fold | learn | test | CCR % | one-to-one CCR % | purity % | DTW 1-NN % | "
+        "| fold | learn | test | CCR % | one-to-one CCR % | purity % | best baseline % | "
         "interactions/demo | exemplars | prototypes | concepts | generation error | wall s |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -217,7 +247,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
             f"| {f['fold']} | {f['learn']} | {f['test']} | {_pct(f['ccr'])} | "
             f"{_pct(f.get('ccr_matched', float('nan')))} | "
             f"{_pct(f.get('purity', float('nan')))} | "
-            f"{_pct(f['baseline_ccr']) if np.isfinite(f['baseline_ccr']) else '-'} | "
+            f"{_best_fold_baseline(f)} | "
             f"{f['interactions_per_demo']:.2f} | {f['exemplars']} | {f['prototypes']} | "
             f"{f['concepts']} | {f['generation_error']:.4f} | {f['wall_seconds']:.1f} |")
     lines += [
@@ -265,9 +295,22 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
                   "Each concept's lowest-generation-error entry, generated closed-loop from "
                   "its PB and decoded to the drawing plane (green: start).", "",
                   "![shapes](figures/shapes.png)", ""]
+    if d.get("checksum"):
+        lines += ["## Data set", "",
+                  f"{d['name']}: {d['samples']} samples of {len(d['concepts'])} concepts"
+                  + (f", {d['writers']} writers" if d.get("writers") else "")
+                  + f"; read from `{d.get('path', '')}`; SHA-256 `{d['checksum']}`.", "",
+                  "Samples per concept: " + ", ".join(f"{c} {n}" for c, n in
+                                                       d["concepts"].items()) + ".", ""]
     if baseline_rows:
-        lines += ["## Baseline", "", m["baseline"]["method"] + " on the same folds: "
-                  f"{_pct(m['baseline']['ccr_mean'])} ± {_pct(m['baseline']['ccr_std'])} %."]
+        lines += ["## Baselines", "",
+                  "Each baseline stores every learning demonstration with its true concept "
+                  "(no feedback, no network) and names each test demonstration by its "
+                  "nearest one, on the same folds (`iloci.evaluation.baselines`):", ""]
+        for name, b in m["baselines"].items():
+            lines.append(f"- **{BASELINE_LABELS.get(name, name)}**: {b['method']}; "
+                         f"{_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])} %.")
+        lines += ["", f"The confusion below is {BASELINE_LABELS['dtw_normalised']}'s."]
         lines += baseline_rows
     if m.get("robustness"):
         figures.plot_robustness(m["robustness"], fig_dir / "robustness.png")
@@ -280,6 +323,17 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     report = out / "report.md"
     write_text_atomic(report, "\n".join(lines) + "\n")
     return report
+
+
+def _best_fold_baseline(fold: dict[str, Any]) -> str:
+    """The fold's best baseline CCR, with its name ('-' when none ran)."""
+    ccr = fold.get("baselines_ccr") or {}
+    finite = {k: v for k, v in ccr.items() if np.isfinite(v)}
+    if finite:
+        name = max(finite, key=lambda k: finite[k])
+        return f"{_pct(finite[name])} ({name})"
+    b = fold.get("baseline_ccr", float("nan"))
+    return _pct(b) if np.isfinite(b) else "-"
 
 
 def stream_headline(metrics: dict[str, Any]) -> str:

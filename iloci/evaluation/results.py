@@ -54,7 +54,8 @@ class Answer:
     unknown : bool
         Recognition's familiarity and whether it answered "unknown".
     baseline_predicted : str or None
-        The DTW 1-NN baseline's answer (None when it did not run).
+        The answer of DTW 1-NN on normalised paths, the strongest baseline
+        (None when it did not run).
     """
 
     key: str
@@ -81,7 +82,8 @@ FOLD_KEYS: tuple[str, ...] = (
     "robot_predicted", "matched_predicted", "ccr_matched", "source_predicted", "ccr_source",
     "purity", "named_concepts", "taught", "distance", "error", "reproduction_error",
     "familiarity", "unknown", "memory_other_distance", "memory_generation_error",
-    "baseline_predicted", "baseline_ccr", "baseline_seconds", "pb_points", "pb_concepts",
+    "baseline_predicted", "baseline_ccr", "baseline_seconds", "baselines", "pb_points",
+    "pb_concepts",
     "pb_kinds", "shapes", "robustness")
 
 @dataclass(frozen=True)
@@ -122,7 +124,13 @@ class FoldResult:
         Per memory entry: PB_rec distance to the nearest entry of another
         concept; generation error (the memory's own scales).
     baseline_seconds : float
-        Wall time of the DTW 1-NN baseline on the fold (NaN when not run).
+        Wall time of DTW 1-NN on normalised paths (the strongest baseline,
+        whose answers are each answer's ``baseline_predicted``) on the fold
+        (NaN when not run).
+    baselines : dict
+        Every baseline of :mod:`iloci.evaluation.baselines` on the same
+        fold: name -> ``{"predicted", "ccr", "seconds"}`` (empty when not
+        run).
     pb_points, pb_concepts, pb_kinds : lists
         Memory PB_rec with the true concept of each entry's robot concept
         and its kind (``"exemplar"``/``"prototype"``), then each test
@@ -131,8 +139,9 @@ class FoldResult:
         One drawing per true concept, (T, 2) as nested lists (m).
     robustness : dict
         Perturbation name -> ``{"predicted", "ccr", "baseline_predicted",
-        "baseline_ccr", "seconds"}`` (:func:`~iloci.evaluation.robustness.robustness_suite`;
-        empty unless asked).
+        "baseline_ccr", "baselines", "seconds"}``
+        (:func:`~iloci.evaluation.robustness.robustness_suite`; empty unless
+        asked).
     """
 
     fold: int
@@ -155,6 +164,7 @@ class FoldResult:
     memory_other_distance: list[float] = field(default_factory=list)
     memory_generation_error: list[float] = field(default_factory=list)
     baseline_seconds: float = float("nan")
+    baselines: dict[str, dict[str, Any]] = field(default_factory=dict)
     pb_points: list[list[float]] = field(default_factory=list)
     pb_concepts: list[str] = field(default_factory=list)
     pb_kinds: list[str] = field(default_factory=list)
@@ -217,7 +227,7 @@ class FoldResult:
 
     @property
     def baseline_ran(self) -> bool:
-        """Did the DTW 1-NN baseline run on this fold."""
+        """Did the baselines run on this fold."""
         return not math.isnan(self.baseline_seconds)
 
     @property

@@ -2,7 +2,7 @@
 
 The perturbations (time warps, resampling, pen rests, jitter, rotation,
 stretch, scale) are :mod:`iloci.evaluation.perturb`'s; each is scored for
-iloci and for the DTW 1-NN baseline on the same fold
+iloci and for each baseline of :mod:`iloci.evaluation.baselines` on the same fold
 (:func:`robustness_suite`), then over folds (:func:`summarize_robustness`,
 ``metrics.json``'s ``robustness``).
 """
@@ -26,7 +26,7 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
                      truth: Callable[[str], str] | Mapping[str, str], *, seed: int = 0,
                      baseline: bool = True,
                      names: Sequence[str] | None = None) -> dict[str, dict[str, Any]]:
-    """Recognize ``test`` under each perturbation; iloci and DTW 1-NN.
+    """Recognize ``test`` under each perturbation; iloci and the baselines.
 
     Parameters
     ----------
@@ -43,7 +43,7 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
     seed : int
         Seeds the perturbations' random draws.
     baseline : bool
-        Also the DTW 1-NN baseline.
+        Also every baseline of :mod:`iloci.evaluation.baselines`.
     names : sequence of str, optional
         Perturbations to run (default: the whole suite).
 
@@ -51,7 +51,8 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
     -------
     dict
         Name -> ``{"predicted", "ccr", "baseline_predicted", "baseline_ccr",
-        "seconds"}``.
+        "baselines", "seconds"}``: ``baseline_*`` of DTW 1-NN on normalised
+        paths (the strongest), ``baselines`` name -> CCR of each.
     """
     if isinstance(truth, Mapping):
         known = GroundTruth()
@@ -65,16 +66,19 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
         row: dict[str, Any] = {"predicted": predicted,
                                "ccr": correct_classification_rate(true, predicted)}
         if baseline:
-            from iloci.evaluation.baseline import dtw_1nn  # dtaidistance: [report], checked first
-            row["baseline_predicted"] = dtw_1nn(learn, shown)
-            row["baseline_ccr"] = correct_classification_rate(true, row["baseline_predicted"])
+            # dtaidistance: [report], checked first
+            from iloci.evaluation.baselines import run_baselines
+            runs = run_baselines(learn, shown)
+            row["baseline_predicted"] = runs["dtw_normalised"]["predicted"]
+            row["baseline_ccr"] = runs["dtw_normalised"]["ccr"]
+            row["baselines"] = {name: r["ccr"] for name, r in runs.items()}
         row["seconds"] = time.perf_counter() - t0
         out[p.name] = row
     return out
 
 
 def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
-    """metrics.json's ``robustness``: per perturbation, CCR over folds, iloci and DTW.
+    """metrics.json's ``robustness``: per perturbation, CCR over folds, iloci and the baselines.
 
     Parameters
     ----------
@@ -86,26 +90,35 @@ def summarize_robustness(results: Sequence[dict]) -> dict[str, Any]:
     dict
         Each perturbation maps to ``{"group", "label", "ccr_mean", "ccr_std",
         "ccr_folds", "drop"}`` (``drop``: clean CCR minus this one, in CCR
-        units, mean over folds) and, when the baseline ran, the same under
-        ``"baseline"``.
+        units, mean over folds) and, when the baselines ran, the same under
+        ``"baseline"`` (DTW 1-NN on normalised paths) and under
+        ``"baselines"`` (name -> the same, for every baseline).
     """
     out: dict[str, Any] = {}
     names = [p for p in suite() if all(p.name in r["robustness"] for r in results)]
+    cleans = ([r["robustness"]["clean"] for r in results]
+              if all("clean" in r["robustness"] for r in results) else None)
+
+    def part(values: list[float], clean: list[float] | None) -> dict[str, Any]:
+        m, s = mean_std(values)
+        got: dict[str, Any] = {"ccr_mean": m, "ccr_std": s, "ccr_folds": values}
+        if clean is not None:
+            got["drop"] = float(np.mean(np.subtract(clean, values)))
+        return got
+
     for p in names:
         rows = [r["robustness"][p.name] for r in results]
         entry: dict[str, Any] = {"group": p.group, "label": p.label}
-        for key, into in (("ccr", entry), ("baseline_ccr", None)):
-            if not all(key in row for row in rows):
-                continue
-            vals = [row[key] for row in rows]
-            m, s = mean_std(vals)
-            part = {"ccr_mean": m, "ccr_std": s, "ccr_folds": vals}
-            if "clean" in results[0]["robustness"]:
-                clean = [r["robustness"]["clean"][key] for r in results]
-                part["drop"] = float(np.mean(np.subtract(clean, vals)))
-            if into is None:
-                entry["baseline"] = part
-            else:
-                entry.update(part)
+        entry.update(part([row["ccr"] for row in rows],
+                          [c["ccr"] for c in cleans] if cleans else None))
+        if all("baseline_ccr" in row for row in rows):
+            entry["baseline"] = part(
+                [row["baseline_ccr"] for row in rows],
+                [c["baseline_ccr"] for c in cleans] if cleans else None)
+        if all(row.get("baselines") for row in rows):
+            entry["baselines"] = {
+                name: part([row["baselines"][name] for row in rows],
+                           [c["baselines"][name] for c in cleans] if cleans else None)
+                for name in rows[0]["baselines"]}
         out[p.name] = entry
     return out

@@ -110,7 +110,11 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
 
     pm = plugin_manager or get_plugin_manager()
     config = load_config(config, registry=get_registry(pm))
-    demos = load_lasa(list(config.data.shapes) or None)
+    if config.data.path:  # a data set of the user's own
+        from iloci.data.datasets import load_dataset
+        demos = load_dataset(config.data.path).demos
+    else:
+        demos = load_lasa(list(config.data.shapes) or None)
     order = stream_order(len(demos), config.evaluation.seed)
     if limit is not None:
         order = order[:limit]

@@ -34,9 +34,12 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
     -------
     dict
         ``ccr_mean``, ``ccr_std``, ``ccr_folds``, mean and std of every
-        per-fold count, ``folds`` (per-fold rows), ``paper``, ``baseline``
-        (when every fold ran it), ``seed``, ``config``, ``versions``,
-        ``machine``.
+        per-fold count, ``folds`` (per-fold rows), ``paper``; when every
+        fold ran the baselines: ``baselines`` (name -> method, CCR mean,
+        std, per fold, seconds), ``best_baseline`` (the name of the highest
+        mean CCR) and ``baseline`` (``dtw_normalised``'s entry, as before);
+        ``seed``, ``config``, ``versions``, ``machine``. :func:`evaluate
+        <iloci.evaluation.evaluate.evaluate>` adds ``dataset`` and ``split``.
     """
     results = [f.to_dict() for f in sorted(folds, key=lambda f: f.fold)]
 
@@ -92,10 +95,20 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
         }
     if all(r.get("robustness") for r in results):
         out["robustness"] = summarize_robustness(results)
-    if all(r.get("baseline_predicted") for r in results):
-        bm, bs = mean_std([r["baseline_ccr"] for r in results])
-        out["baseline"] = {"method": "DTW 1-NN (dtaidistance), positions resampled to 50",
-                           "ccr_mean": bm, "ccr_std": bs,
-                           "ccr_folds": [r["baseline_ccr"] for r in results],
-                           "seconds": [r["baseline_seconds"] for r in results]}
+    if results and all(r.get("baselines") for r in results):
+        from iloci.evaluation.baselines import BASELINES, best_baseline
+        out["baselines"] = {}
+        for name in results[0]["baselines"]:
+            ccrs = [r["baselines"][name]["ccr"] for r in results]
+            bm, bs = mean_std(ccrs)
+            out["baselines"][name] = {"method": BASELINES[name].method, "ccr_mean": bm,
+                                      "ccr_std": bs, "ccr_folds": ccrs,
+                                      "seconds": [r["baselines"][name]["seconds"]
+                                                  for r in results]}
+        best, _ = best_baseline({k: v["ccr_mean"] for k, v in out["baselines"].items()})
+        out["best_baseline"] = best
+        # the strongest baseline by design (DTW on normalised paths), as `baseline`
+        out["baseline"] = dict(out["baselines"]["dtw_normalised"], name="dtw_normalised")
+        for row, r in zip(out["folds"], results):
+            row["baselines_ccr"] = {k: v["ccr"] for k, v in r["baselines"].items()}
     return out

@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from iloci.errors import IlociError, InvalidInputError
+from iloci.errors import IlociError, InvalidInputError, UnreachableTargetError
+from iloci.sensorimotor.robots.model import DrawingPlane, _vec3
 
 __all__ = ["NoReachablePlaneError", "PlaneCheck", "check_plane", "find_drawing_plane"]
 
@@ -91,7 +92,6 @@ def check_plane(ik: Any, plane: Any, q_start: np.ndarray, *, edge: float = 0.0,
     The centre is solved from ``q_start``; the grid is then walked in
     serpentine order from its first corner, warm-started point to point.
     """
-    from iloci.errors import UnreachableTargetError
     lo, hi = np.asarray(ik.lower, float), np.asarray(ik.upper, float)
     big = plane.grown(edge)
     pts2 = big.center + _grid(grid) * big.size
@@ -169,7 +169,6 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
     NoReachablePlaneError
         No rectangle of at least 1 cm passes (says what to relax).
     """
-    from iloci.sensorimotor.robots import DrawingPlane, _vec3
     t0 = time.perf_counter()
     if not (aspect > 0 and 0 <= edge_fraction < 1 and joint_margin >= 0 and min_singular >= 0):
         raise InvalidInputError("plane search needs aspect > 0, 0 <= edge_fraction < 1 and "

@@ -7,11 +7,18 @@ const padCtx = pad.getContext("2d");
 const ansCtx = answerCanvas.getContext("2d");
 const $ = (id) => document.getElementById(id);
 
-let stroke = [];          // [x, y, t]: x right, y up (pixels), t seconds
+let stroke = [];          // [x, y, t]: x right, y up (canvas pixels), t seconds
 let drawing = false;
+let pointer = null;       // the pointerId that started the stroke: the only one drawn
 let pending = null;       // the guess waiting for yes / no
 let busy = false;
 let animation = null;
+// the server's token (a new one each start): every write carries it
+const TOKEN = document.querySelector('meta[name="iloci-token"]').content;
+// this tab's id: its own turn; kept over a reload of the tab, not shared with others
+const CLIENT = sessionStorage.getItem("iloci-client") ||
+  (crypto.randomUUID ? crypto.randomUUID() : String(Math.random()).slice(2));
+sessionStorage.setItem("iloci-client", CLIENT);
 
 function mode() { return document.querySelector("input[name=mode]:checked").value; }
 
@@ -23,9 +30,12 @@ function showError(text) {
 
 function say(text) { $("message").textContent = text || ""; }
 
-async function api(path, body) {
+async function api(path, body, raw) {
   const options = body === undefined ? {} : {
-    method: "POST", headers: {"Content-Type": "application/json"}, body: JSON.stringify(body)};
+    method: "POST",
+    headers: {"Content-Type": raw ? "application/octet-stream" : "application/json",
+              "X-Iloci-Token": TOKEN},
+    body: raw ? body : JSON.stringify(body)};
   let response;
   try {
     response = await fetch(path, options);
@@ -35,6 +45,8 @@ async function api(path, body) {
   let data = null;
   try { data = await response.json(); } catch (err) { data = null; }
   if (!response.ok) {
+    // a failed save: the page shows what the file still holds
+    if (data && data.memory) renderMemory(data.memory);
     throw new Error((data && data.error) || `the server answered ${response.status}`);
   }
   return data;
@@ -54,6 +66,14 @@ function clearAnswer() {
   $("arm").hidden = true;
 }
 
+// high-DPI: the backing store has the screen's pixels, the page's size stays
+function fitCanvas(canvas) {
+  const r = canvas.getBoundingClientRect();
+  const ratio = window.devicePixelRatio || 1;
+  const w = Math.max(1, Math.round(r.width * ratio)), h = Math.max(1, Math.round(r.height * ratio));
+  if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+}
+
 function addPoint(e) {
   const r = pad.getBoundingClientRect();
   const x = (e.clientX - r.left) * pad.width / r.width;
@@ -71,33 +91,47 @@ function addPoint(e) {
   }
 }
 
+// the stroke belongs to the pointer that started it: a second finger or the
+// palm is ignored; a cancelled pointer (the browser took it over) or lost
+// capture ends the stroke without sending it
 pad.addEventListener("pointerdown", (e) => {
-  if (busy) return;
   e.preventDefault();
-  pad.setPointerCapture(e.pointerId);
+  if (busy || drawing) return;               // another pointer is drawing: ignored
+  if (e.pointerType === "mouse" && e.button !== 0) return;
+  pointer = e.pointerId;
+  try { pad.setPointerCapture(e.pointerId); } catch (err) { /* not capturable */ }
+  fitCanvas(pad);
   clearPad();
   if (mode() === "teach") clearAnswer();
   showError("");
-  padCtx.lineWidth = 3; padCtx.lineCap = "round"; padCtx.strokeStyle = "#222";
+  padCtx.lineWidth = 3 * (window.devicePixelRatio || 1);
+  padCtx.lineCap = "round"; padCtx.lineJoin = "round"; padCtx.strokeStyle = "#222";
   drawing = true;
   addPoint(e);
 });
 
 pad.addEventListener("pointermove", (e) => {
-  if (!drawing) return;
-  const events = e.getCoalescedEvents ? e.getCoalescedEvents() : [e];
+  if (!drawing || e.pointerId !== pointer) return;
+  const events = e.getCoalescedEvents ? e.getCoalescedEvents() : [];
   for (const c of (events.length ? events : [e])) addPoint(c);
 });
 
 function penUp(e) {
-  if (!drawing) return;
-  drawing = false;
+  if (!drawing || e.pointerId !== pointer) return;
+  drawing = false; pointer = null;
   addPoint(e);
-  if (stroke.length < 3) { showError("Draw a longer stroke."); return; }
+  if (stroke.length < 5) { showError("The stroke is too short: draw a shape in one stroke (press, draw, lift)."); return; }
   if (mode() === "teach") observe(); else recognize();
 }
+function abandon(e) {
+  if (!drawing || e.pointerId !== pointer) return;
+  drawing = false; pointer = null;
+  clearPad();
+  say("The stroke was interrupted (the browser took the pointer); draw it again.");
+}
 pad.addEventListener("pointerup", penUp);
-pad.addEventListener("pointercancel", () => { drawing = false; });
+pad.addEventListener("pointercancel", abandon);
+pad.addEventListener("lostpointercapture", (e) => { if (drawing && e.pointerId === pointer) penUp(e); });
 
 // -- the robot's answer ---------------------------------------------------------
 // the answer canvas shows the pad's frame (pixels, y up); when the robot's
@@ -131,6 +165,7 @@ function showStrokeFaint(ctx, view) {
 function animateAnswer(answer) {
   // the drawing is in the frame of what was drawn: pad pixels, y up
   clearAnswer();
+  fitCanvas(answerCanvas);
   const pts = answer.drawing;
   const view = viewOf(pts);
   const total = Math.min(6, Math.max(0.8, answer.dt * (pts.length - 1)));   // seconds
@@ -139,7 +174,8 @@ function animateAnswer(answer) {
     const k = Math.max(1, Math.min(pts.length, 1 + Math.floor((now - start) / 1000 / total * (pts.length - 1))));
     ansCtx.clearRect(0, 0, answerCanvas.width, answerCanvas.height);
     showStrokeFaint(ansCtx, view);
-    ansCtx.strokeStyle = "#1f5fbf"; ansCtx.lineWidth = 3; ansCtx.lineCap = "round";
+    ansCtx.strokeStyle = "#1f5fbf"; ansCtx.lineWidth = 3 * (window.devicePixelRatio || 1);
+    ansCtx.lineCap = "round";
     ansCtx.beginPath();
     for (let i = 0; i < k; i++) {
       const [x, y] = view(pts[i]);
@@ -156,15 +192,20 @@ function animateAnswer(answer) {
 
 function showAnswer(answer) {
   pending = answer;
+  if (answer.notice) say(answer.notice);
   animateAnswer(answer);
   // the novelty answer: nothing the robot knows is like the drawing, it
   // drew it back as it saw it and asks whether it is a new concept
   $("guess").textContent = answer.novel ?
     `Something new? The robot knows nothing like it and drew it back as it saw it: ` +
     `is it a new concept ("${answer.concept}")? (attempt ${answer.attempt})` :
-    `Is it "${answer.concept}"? (confidence ${answer.confidence.toFixed(2)}, ` +
+    answer.last_guess ?
+    `Is it "${answer.concept}"? It is the only concept left to guess, so this is no ` +
+    `certainty (attempt ${answer.attempt})` :
+    `Is it "${answer.concept}"? (confidence ${answer.confidence === null ? "n/a" : answer.confidence.toFixed(2)}, ` +
     `attempt ${answer.attempt})`;
   $("judge").hidden = false;
+  $("new").hidden = !!answer.novel;
   if (answer.arm) { $("arm").src = answer.arm; $("arm").hidden = false; }
 }
 
@@ -198,26 +239,36 @@ async function withProgress(promise) {
   }
 }
 
+function learned(data) {
+  // the turn is over: no guess stays on screen
+  pending = null;
+  clearAnswer();
+  say(describe(data.outcome));
+  renderMemory(data.memory);
+}
+
 async function observe() {
   say("The robot is thinking...");
   try {
-    const data = await withProgress(api("/api/observe", {points: stroke}));
+    const data = await withProgress(api("/api/observe", {points: stroke, client: CLIENT}));
     if (data.answer) { say(""); showAnswer(data.answer); }
-    else { pending = null; say(describe(data.outcome)); renderMemory(data.memory); }
+    else learned(data);
   } catch (err) { say(""); showError(err.message); }
 }
 
 async function judge(value) {
   if (!pending || busy) return;
   $("judge").hidden = true;
-  say(value > 0 ? "Yes: learning..." : "No: thinking again...");
+  say(value === "new" ? "Something new: learning..." :
+      value > 0 ? "Yes: learning..." : "No: thinking again...");
   try {
-    const data = await withProgress(api("/api/feedback", {turn: pending.turn, value}));
+    const data = await withProgress(api("/api/feedback", {turn: pending.turn, answer: pending.id, value}));
     if (data.answer) { say(""); showAnswer(data.answer); }
-    else { pending = null; say(describe(data.outcome)); renderMemory(data.memory); }
+    else learned(data);
   } catch (err) {
     say(""); showError(err.message);
-    if (pending) $("judge").hidden = false;
+    if (/no such guess/.test(err.message)) { pending = null; clearAnswer(); }
+    else if (pending) $("judge").hidden = false;
   }
 }
 
@@ -227,20 +278,22 @@ async function recognize() {
     const r = await api("/api/recognize", {points: stroke});
     clearAnswer();
     say("");
+    if (r.drawing && r.drawing.length > 1) animateAnswer({drawing: r.drawing, dt: 0.02});
     $("guess").textContent = r.unknown ?
-      `Unknown: like nothing it was taught (nearest "${r.concept}", familiarity ` +
-      `${r.familiarity.toFixed(2)}); nothing learned.` :
+      `Unknown: like nothing it was taught (nearest "${r.concept}"); nothing learned.` :
       `Recognized: "${r.concept}" (confidence ${r.confidence.toFixed(2)}); nothing learned.`;
   } catch (err) { say(""); showError(err.message); }
 }
 
 $("yes").addEventListener("click", () => judge(1));
 $("no").addEventListener("click", () => judge(-1));
+$("new").addEventListener("click", () => judge("new"));
 $("clear").addEventListener("click", () => { clearPad(); showError(""); });
 document.addEventListener("keydown", (e) => {
   if (e.target.tagName === "INPUT") return;
   if (e.key === "y") judge(1);
   else if (e.key === "n") judge(-1);
+  else if (e.key === "s" && pending && !pending.novel) judge("new");
   else if (e.key === "c") { clearPad(); showError(""); }
 });
 document.querySelectorAll("input[name=mode]").forEach((r) => r.addEventListener("change", () => {
@@ -269,10 +322,24 @@ function thumbnail(points, prototype) {
   return c;
 }
 
+async function control(path, body, done) {
+  if (busy) return;
+  showError("");
+  try {
+    const data = await api(path, body);
+    renderMemory(data.memory);
+    pending = null; clearAnswer();
+    say(done(data));
+  } catch (err) { showError(err.message); }
+}
+
 function renderMemory(memory) {
   if (!memory) return;
   $("memsummary").textContent = `${memory.concepts.length} concept(s), ${memory.entries} entries, ` +
     `${memory.demonstrations_seen} drawing(s) learned; saved in ${memory.file}`;
+  $("undo").disabled = !memory.undo;
+  $("undo").title = memory.undo ? `undo: ${memory.undo}` : "nothing to undo";
+  if (memory.save_error) showError(memory.save_error);
   const box = $("concepts");
   box.textContent = "";
   if (!memory.concepts.length) {
@@ -303,6 +370,12 @@ function renderMemory(memory) {
       } catch (err) { showError(err.message); }
     });
     div.appendChild(form);
+    const forget = document.createElement("button");
+    forget.type = "button"; forget.className = "forget"; forget.textContent = "Forget";
+    forget.title = `forget the concept ${concept.name} (undo brings it back)`;
+    forget.addEventListener("click", () => control("/api/forget", {concept: concept.name},
+      () => `Forgot "${concept.name}". (Undo brings it back.)`));
+    name.appendChild(forget);
     const thumbs = document.createElement("div");
     thumbs.className = "thumbs";
     for (const entry of concept.entries) {
@@ -314,6 +387,15 @@ function renderMemory(memory) {
       const label = document.createElement("span");
       label.textContent = `${entry.prototype ? "prototype" : "exemplar"} x${entry.num_samples}`;
       t.appendChild(label);
+      if (concept.entries.length > 1) {
+        const x = document.createElement("button");
+        x.type = "button"; x.className = "forget-entry"; x.textContent = "\u00d7";
+        x.title = "forget this entry";
+        x.setAttribute("aria-label", `forget this entry of ${concept.name}`);
+        x.addEventListener("click", () => control("/api/forget", {entry: entry.index},
+          () => `Forgot an entry of "${concept.name}". (Undo brings it back.)`));
+        t.appendChild(x);
+      }
       thumbs.appendChild(t);
     }
     div.appendChild(thumbs);
@@ -321,11 +403,45 @@ function renderMemory(memory) {
   }
 }
 
-async function start() {
+$("undo").addEventListener("click", () => control("/api/undo", {},
+  (d) => `Undone: ${d.undone}. The memory and the network are as before it.`));
+$("reset").addEventListener("click", () => {
+  if (!confirm("Start over with an empty memory? (Undo brings it back.)")) return;
+  control("/api/reset", {}, () => "Started over: the memory is empty. Draw a first shape.");
+});
+$("import").addEventListener("change", async () => {
+  const file = $("import").files[0];
+  if (!file) return;
+  showError("");
   try {
-    const state = await api("/api/state");
+    const data = await api("/api/import", await file.arrayBuffer(), true);
+    renderMemory(data.memory);
+    pending = null; clearAnswer();
+    say(`Imported ${file.name}. (Undo brings the previous memory back.)`);
+  } catch (err) { showError(err.message); }
+  $("import").value = "";
+});
+
+window.addEventListener("resize", () => { if (!drawing && !stroke.length) fitCanvas(pad); });
+
+async function start() {
+  fitCanvas(pad); fitCanvas(answerCanvas);
+  try {
+    const state = await api(`/api/state?client=${encodeURIComponent(CLIENT)}`);
     renderMemory(state.memory);
-    if (state.pending) showAnswer(state.pending);
+    if (state.pending) {
+      // a reload: the drawing and the guess it is waiting on
+      fitCanvas(pad);
+      stroke = state.pending.points;
+      padCtx.lineWidth = 3 * (window.devicePixelRatio || 1); padCtx.lineCap = "round";
+      padCtx.strokeStyle = "#222";
+      padCtx.beginPath();
+      stroke.forEach((p, i) => {
+        if (i === 0) padCtx.moveTo(p[0], pad.height - p[1]); else padCtx.lineTo(p[0], pad.height - p[1]);
+      });
+      padCtx.stroke();
+      showAnswer(state.pending);
+    }
   } catch (err) { showError(err.message); }
 }
 start();
