@@ -248,7 +248,7 @@ def show_to_teacher(teacher: Any, demo: Demonstration) -> None:
         show(demo)
 
 
-def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
+def ik_joint_limits(ik_solver: Any) -> tuple[np.ndarray, np.ndarray] | None:
     """``(lower, upper)`` joint limits (rad, shape (J,) each) of an IK solver, if it has them.
 
     The learner clips regenerated joint paths to them before execution.
