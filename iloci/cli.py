@@ -92,10 +92,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the exit code."""
     # warnings (a plugin that failed to load, a time unit) as one line each,
     # from parsing on; restored afterwards for in-process callers
-    with warnings.catch_warnings():
+    from iloci.progress import progress_sink
+    with warnings.catch_warnings(), progress_sink(_show_progress):
         warnings.showwarning = _show_warning
         _shown.clear()
         return _main(argv)
+
+
+def _show_progress(what: str, fraction: float, seconds: float) -> None:
+    """A long step's progress, one line on stderr (see :func:`iloci.progress.long_step`)."""
+    state = f"done in {seconds:.1f} s" if fraction >= 1.0 else \
+        f"{100 * fraction:.0f} % after {seconds:.0f} s"
+    print(f"{what}: {state}", file=sys.stderr, flush=True)
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -540,28 +540,37 @@ class Config:
 _LINE_RE = re.compile(r"line (\d+)")
 
 
-def _read_toml(path: Path) -> dict[str, Any]:
+def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
+    """The tables of a TOML file, read the one way every iloci file is read.
+
+    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
+    file, a directory and malformed TOML are each one :class:`ConfigError`
+    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
+    the kind of file.
+    """
+    path = Path(path)
     try:
         raw = path.read_bytes()
         if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
-            raise ConfigError("config is UTF-16 text (it starts with a UTF-16 byte-order "
+            raise ConfigError(f"{what} is UTF-16 text (it starts with a UTF-16 byte-order "
                               "mark); TOML files are UTF-8: save it as UTF-8.",
                               source=str(path))
         # a UTF-8 byte-order mark (what Notepad and PowerShell write) is no content
         text = raw.decode("utf-8-sig")
     except FileNotFoundError:
-        raise ConfigError(f"config file not found: {path}. Pass an existing TOML "
-                          "file, or see `iloci config show` for a full example.",
+        raise ConfigError(f"{what} file not found: {path}. Pass an existing TOML "
+                          "file" + (", or see `iloci config show` for a full example." if
+                                    what == "config" else "."),
                           source=str(path)) from None
     except UnicodeDecodeError as exc:
-        raise ConfigError(f"config is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+        raise ConfigError(f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
                           "TOML files are UTF-8: save it as UTF-8.",
                           source=str(path)) from None
     except IsADirectoryError:
-        raise ConfigError("config path is a directory; pass a TOML file.",
+        raise ConfigError(f"{what} path is a directory; pass a TOML file.",
                           source=str(path)) from None
     except OSError as exc:
-        raise ConfigError(f"cannot read config: {exc.strerror}.", source=str(path)) from None
+        raise ConfigError(f"cannot read {what}: {exc.strerror}.", source=str(path)) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -570,20 +579,43 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
 
 
-def _beside(robot: RobotConfig, folder: Path) -> RobotConfig:
-    """``robot`` with a relative ``urdf`` and ``package_dirs`` made absolute paths beside
-    the config file in ``folder`` (not the current folder): a config means the same
-    from anywhere, and a memory stores the absolute path, so it loads from anywhere."""
-    def absolute(p: str) -> str:
-        if not p or p.startswith("package://"):
-            return p
-        q = Path(p.removeprefix("file://")).expanduser()
-        return str(q if q.is_absolute() else (folder / q).resolve())
+class ConfigData(dict[str, Any]):
+    """A config file's tables as :func:`read_config_file` read them; ``source`` is the file.
 
-    urdf, dirs = absolute(robot.urdf), tuple(absolute(d) for d in robot.package_dirs)
-    if urdf == robot.urdf and dirs == robot.package_dirs:
-        return robot
-    return dataclasses.replace(robot, urdf=urdf, package_dirs=dirs)
+    :func:`load_config` names it in its errors as it names a file it reads.
+    """
+
+    source: str = "<dict>"
+
+
+def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
+    """A config file's tables, read once (:func:`read_toml`), its robot's relative paths
+    made absolute beside the file.
+
+    A relative ``[robot] urdf`` or ``package_dirs`` means a path beside the
+    config file, not in the current folder: the config means the same from
+    anywhere, and a memory stores the absolute path, so it loads from anywhere.
+    Pass the result to :func:`load_config` (or change it first, as ``iloci
+    sweep`` does with its base config).
+    """
+    path = Path(path)
+    data = ConfigData(read_toml(path))
+    data.source = str(path)
+    robot = data.get("robot")
+    if isinstance(robot, dict):
+        robot = data["robot"] = dict(robot)
+
+        def absolute(p: Any) -> Any:
+            if not isinstance(p, str) or not p or p.startswith("package://"):
+                return p
+            q = Path(p.removeprefix("file://")).expanduser()
+            return str(q if q.is_absolute() else (path.parent / q).resolve())
+
+        if "urdf" in robot:
+            robot["urdf"] = absolute(robot["urdf"])
+        if isinstance(robot.get("package_dirs"), list):
+            robot["package_dirs"] = [absolute(d) for d in robot["package_dirs"]]
+    return data
 
 
 def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | None = None,
@@ -626,11 +658,10 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
         origin = "<defaults>"
     elif isinstance(source, Mapping):
         data = source
-        origin = "<dict>"
+        origin = getattr(source, "source", "<dict>")
     elif isinstance(source, (str, os.PathLike)):
-        path = Path(source)
-        data = _read_toml(path)
-        origin = str(path)
+        data = read_config_file(source)
+        origin = data.source
     else:
         raise ConfigError(f"load_config takes a path, a mapping or None, got "
                           f"{type(source).__name__}.")
@@ -690,8 +721,6 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
                                          source=origin)
-    if isinstance(source, (str, os.PathLike)):
-        kwargs["robot"] = _beside(kwargs["robot"], Path(source).parent)
     if missing is not None:
         raise missing
     return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))

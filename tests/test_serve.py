@@ -58,7 +58,7 @@ def lasa():
 @pytest.fixture
 def served(tmp_path):
     memory = tmp_path / "memory.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False)
+    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
     try:
         with page_client(classroom) as client:
             yield client, classroom, memory
@@ -144,7 +144,7 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
     lasa = {d.key: d for d in load_lasa(shapes)}
     cfg = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.8,
                                  "unknown_below": 0.8, "confirm_rewards": True}}
-    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False)
+    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False, protocol="paper")
     novel = None
     with page_client(classroom) as client:
         for shape in shapes:
@@ -254,7 +254,7 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
     assert r.status_code == 404 and "simulator" in r.json()["error"]
     pytest.importorskip("pybullet")
     cfg = {**CONFIG, "simulator": {"name": "pybullet"}}
-    classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False)
+    classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False, protocol="paper")
     with page_client(classroom) as sim:
         sim.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
         answer = sim.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}
@@ -266,7 +266,7 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
 
 
 def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
-    classroom = build_classroom(tmp_path / "w.npz", CONFIG)        # worker=True
+    classroom = build_classroom(tmp_path / "w.npz", CONFIG, protocol="paper")   # a worker
     try:
         assert type(classroom.agent.perceptual_model).__name__ == "WorkerModel"
         with page_client(classroom) as client:
@@ -478,7 +478,7 @@ def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
     exported = client.get("/api/export")
     assert exported.status_code == 200
     assert "attachment" in exported.headers["content-disposition"]
-    fresh = build_classroom(tmp_path / "fresh.npz", CONFIG, worker=False)
+    fresh = build_classroom(tmp_path / "fresh.npz", CONFIG, worker=False, protocol="paper")
     try:
         with page_client(fresh) as other:
             for bad in (b"", b"PK\x03\x04 not a zip", b"\x80\x04\x95 pickle"):
@@ -507,7 +507,7 @@ def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
     target.parent.mkdir()
     link = tmp_path / "link.npz"
     link.symlink_to(target)
-    classroom = build_classroom(link, CONFIG, worker=False)
+    classroom = build_classroom(link, CONFIG, worker=False, protocol="paper")
     try:
         # another writer of the same file, by any path, is refused
         with pytest.raises(MemoryLockedError, match="iloci serve, pid"):
@@ -549,7 +549,7 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
     import sys
 
     memory = tmp_path / "m.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False)
+    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
     try:
         with page_client(classroom) as client:
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
@@ -569,3 +569,27 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
         classroom.close()
     # released: teach goes on from the served memory
     assert cli("teach", "--memory", str(memory), "Angle/0").returncode == 0
+
+
+def test_the_interactive_protocol_is_the_default_where_the_config_is_silent(tmp_path):
+    from iloci.commands.teach import INTERACTIVE
+
+    classroom = build_classroom(tmp_path / "a.npz", CONFIG, worker=False)
+    try:
+        learner = classroom.agent.config.learner
+        assert all(getattr(learner, k) == v for k, v in INTERACTIVE.items())
+    finally:
+        classroom.close()
+    own = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.0}}
+    classroom = build_classroom(tmp_path / "b.npz", own, worker=False)
+    try:
+        assert classroom.agent.config.learner.novelty_below == 0.0     # the config's word
+        assert classroom.agent.config.learner.unknown_below == 0.8
+    finally:
+        classroom.close()
+    classroom = build_classroom(tmp_path / "c.npz", CONFIG, worker=False, protocol="paper")
+    try:
+        assert classroom.agent.config.learner.novelty_below == 0.0
+        assert classroom.agent.config.learner.confirm_rewards is False
+    finally:
+        classroom.close()

@@ -122,3 +122,91 @@ def test_relative_urdf_is_read_beside_the_config_from_any_folder(tmp_path, monke
     monkeypatch.chdir(tmp_path)
     assert load_config(saved).robot.urdf == cfg.robot.urdf
     assert np.isfinite(check_robot(load_config(saved).robot).lower).all()
+
+
+# -- size: a huge stroke ------------------------------------------------------------------
+
+def _stroke(n: int, seed: int = 0) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n)
+    rng = np.random.default_rng(seed)
+    return np.column_stack([np.cos(6 * t) * (1 + t), np.sin(4 * t)]) + \
+        rng.normal(0.0, 0.002, (n, 2))
+
+
+def test_a_huge_stroke_is_read_in_linear_time_close_to_the_exact_fit(monkeypatch):
+    import iloci.sensorimotor.preprocess as pp
+    from scipy.ndimage import gaussian_filter1d
+
+    xy = _stroke(pp.POOL_ABOVE + 10_000)
+    # the path's Gaussian by FFT above FFT_ABOVE: scipy's direct convolution's result
+    sigma = pp.PRESMOOTH * len(xy)
+    assert np.allclose(pp._gaussian(xy, sigma), gaussian_filter1d(xy, sigma, axis=0,
+                                                                  mode="nearest"),
+                       rtol=0, atol=1e-12)
+    pooled = pp.resample_path(xy)
+    monkeypatch.setattr(pp, "POOL_ABOVE", 10**12)
+    exact = pp.resample_path(xy)
+    assert np.abs(pooled - exact).max() < 1e-4 * np.ptp(exact, axis=0).max()
+
+
+def test_beyond_the_maximum_a_stroke_is_refused_before_any_work(tmp_path, monkeypatch):
+    import iloci.sensorimotor.preprocess as pp
+    from iloci import Demonstration
+    from iloci.data import load_trajectory
+    from iloci.errors import InvalidDemonstrationError
+    from iloci.sensorimotor.robots import NAO_PLANE
+
+    line = np.linspace(0.0, 1.0, pp.MAX_POINTS + 1)
+    demo = Demonstration(positions=np.column_stack([line, line]), shape="huge")
+    with pytest.raises(InvalidDemonstrationError, match="2,000,001 samples; iloci reads at "
+                       "most 2,000,000.*Downsample"):
+        pp.preprocess(demo, plane=NAO_PLANE)
+    monkeypatch.setattr(pp, "MAX_POINTS", 500)
+    f = tmp_path / "long.csv"
+    np.savetxt(f, _stroke(600), delimiter=",", header="x,y", comments="")
+    with pytest.raises(InvalidDemonstrationError, match="long.csv .about 601 lines. has 600"):
+        load_trajectory(f)
+
+
+def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypatch):
+    import iloci.data.files as files
+    from iloci.data import load_trajectory
+    from iloci.errors import InvalidDemonstrationError
+
+    rows = np.column_stack([np.arange(5000) * 0.01, _stroke(5000)])
+    f = tmp_path / "big.csv"
+    np.savetxt(f, rows, delimiter=";", header="time_ms;pos_x;pos_y", comments="", fmt="%.7g")
+    fast = load_trajectory(f)
+    monkeypatch.setattr(files, "_SAMPLE", 10**12)  # dialect from the whole file: no fast path
+    slow = load_trajectory(f)
+    assert np.array_equal(fast.positions, slow.positions)
+    assert np.array_equal(fast.times, slow.times) and fast.times[1] == pytest.approx(1e-5)
+    monkeypatch.undo()
+    lines = f.read_text().splitlines()
+    lines[4001] = "40.0;0.5;abc"
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InvalidDemonstrationError, match=r"line 4002, column 'pos_y': 'abc'"):
+        load_trajectory(f)
+    lines[4001] = "0.5;0.5;0.5"
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InvalidDemonstrationError, match=r"line 4002: time 0.0005 is not after"):
+        load_trajectory(f)
+
+
+def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
+    import iloci.progress as progress
+    import iloci.sensorimotor.preprocess as pp
+    from iloci import Demonstration
+    from iloci.sensorimotor.robots import NAO_PLANE
+
+    monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
+    monkeypatch.setattr(progress, "_EVERY", 0.0)
+    seen = []
+    demo = Demonstration(positions=_stroke(pp.POOL_ABOVE + 1), shape="long")
+    with progress.progress_sink(lambda what, f, s: seen.append((what, f))):
+        pp.preprocess(demo, plane=NAO_PLANE)
+    assert seen[0][0] == f"reading the drawing long/0 ({pp.POOL_ABOVE + 1:,} samples)"
+    fractions = [f for _, f in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 3
+    pp.preprocess(demo, plane=NAO_PLANE)  # nobody listening: nothing shown, nothing kept
+    assert len(seen) == len(fractions)

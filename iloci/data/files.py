@@ -255,7 +255,7 @@ def _rows(text: str, delimiter: str | None) -> list[tuple[int, list[str]]]:
     out = []
     try:
         for fields in reader:
-            if fields and any(f.strip() for f in fields):
+            if fields and "".join(fields).strip():
                 out.append((reader.line_num, fields))
     except csv.Error as exc:
         raise InvalidDemonstrationError(f"line {reader.line_num}: {exc}") from None
@@ -312,13 +312,48 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
         raw = p.read_bytes()
     except OSError as exc:
         raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror}.") from None
+    from iloci.progress import long_step
+    from iloci.sensorimotor.preprocess import MAX_POINTS, check_size
+    lines = raw.count(b"\n")
+    if lines > MAX_POINTS + 1:  # before any parsing: the file is refused at once
+        check_size(lines - 1, f"{p.name} (about {lines:,} lines)")
+    if len(raw) < 1_000_000:  # read in well under a second
+        return _parse_csv(raw, p, lambda fraction: None)
+    with long_step(f"reading {p.name} ({lines:,} lines)") as tell:
+        return _parse_csv(raw, p, tell)
+
+
+def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
+               ) -> tuple[np.ndarray, np.ndarray | None]:
     text, encoding = _decode(raw, p.name)
-    delimiter, decimal_comma = _dialect(text)
+    # a big file's dialect is found on its first 64 kB (whole lines): the rest is
+    # checked row by row below, with the line named
+    sample = text if len(text) <= _SAMPLE else text[:text.rfind("\n", 0, _SAMPLE) + 1] or text
+    delimiter, decimal_comma = _dialect(sample)
     how = _describe_dialect(delimiter, decimal_comma, encoding)
+    tell(0.1)
+    head = _rows(sample, delimiter) if sample is not text else None
+    if head and not _numeric_rows(head[:1], decimal_comma):
+        head_names = [c.strip() for c in head[0][1]]
+        cols = _columns(head_names, len(head_names), p.name, how)
+        body = text
+        for _ in range(head[0][0]):  # the body starts after the header's line
+            body = body[body.find("\n") + 1:]
+        values = _loadtxt(body, delimiter, decimal_comma, len(head_names))
+        if values is not None:
+            tell(0.9)
+            positions = values[:, [cols["x"], cols["y"]]]
+            if cols["t"] is None:
+                return positions, None
+            times = values[:, cols["t"]] * cols["unit"]
+            if np.all(np.diff(times) > 0):
+                return positions, times
+            # a time out of order: read again below, to name its line
     try:
         rows = _rows(text, delimiter)
     except InvalidDemonstrationError as exc:
         raise InvalidDemonstrationError(f"{p.name}: {exc} ({how}).") from None
+    tell(0.5)
     if not rows:
         raise InvalidDemonstrationError(f"{p.name}: the file holds no rows of numbers.")
     header: list[str] | None = None
@@ -337,7 +372,7 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
                        for i in range(width)]
     used = [c for c in (cols["t"], cols["x"], cols["y"]) if c is not None]
     values = np.empty((len(rows), width), dtype=np.float64)
-    lines = [line for line, _ in rows]
+    tell(0.7)
     for r, (line, fields) in enumerate(rows):
         for c in used:
             v = _number(fields[c], decimal_comma)
@@ -354,8 +389,36 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
     times = None
     if cols["t"] is not None:
         times = values[:, cols["t"]] * cols["unit"]
-        _check_times(times, [f"line {n}" for n in lines], p.name)
+        _check_times(times, [f"line {line}" for line, _ in rows], p.name)
     return positions, times
+
+
+#: Characters of a CSV file its dialect is found on (all of a smaller file).
+_SAMPLE = 65_536
+
+
+def _loadtxt(body: str, delimiter: str | None, decimal_comma: bool, width: int
+             ) -> np.ndarray | None:
+    """A big file's rows of numbers after its header, read by numpy's C parser: (N, width).
+
+    None whenever the rows are not plainly ``width`` finite numbers each (a quote, a
+    decimal comma, a blank cell, a word, NaN, a row of another width, ``1_000``
+    which Python reads and :func:`_number` does not): the row-by-row reading then
+    takes over and names the line at fault.
+    """
+    if delimiter is None or decimal_comma or '"' in body or "_" in body:
+        return None
+    import warnings
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # numpy's "empty input" warning
+            values = np.loadtxt(io.StringIO(body), delimiter=delimiter, comments=None,
+                                ndmin=2, dtype=np.float64)
+    except ValueError:
+        return None
+    if values.shape[1] != width or len(values) < 3 or not np.isfinite(values).all():
+        return None
+    return values
 
 
 def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[str, Any]:

@@ -66,7 +66,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import errno
 import hmac
 import json
 import logging
@@ -243,18 +242,10 @@ class _Turn:
 
 
 def _save_failure(path: Path, exc: OSError) -> str:
-    why = exc.strerror or str(exc)
-    if exc.errno in (errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", -1)):
-        what = "the disk is full (or the file size limit is reached)"
-    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        what = "it may not be written (permissions, or a read-only disk)"
-    else:
-        what = "the system refused"
-    target = os.path.realpath(path)
-    where = str(path) if target == str(path) else f"{path} (a link to {target})"
-    return (f"could not save the memory to {where}: {what} ({why}). The file still holds "
-            "the memory shown here, from before this step; this step was not learned. "
-            "Free some space or fix the permissions, then do it again.")
+    from iloci.progress import why_not_saved
+    return (f"{why_not_saved(path, exc)} The file still holds the memory shown here, from "
+            "before this step; this step was not learned. Free some space or fix the "
+            "permissions, then do it again.")
 
 
 class Classroom:

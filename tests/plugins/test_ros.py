@@ -68,6 +68,8 @@ def ros_env(tmp_path_factory):
         time.sleep(0.5)
     os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME")})
     yield env
+    if rospy.core.is_initialized():   # this process's test node, before its master goes
+        rospy.signal_shutdown("iloci-ros tests done")
     os.killpg(core.pid, 15)
     core.wait(timeout=30)
 
@@ -221,3 +223,21 @@ def test_drawing_guess_feedback_over_a_real_roscore(ros_env, memory, tmp_path):
             os.killpg(node.pid, 9)
             out, errs = node.communicate()
     assert "iloci ros: node /iloci" in errs, errs
+
+
+def test_messages_convert_to_drawings():
+    from geometry_msgs.msg import Point32, PolygonStamped
+    from iloci_ros.node import path_to_drawing, polygon_to_drawing
+    xy = np.array([[0.0, 0.0], [1.0, 0.5], [2.0, 2.0]])
+    msg = _path_msg(xy)
+    positions, times = path_to_drawing(msg)
+    assert np.array_equal(positions, xy) and times is None       # no stamps: no times
+    for i, pose in enumerate(msg.poses):
+        pose.header.stamp = rospy.Time.from_sec(100 + 0.1 * i)
+    positions, times = path_to_drawing(msg)
+    np.testing.assert_allclose(times, [0.0, 0.1, 0.2], atol=1e-6)
+    poly = PolygonStamped()
+    poly.polygon.points = [Point32(x=float(x), y=float(y), z=0.0) for x, y in xy]
+    positions, times = polygon_to_drawing(poly)
+    np.testing.assert_allclose(positions, xy)
+    assert times is None

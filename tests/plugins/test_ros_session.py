@@ -75,3 +75,36 @@ def test_a_bad_drawing_keeps_the_pending_answer(lasa):
         session.drawing(np.zeros((30, 2)))
     assert session.pending is guess
     assert isinstance(session.feedback(guess.answer_id, -1), Placed)
+
+
+def test_every_feedback_twice_and_some_late_leaves_the_memory_of_each_once(lasa):
+    """A stack that delivers every yes/no twice, and replays old ones late, learns what one
+    that sent each once learns: the duplicates and late ones are refused."""
+    stream = [lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1", "Angle/1", "GShape/2")]
+
+    def teach(bouncy: bool):
+        session = TeachingSession(iloci.build(SETTINGS))
+        sent, refused, resent = [], 0, 0
+        for demo in stream:
+            step = session.drawing(demo.positions)
+            while isinstance(step, Guess):
+                right = {"c1": "GShape", "c2": "Angle"}.get(step.concept) == demo.shape
+                value = 1 if right else -1
+                nxt = session.feedback(step.answer_id, value)
+                sent.append((step.answer_id, value))
+                if bouncy:
+                    for answer_id, v in [(step.answer_id, value), *sent[:2]]:  # twice, late
+                        resent += 1
+                        try:
+                            session.feedback(answer_id, v)
+                        except StaleAnswerError:
+                            refused += 1
+                step = nxt
+        return session.agent.memory, refused, resent
+
+    once, _, _ = teach(False)
+    twice, refused, resent = teach(True)
+    assert refused == resent > 0                   # every duplicate and late one refused
+    assert entries_equal(once.entries, twice.entries)
+    assert (once.demonstrations_seen, once.concepts()) == (twice.demonstrations_seen,
+                                                          twice.concepts())

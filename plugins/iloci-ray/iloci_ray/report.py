@@ -121,6 +121,12 @@ def write_report(out: str | Path, spec: SweepSpec, records: Sequence[dict[str, A
              f"{info['reused']} found stored (not recomputed); wall {info['wall_seconds']:.0f} s"
              f" on Ray ({info['address'] or 'started on this machine'}, "
              f"{info['jobs']} at once).", "",
+             *([f"**{len(info['failed'])} run(s) failed** (after {info['retries']} "
+                "retries for a worker that died; not in the table below); run the same "
+                "command again to resume: " + "; ".join(
+                    f"run {f['key']} ({_label(f['setting'])}, seed {f['seed']}, fold "
+                    f"{f['fold']}): {f['error']}" for f in info["failed"]), ""]
+               if info.get("failed") else []),
              "Each metric: the mean over a seed's folds, then mean ± std over the seeds. "
              "Feedbacks: the teacher's +1/-1 answers in a fold's learning phase (a "
              "demonstration shown before any concept is learned gets none); rewarded: the "
