@@ -68,6 +68,8 @@ def ros_env(tmp_path_factory):
         time.sleep(0.5)
     os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME")})
     yield env
+    if rospy.core.is_initialized():   # this process's test node, before its master goes
+        rospy.signal_shutdown("iloci-ros tests done")
     os.killpg(core.pid, 15)
     core.wait(timeout=30)
 
