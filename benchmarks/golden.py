@@ -84,6 +84,9 @@ def record(config: dict[str, Any], baseline: bool, jobs: int) -> dict[str, Any]:
                                            for name, part in robust.items()})
         folds.append(fields)
     kept = {k: v for k, v in metrics.items() if k not in VOLATILE}
+    if isinstance(kept.get("folds"), list):
+        kept["folds"] = [{k: v for k, v in f.items() if k not in VOLATILE_FOLD}
+                         for f in kept["folds"]]
     if "baseline" in kept:
         kept["baseline"] = {k: v for k, v in kept["baseline"].items() if k != "seconds"}
     return canonical({"metrics": kept, "folds": folds})

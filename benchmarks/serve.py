@@ -57,6 +57,12 @@ SHAPES = ["GShape", "Angle", "Sine", "Leaf_1", "CShape", "JShape", "Snake", "WSh
           "Trapezoid", "Worm", "Spoon", "Zshape"]
 
 
+
+def judge(client, answer, value):
+    """POST /api/feedback judging ``answer`` (its turn and its id) with ``value``."""
+    return client.post("/api/feedback", json={"turn": answer["turn"], "answer": answer["id"],
+                                              "value": value})
+
 def stroke(demo, n: int = 120, seconds: float = 1.3) -> list[list[float]]:
     """A LASA demonstration as a mouse stroke: pixels in a 400 px box, y up, accelerating."""
     pos = demo.positions[np.linspace(0, len(demo.positions) - 1, n).astype(int)]
@@ -150,8 +156,7 @@ def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
                     answer = client.post("/api/observe", json={"points": stroke(demo)}
                                          ).json()["answer"]
                     t0 = time.perf_counter()
-                    out = client.post("/api/feedback", json={"turn": answer["turn"],
-                                                             "value": 1}).json()
+                    out = judge(client, answer, 1).json()
                     seconds = time.perf_counter() - t0
                     if "outcome" in out:
                         feedback.append({"request_seconds": round(seconds, 2),
@@ -200,7 +205,7 @@ async def _learn_with_loop(agent, demos, realtime: bool
     for demo in demos:
         turn = await agent.aobserve(demo)
         while not turn.done:
-            await turn.afeedback(oracle.feedback(demo, turn.answer.response))
+            await turn.afeedback(oracle.feedback(demo, turn.answer.response), turn.answer.id)
         actions.append(turn.outcome.action)
     seconds = time.perf_counter() - t0
     stop.set()

@@ -157,6 +157,8 @@ class Agent:
         #: Called with each RehearsalProgress (see Learner); None for none.
         self.on_progress: Callable[[Any], None] | None = None
         self._worker: Any = None
+        # the turn of the last observe(): Agent.feedback judges its answers
+        self._turn: Any = None
         # one learning step at a time (threads, asyncio.to_thread)
         self._lock = threading.RLock()
 
@@ -254,7 +256,7 @@ class Agent:
         Turn
             ``turn.answer``: the guess (concept, confidence, attempt, the
             drawing in the demonstration's frame, joint path, dt, start
-            posture) to judge with ``turn.feedback(+1 | -1)``; or, for the
+            posture) to judge with ``turn.feedback(+1 | -1, turn.answer.id)``; or, for the
             first demonstration of an empty memory, ``turn.outcome`` at once
             (a new concept, nothing asked).
 
@@ -273,7 +275,62 @@ class Agent:
             seq, start = self._encode(motion)
             frame = TeacherFrame.of(demo, motion.plane_points)
             turn = self.learner.observe(demo, seq, start, motion.dt, frame)
+            self._turn = turn
         return turn
+
+    @property
+    def pending(self):
+        """The answer of the last :meth:`observe` waiting for a feedback, or ``None``.
+
+        Returns
+        -------
+        Answer or None
+            Its :attr:`~iloci.concepts.learner.Answer.id` is what
+            :meth:`feedback` must name.
+        """
+        turn = self._turn
+        return None if turn is None else turn.answer
+
+    def feedback(self, value: int, answer_id: Any):
+        """Judge the answer ``answer_id`` of the last :meth:`observe`: +1 or -1.
+
+        For event-driven stacks (buttons, ROS topics, web hooks) that keep
+        no turn object: the feedback is routed by the answer's id.
+        ``turn.feedback(value, answer_id)`` on the turn :meth:`observe`
+        returned does the same.
+
+        Parameters
+        ----------
+        value : int
+            +1 (reward) or -1 (punishment).
+        answer_id : str or Answer
+            :attr:`Answer.id <iloci.concepts.learner.Answer.id>` of the
+            answer judged.
+
+        Returns
+        -------
+        Answer or LearnOutcome
+            The next answer, or the demonstration's place in the memory.
+
+        Raises
+        ------
+        StaleAnswerError
+            ``answer_id`` is not the pending answer's (a duplicate, a late
+            feedback, one for an earlier turn, or no turn is under way);
+            nothing changed.
+        FeedbackError
+            ``value`` is not +1 or -1; nothing changed.
+        """
+        turn = self._turn
+        if turn is None:
+            from iloci.errors import StaleAnswerError
+            shown = getattr(answer_id, "id", answer_id)
+            raise StaleAnswerError(
+                f"answer {shown!r} is not waiting for a feedback (no demonstration has been "
+                "observed); the feedback was refused and nothing changed. Call "
+                "agent.observe(demo) and judge the answer it shows.",
+                answer_id=str(shown), pending=None)
+        return turn.feedback(value, answer_id)
 
     async def aobserve(self, demo: Demonstration):
         """:meth:`observe` from asyncio code: runs in a thread, the event loop stays free.
@@ -312,14 +369,8 @@ class Agent:
             An observer hook raised after the demonstration was learned
             (its ``outcome`` says how); do not teach it again.
         """
-        from iloci.concepts.learner import show_to_teacher
-        from iloci.interfaces import check_feedback
-        show_to_teacher(self.teacher, demo)
-        turn = self.observe(demo, motion)
-        while turn.answer is not None:
-            value = self.teacher.feedback(demo, turn.answer.response)
-            turn.feedback(check_feedback(value, self.teacher))
-        return turn.outcome
+        from iloci.concepts.learner import run_turn
+        return run_turn(self.teacher, demo, lambda: self.observe(demo, motion))
 
     def teach(self, demos: Iterable[Any], *,
               on_change: Callable[[Any], None] | None = None) -> TeachReport:

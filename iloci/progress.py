@@ -40,6 +40,7 @@ __all__ = [
     "lock_path_of",
     "memory_lock",
     "saving",
+    "why_not_saved",
     "item_digest",
     "long_step",
     "progress_sink",
@@ -115,6 +116,21 @@ def resume_point(record: Any, digests: Sequence[str]) -> int:
     if not isinstance(n, int) or isinstance(n, bool) or not 0 < n <= len(digests):
         return 0
     return n if record.get("digest") == prefix_digest(digests, n) else 0
+
+
+def why_not_saved(path: str | os.PathLike[str], exc: OSError) -> str:
+    """``"could not save the memory to PATH: the disk is full (...)."``: a failed save in words."""
+    import errno
+    why = exc.strerror or str(exc)
+    if exc.errno in (errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", -1)):
+        what = "the disk is full (or the file size limit is reached)"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        what = "it may not be written (permissions, or a read-only disk)"
+    else:
+        what = "the system refused"
+    target = os.path.realpath(path)
+    where = str(path) if target == os.fspath(path) else f"{path} (a link to {target})"
+    return f"could not save the memory to {where}: {what} ({why})."
 
 
 #: Memory locks this process holds: real path of the memory -> (lock, holder record).

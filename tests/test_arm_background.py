@@ -108,7 +108,7 @@ def test_an_attached_background_arm_does_not_hold_observe_or_feedback(taught, tm
         assert motion is not None and not motion.done()
         assert turn.answer.response.execution is None     # drawn path: the generated one
         right = turn.answer.concept == "c2"
-        step = turn.feedback(1 if right else -1)       # returns too
+        step = turn.feedback(1 if right else -1, turn.answer.id)   # returns too
         if not right:
             assert executor.last_motion is not motion   # the next guess's motion, queued
         arm.gate.set()

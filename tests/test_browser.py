@@ -55,11 +55,11 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def serving(memory, config=CONFIG):
+def serving(memory, config=CONFIG, protocol="paper"):
     """``iloci serve`` of ``memory`` in a thread of this process: yields (url, classroom)."""
     import uvicorn
 
-    classroom = build_classroom(memory, config)
+    classroom = build_classroom(memory, config, protocol=protocol)
     port = free_port()
     srv = uvicorn.Server(uvicorn.Config(create_app(classroom), host="127.0.0.1", port=port,
                                         log_level="warning"))

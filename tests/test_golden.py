@@ -90,7 +90,7 @@ def run_session(learner: dict[str, Any], slips: set[tuple[str, int]], tmp: Path
                 "confidence": a.confidence, "distance": a.distance, "entry": a.entry,
                 "novel": a.response.novel, "dt": a.dt, "drawing": digest(a.drawing),
                 "joint_path": digest(a.joint_path)}, "feedback": fb})
-            turn.feedback(fb)
+            turn.feedback(fb, a.id)
         out = turn.outcome
         if out.action == "new_concept":
             taught[out.concept] = key.split("/")[0]

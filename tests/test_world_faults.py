@@ -161,7 +161,8 @@ def test_beyond_the_maximum_a_stroke_is_refused_before_any_work(tmp_path, monkey
     with pytest.raises(InvalidDemonstrationError, match="2,000,001 samples; iloci reads at "
                        "most 2,000,000.*Downsample"):
         pp.preprocess(demo, plane=NAO_PLANE)
-    monkeypatch.setattr(pp, "MAX_POINTS", 500)
+    import iloci.validation as validation       # the one place the maximum lives
+    monkeypatch.setattr(validation, "MAX_POINTS", 500)
     f = tmp_path / "long.csv"
     np.savetxt(f, _stroke(600), delimiter=",", header="x,y", comments="")
     with pytest.raises(InvalidDemonstrationError, match="long.csv .about 601 lines. has 600"):

@@ -38,7 +38,7 @@ never a mixture. Replacing a memory file keeps its permission bits.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 import hashlib
 import json
@@ -234,6 +234,84 @@ class Memory:
         while f"c{self.concept_count}" in used:
             self.concept_count += 1
         return f"c{self.concept_count}"
+
+    # -- transitions (the learning phase's changes, each with its invariant) -----
+    def found_label(self) -> tuple[str, Callable[[], None]]:
+        """The label of a concept about to be founded, and the undo of reserving it.
+
+        :meth:`new_concept_label`, with a function that gives the label back
+        (``concept_count`` as it was) when founding the concept fails.
+        """
+        before = self.concept_count
+        label = self.new_concept_label()
+
+        def undo() -> None:
+            self.concept_count = before
+        return label, undo
+
+    def strengthen(self, index: int, source: str) -> None:
+        """A rewarded demonstration within ``similarity_threshold`` of entry ``index``.
+
+        The entry's numSamples rises by one and ``source`` (the
+        demonstration's key) joins its sources; PBs, patterns and the
+        network are untouched (no rehearsal). Bumps :attr:`revision`.
+        """
+        e = self.entries[index]
+        e.num_samples += 1
+        e.sources = tuple(e.sources) + (source,)
+        self.revision += 1
+
+    def install(self, entries: list[Entry]) -> None:
+        """Replace every entry in one assignment (a rehearsal's result, once it succeeded).
+
+        Other threads see the old entries or the new ones, never a mix; a
+        rehearsal that fails installs nothing. Bumps :attr:`revision`.
+        """
+        self.entries = entries
+        self.revision += 1
+
+    def clustered(self, concept: str, clusterer: Any, *, k_cutoff: float,
+                  num_threshold: int) -> tuple[list[Entry], int, float]:
+        """The entries with ``concept``'s valid clusters replaced by their medoids.
+
+        Works on copies (the memory is unchanged; :meth:`install` the
+        entries once they are rehearsed). Each valid cluster
+        (:func:`~iloci.concepts.clustering.plan_clusters`) keeps its medoid,
+        now a prototype whose numSamples is the cluster's sum and whose
+        sources are every member's; the other members are dropped.
+
+        Returns
+        -------
+        entries : list of Entry
+        clustered : int
+            Valid clusters replaced.
+        d_cutoff : float
+            The cut the clusters were taken at (NaN below two entries).
+        """
+        from iloci.concepts import clustering
+        entries = [e.copy() for e in self.entries]
+        idx = [i for i, e in enumerate(entries) if e.concept == concept]
+        own = [entries[i] for i in idx]
+        plan = clustering.plan_clusters(
+            np.array([e.pb for e in own]), [e.num_samples for e in own],
+            [e.exemplar for e in own], clusterer=clusterer,
+            k_cutoff=k_cutoff, num_threshold=num_threshold)
+        if not plan.valid:
+            return entries, 0, plan.d_cutoff
+        drop: set[int] = set()
+        for members, med in zip(plan.valid, plan.medoids):
+            keep = own[med]
+            others = [own[j] for j in members if j != med]
+            keep.num_samples = sum(own[j].num_samples for j in members)
+            keep.sources = tuple(dict.fromkeys(
+                list(keep.sources) + [s for o in others for s in o.sources]))
+            keep.prototype = True
+            drop.update(idx[j] for j in members if j != med)
+        return [e for i, e in enumerate(entries) if i not in drop], len(plan.valid), plan.d_cutoff
+
+    def placed(self) -> None:
+        """One demonstration more was learned from (strengthened, exemplar or concept)."""
+        self.demonstrations_seen += 1
 
     def rename(self, concept: str, name: str) -> None:
         """Name a concept: every entry of ``concept`` is relabelled ``name``.

@@ -313,7 +313,7 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
     except OSError as exc:
         raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror}.") from None
     from iloci.progress import long_step
-    from iloci.sensorimotor.preprocess import MAX_POINTS, check_size
+    from iloci.validation import MAX_POINTS, check_size
     lines = raw.count(b"\n")
     if lines > MAX_POINTS + 1:  # before any parsing: the file is refused at once
         check_size(lines - 1, f"{p.name} (about {lines:,} lines)")

@@ -48,32 +48,15 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 from iloci.sensorimotor.robots import DrawingPlane
-from iloci.validation import check_array
+from iloci.validation import MAX_POINTS, check_array, check_size
 
 __all__ = ["MAX_POINTS", "POLYORDER", "PRESMOOTH", "check_size", "densify", "fit_to_plane",
            "local_linear", "path_parameter",
            "preprocess", "resample", "resample_path", "smooth", "trim_rests"]
 
-#: Most samples one demonstration may have: 2,000,000 (a pen sampled at 1 kHz for
-#: 33 minutes). Reading a drawing takes time linear in its samples, about 3 s per
-#: million on one core (``benchmarks/results/preprocess.json``); more is refused by
-#: :func:`preprocess` and :func:`iloci.data.load_trajectory` with a clear error.
-MAX_POINTS = 2_000_000
-
-
 #: Drawings of at least this many samples show their progress (:func:`iloci.progress.long_step`)
 #: when reading them takes over a second; smaller ones take far less.
 SHOWN_ABOVE = 20_000
-
-
-def check_size(n: int, what: str) -> None:
-    """Raise InvalidDemonstrationError when ``n`` samples exceed :data:`MAX_POINTS`."""
-    if n > MAX_POINTS:
-        raise InvalidDemonstrationError(
-            f"{what} has {n:,} samples; iloci reads at most {MAX_POINTS:,} per demonstration "
-            "(iloci.sensorimotor.preprocess.MAX_POINTS). Downsample it first (every k-th "
-            "sample keeps the drawing: 50 points along its path are all the robot reads), "
-            "or split a recording of several drawings into one file each.")
 
 
 #: Order of the Savitzky-Golay polynomial.
