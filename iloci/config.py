@@ -1,14 +1,14 @@
 """Configuration: TOML -> validated, frozen dataclasses.
 
 Every value has a default; the defaults are the paper's settings. A config
-names components (``name = "torch-rnnpb"``), never import paths. Each
+names components (``name = "native-rnnpb"``), never import paths. Each
 component section's other keys are validated by that component's own schema
 (a light dataclass the plugin registers) before anything heavy is imported.
 
 Example::
 
     [perceptual_model]
-    name = "torch-rnnpb"
+    name = "native-rnnpb"
     hidden = 60
     [clusterer]
     name = "sklearn"
@@ -47,12 +47,11 @@ __all__ = [
 
 #: The component each section names when a config leaves its name out.
 DEFAULT_NAMES = {
-    # torch-rnnpb: with AVX2 or AVX-512 its native training kernel is the
-    # fastest training step measured (CPU per paper-size step: AVX-512 0.47 ms,
-    # AVX2 0.57 ms, jax-rnnpb 1.46 ms; its portable C path, 1.34 ms, is about
-    # as fast as jax), and its recognition is faster than jax's everywhere
+    # native-rnnpb: its C kernel is the fastest training step measured and
+    # gives the same bits on every CPU; it needs numpy only (no torch), so
+    # the default config installs in seconds and runs on Python 3.11 to 3.13
     # (benchmarks/results/rnnpb_speed.json, step_ms_by_kernel)
-    "perceptual_model": "torch-rnnpb",
+    "perceptual_model": "native-rnnpb",
     "clusterer": "scipy",
     "teacher": "oracle",
     "ik": "pinocchio",

@@ -32,6 +32,7 @@ __all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
 #: than "unknown name". The distributions live under ``plugins/`` in iloci's
 #: source tree.
 FIRST_PARTY = {
+    ("perceptual_model", "native-rnnpb"): "iloci-native",
     ("perceptual_model", "torch-rnnpb"): "iloci-torch",
     ("perceptual_model", "jax-rnnpb"): "iloci-jax",
     ("clusterer", "scipy"): "iloci-scipy",

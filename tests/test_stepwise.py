@@ -1,6 +1,6 @@
 """The step-wise learning phase (Agent.observe / Turn.feedback), its worker process, rename.
 
-Real RNNPB (torch-rnnpb, few epochs), real IK, real LASA demonstrations.
+Real RNNPB (native-rnnpb, few epochs), real IK, real LASA demonstrations.
 ``Agent.learn`` with a teacher and the same feedback given step by step
 must do exactly the same thing: they are one code path.
 """
@@ -23,14 +23,14 @@ from iloci.concepts.learner import show_to_teacher
 from iloci.errors import FeedbackError, InvalidInputError, MissingBackendError, StaleAnswerError
 from iloci.sensorimotor.frames import TeacherFrame
 
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 EPOCHS = 30
 
 
 def config() -> dict:
-    return {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+    return {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
