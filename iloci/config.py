@@ -27,6 +27,7 @@ import re
 import tomllib
 from typing import Any
 
+from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
 from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError
 from iloci.interfaces import COMPONENT_KINDS
 from iloci.registry import Registry, params_to_dict, validate_dataclass, validate_params
@@ -394,7 +395,6 @@ class DataConfig:
         if self.path and self.shapes:
             raise ValueError("shapes picks LASA shapes; it cannot be combined with path "
                              "(your own data set)")
-        from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
         known = LASA_SHAPES + MULTI_MODEL_SHAPES
         for shape in self.shapes:
             if shape not in known:

@@ -112,8 +112,11 @@ def run(args: argparse.Namespace) -> int:
         dataset = load_dataset(config.data.path)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
+        names = list(dataset.concepts)
+        shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
         what = (f"data set {dataset.name} ({len(dataset.samples)} samples, "
-                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} writers)")
+                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} writers; "
+                f"concepts: {shown})")
     else:
         what = "LASA"
     split = ", writer-disjoint" if config.evaluation.split == "writers" else ""
