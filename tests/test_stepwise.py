@@ -222,7 +222,7 @@ def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(la
             agent.learn(d)
         assert same_state(state(agent), state(local))   # state() read from the worker
         recognized = agent.recognize(lasa["GShape/2"])
-    assert pid is not None and type(agent.perceptual_model).__name__ == "TorchRNNPB"
+    assert pid is not None and type(agent.perceptual_model) is type(local.perceptual_model)
     assert entries_equal(agent.memory.entries, local.memory.entries)
     assert same_state(state(agent), state(local))
     assert recognized.concept == local.recognize(lasa["GShape/2"]).concept

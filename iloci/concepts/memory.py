@@ -51,6 +51,7 @@ import zlib
 
 import numpy as np
 
+from iloci._version import __version__
 from iloci.data.files import write_atomic
 from iloci.errors import InvalidInputError, MemoryFileError
 from iloci.sensorimotor.encoding import SensorimotorEncoder
@@ -534,7 +535,6 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
             raise InvalidInputError(f"network state {k!r} is an object array; states must "
                                     "be numeric (no pickle).")
         arrays[f"net/{k}"] = a
-    from iloci._version import __version__
     header: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                               "iloci": __version__, "memory": meta, **dict(extra or {})}
     header["checksum"] = _checksum(header, arrays)

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci.data.files import load_trajectory
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
@@ -314,7 +315,6 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
     if problems:
         raise _fail(f"data set {p} has problems; nothing was learned:", problems,
                     "Fix them (or leave the files out) and run again.")
-    from iloci.data.files import load_trajectory
 
     demos: list[Demonstration] = []
     counter: Counter[str] = Counter()
