@@ -52,7 +52,7 @@ def _quality_config(row: str, seed: int) -> dict[str, Any]:
     import quality  # benchmarks/quality.py: its rows and base config
 
     from iloci.config import load_config
-    base = load_config({"perceptual_model": {"name": "torch-rnnpb"}}).to_dict()
+    base = load_config({"perceptual_model": {"name": "native-rnnpb"}}).to_dict()
     data = quality._merge(base, quality.ROWS[row])
     data.setdefault("evaluation", {})["seed"] = seed
     return data

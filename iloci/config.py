@@ -1,14 +1,14 @@
 """Configuration: TOML -> validated, frozen dataclasses.
 
 Every value has a default; the defaults are the paper's settings. A config
-names components (``name = "torch-rnnpb"``), never import paths. Each
+names components (``name = "native-rnnpb"``), never import paths. Each
 component section's other keys are validated by that component's own schema
 (a light dataclass the plugin registers) before anything heavy is imported.
 
 Example::
 
     [perceptual_model]
-    name = "torch-rnnpb"
+    name = "native-rnnpb"
     hidden = 60
     [clusterer]
     name = "sklearn"
@@ -27,6 +27,7 @@ import re
 import tomllib
 from typing import Any
 
+from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
 from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError
 from iloci.interfaces import COMPONENT_KINDS
 from iloci.registry import Registry, params_to_dict, validate_dataclass, validate_params
@@ -47,12 +48,11 @@ __all__ = [
 
 #: The component each section names when a config leaves its name out.
 DEFAULT_NAMES = {
-    # torch-rnnpb: with AVX2 or AVX-512 its native training kernel is the
-    # fastest training step measured (CPU per paper-size step: AVX-512 0.47 ms,
-    # AVX2 0.57 ms, jax-rnnpb 1.46 ms; its portable C path, 1.34 ms, is about
-    # as fast as jax), and its recognition is faster than jax's everywhere
+    # native-rnnpb: its C kernel is the fastest training step measured and
+    # gives the same bits on every CPU; it needs numpy only (no torch), so
+    # the default config installs in seconds and runs on Python 3.11 to 3.13
     # (benchmarks/results/rnnpb_speed.json, step_ms_by_kernel)
-    "perceptual_model": "torch-rnnpb",
+    "perceptual_model": "native-rnnpb",
     "clusterer": "scipy",
     "teacher": "oracle",
     "ik": "pinocchio",
@@ -395,7 +395,6 @@ class DataConfig:
         if self.path and self.shapes:
             raise ValueError("shapes picks LASA shapes; it cannot be combined with path "
                              "(your own data set)")
-        from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
         known = LASA_SHAPES + MULTI_MODEL_SHAPES
         for shape in self.shapes:
             if shape not in known:
@@ -540,15 +539,8 @@ class Config:
 _LINE_RE = re.compile(r"line (\d+)")
 
 
-def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
-    """The tables of a TOML file, read the one way every iloci file is read.
-
-    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
-    file, a directory and malformed TOML are each one :class:`ConfigError`
-    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
-    the kind of file.
-    """
-    path = Path(path)
+def _read_text(path: Path, what: str) -> str:
+    """The text of a TOML file (see :func:`read_toml`)."""
     try:
         raw = path.read_bytes()
         if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
@@ -571,6 +563,22 @@ def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, A
                           source=str(path)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read {what}: {exc.strerror}.", source=str(path)) from None
+    return text
+
+
+def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
+    """The tables of a TOML file, read the one way every iloci file is read.
+
+    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
+    file, a directory and malformed TOML are each one :class:`ConfigError`
+    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
+    the kind of file.
+    """
+    path = Path(path)
+    return _parse_toml(_read_text(path, what), path)
+
+
+def _parse_toml(text: str, path: Path) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -586,6 +594,12 @@ class ConfigData(dict[str, Any]):
     """
 
     source: str = "<dict>"
+    #: The iloci version that wrote the file (its ``# ... written by iloci X``
+    #: first line, as ``iloci config show`` writes it), "" when it says none.
+    written_by: str = ""
+
+
+_WRITTEN_BY_RE = re.compile(r"^#.*\bwritten by iloci ([0-9][^\s,;)]*)", re.MULTILINE)
 
 
 def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
@@ -599,8 +613,11 @@ def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
     sweep`` does with its base config).
     """
     path = Path(path)
-    data = ConfigData(read_toml(path))
+    text = _read_text(path, "config")
+    data = ConfigData(_parse_toml(text, path))
     data.source = str(path)
+    m = _WRITTEN_BY_RE.search(text[:2000])
+    data.written_by = m.group(1) if m else ""
     robot = data.get("robot")
     if isinstance(robot, dict):
         robot = data["robot"] = dict(robot)
@@ -662,6 +679,15 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     elif isinstance(source, (str, os.PathLike)):
         data = read_config_file(source)
         origin = data.source
+        from iloci._version import __version__, is_newer
+        if is_newer(data.written_by):
+            try:
+                return load_config(data, registry=registry, supplied=supplied)
+            except (ConfigError, UnknownComponentError) as exc:
+                raise ConfigError(
+                    f"written by iloci {data.written_by}, this is iloci {__version__}: upgrade "
+                    f"iloci (and its plugins) to read it, or remove what this version does not "
+                    f"know ({exc})", source=origin) from None
     else:
         raise ConfigError(f"load_config takes a path, a mapping or None, got "
                           f"{type(source).__name__}.")
@@ -833,4 +859,6 @@ def to_toml(config: Config) -> str:
     except TypeError as exc:
         raise ConfigError(f"cannot write the config as TOML: {exc}", source=config.source) \
             from None
-    return f"# iloci configuration (resolved from {config.source})\n\n{body}"
+    from iloci._version import __version__
+    return (f"# iloci configuration (resolved from {config.source}), written by iloci "
+            f"{__version__}\n\n{body}")

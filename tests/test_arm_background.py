@@ -17,11 +17,11 @@ import iloci
 from iloci.errors import InvalidInputError
 from iloci.sensorimotor.hardware import ArmExecutor, ArmMotion
 
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 EPOCHS = 30
-SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 

@@ -27,7 +27,7 @@ import pytest
 
 pytest.importorskip("starlette")
 pytest.importorskip("uvicorn")
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 sync_api = pytest.importorskip("playwright.sync_api")
 
@@ -37,7 +37,7 @@ from iloci.web.app import create_app  # noqa: E402
 
 EPOCHS = 30
 CONFIG = os.environ.get("ILOCI_SERVE_TEST_CONFIG") or {
-    "perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS, "recognition_steps": EPOCHS},
+    "perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS, "recognition_steps": EPOCHS},
     "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 #: Debian's chromium; a browser is never downloaded.
 CHROMIUM = os.environ.get("ILOCI_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"

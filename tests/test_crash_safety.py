@@ -72,7 +72,7 @@ def iloci_on_interaction(event):
 
 @pytest.mark.slow
 def test_rerun_resumes_and_ends_like_an_uninterrupted_run(tmp_path, cli):
-    pytest.importorskip("iloci_torch")
+    pytest.importorskip("iloci_native")
     pytest.importorskip("iloci_pinocchio")
     from iloci.concepts.memory import entries_equal, load_memory
     site = tmp_path / "site"
@@ -83,7 +83,7 @@ def test_rerun_resumes_and_ends_like_an_uninterrupted_run(tmp_path, cli):
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: crasher\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text("[iloci]\ncrasher = crasher\n")
     config = tmp_path / "c.toml"
-    config.write_text('[perceptual_model]\nname = "torch-rnnpb"\nhidden = 12\nepochs = 30\n'
+    config.write_text('[perceptual_model]\nname = "native-rnnpb"\nhidden = 12\nepochs = 30\n'
                       "[learner]\nrehearsal_epochs = 30\n")
     stream = ["GShape/0", "Sine/1", "GShape/2", "Sine/3"]
     whole, cut = tmp_path / "whole.npz", tmp_path / "cut.npz"

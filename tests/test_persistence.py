@@ -193,7 +193,7 @@ def test_save_creates_parent_directories_and_overwrites(tmp_path):
 # -- with a real network -------------------------------------------------------------
 
 #: The RNNPB back end under test (ILOCI_TEST_RNNPB=jax-rnnpb runs these on JAX).
-RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "torch-rnnpb")
+RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "native-rnnpb")
 
 SMALL_TOML = f"""
 [perceptual_model]
@@ -210,7 +210,8 @@ seed = 0
 @pytest.fixture(scope="module")
 def taught(tmp_path_factory):
     """An agent taught two concepts, saved to a file."""
-    pytest.importorskip({"torch-rnnpb": "torch", "jax-rnnpb": "jax"}.get(RNNPB, "torch"))
+    pytest.importorskip({"native-rnnpb": "iloci_native", "torch-rnnpb": "torch",
+                     "jax-rnnpb": "jax"}[RNNPB])
     pytest.importorskip("pinocchio")
     from iloci.data import load_lasa
     from iloci.errors import MissingBackendError
@@ -288,7 +289,8 @@ def _needs_default_back_ends():
     """The CLI below builds an agent from the default config (no --config)."""
     from iloci.config import DEFAULT_NAMES
     modules = {"jax-rnnpb": "iloci_jax", "torch-rnnpb": "iloci_torch",
-               "pinocchio": "iloci_pinocchio", "scipy": "iloci_scipy"}
+               "native-rnnpb": "iloci_native", "pinocchio": "iloci_pinocchio",
+               "scipy": "iloci_scipy"}
     for kind in ("perceptual_model", "ik", "clusterer"):
         name = DEFAULT_NAMES[kind]
         if name in modules:
@@ -331,7 +333,8 @@ class _HdbscanLike:
 def test_a_memory_recognizes_without_its_teaching_only_plugins(tmp_path):
     """Taught with a clusterer plugin that is then not installed: recognition still loads."""
     pytest.importorskip("iloci_scipy")
-    pytest.importorskip("torch")
+    pytest.importorskip({"native-rnnpb": "iloci_native", "torch-rnnpb": "torch",
+                         "jax-rnnpb": "jax"}[RNNPB])
     pytest.importorskip("pinocchio")
     from iloci.data import load_lasa
     from iloci.errors import NotLoadedError, UnknownComponentError

@@ -149,8 +149,8 @@ KEYS = ["name", "k_cutoff", "num_threshold", "similarity_threshold", "rehearsal_
         "train_fraction", "seed", "jobs", "hidden", "pb", "epochs", "learning_rate",
         "input_size", "pb_bound", "p", "concepts", "gravity", "tolerance", "max_error",
         "picture_dir", "dtype", "bogus"]
-NAMES = ["torch-rnnpb", "jax-rnnpb", "scipy", "sklearn", "oracle", "noisy", "pinocchio",
-         "pybullet", "mujoco", "none", "nope"]
+NAMES = ["native-rnnpb", "torch-rnnpb", "jax-rnnpb", "scipy", "sklearn", "oracle", "noisy",
+         "pinocchio", "pybullet", "mujoco", "none", "nope"]
 VALUES = st.deferred(lambda: st.one_of(
     st.integers(-2**70, 2**70), FLOATS, st.booleans(), st.text(max_size=6),
     st.sampled_from(NAMES + ["GShape", "Sine", "time", "arc_length", "float64"]),

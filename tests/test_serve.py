@@ -1,6 +1,6 @@
 """``iloci serve``: every HTTP endpoint and every bad input, through Starlette's TestClient.
 
-Real agent (torch-rnnpb, few epochs; pinocchio IK), real LASA shapes sent as
+Real agent (native-rnnpb, few epochs; pinocchio IK), real LASA shapes sent as
 a person's strokes would be: pixel coordinates, y up, at a pace unlike
 LASA's. The memory file must be untouched by every refused request.
 """
@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("starlette")
 pytest.importorskip("httpx")
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 from starlette.testclient import TestClient  # noqa: E402
@@ -26,7 +26,7 @@ from iloci.data import load_lasa  # noqa: E402
 from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, TOKEN_HEADER, create_app  # noqa: E402
 
 EPOCHS = 30
-CONFIG = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+CONFIG = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                "recognition_steps": EPOCHS},
           "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 

@@ -1,6 +1,6 @@
 """The step-wise learning phase (Agent.observe / Turn.feedback), its worker process, rename.
 
-Real RNNPB (torch-rnnpb, few epochs), real IK, real LASA demonstrations.
+Real RNNPB (native-rnnpb, few epochs), real IK, real LASA demonstrations.
 ``Agent.learn`` with a teacher and the same feedback given step by step
 must do exactly the same thing: they are one code path.
 """
@@ -23,14 +23,14 @@ from iloci.concepts.learner import show_to_teacher
 from iloci.errors import FeedbackError, InvalidInputError, MissingBackendError, StaleAnswerError
 from iloci.sensorimotor.frames import TeacherFrame
 
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 EPOCHS = 30
 
 
 def config() -> dict:
-    return {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+    return {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
@@ -248,7 +248,7 @@ def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(la
             agent.learn(d)
         assert same_state(state(agent), state(local))   # state() read from the worker
         recognized = agent.recognize(lasa["GShape/2"])
-    assert pid is not None and type(agent.perceptual_model).__name__ == "TorchRNNPB"
+    assert pid is not None and type(agent.perceptual_model) is type(local.perceptual_model)
     assert entries_equal(agent.memory.entries, local.memory.entries)
     assert same_state(state(agent), state(local))
     assert recognized.concept == local.recognize(lasa["GShape/2"]).concept

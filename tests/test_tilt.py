@@ -16,8 +16,8 @@ from iloci.config import ConfigError, load_config
 from iloci.data import load_lasa
 from iloci.errors import InvalidInputError
 
-# the default config's back ends: torch-rnnpb, the scipy clusterer, Pinocchio IK
-pytest.importorskip("iloci_torch")
+# the default config's back ends: native-rnnpb, the scipy clusterer, Pinocchio IK
+pytest.importorskip("iloci_native")
 pytest.importorskip("iloci_scipy")
 pytest.importorskip("iloci_pinocchio")
 

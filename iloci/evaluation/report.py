@@ -11,8 +11,9 @@ import numpy as np
 
 from iloci.data.files import write_text_atomic
 from iloci.errors import MissingBackendError
-from iloci.evaluation.results import FoldResult
+from iloci.evaluation import figures
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
+from iloci.evaluation.results import FoldResult
 
 __all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
            "robustness_table", "stream_headline"]
@@ -177,7 +178,6 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     results : sequence of FoldResult
         As :func:`~iloci.evaluation.evaluate.evaluate` returns them.
     """
-    from iloci.evaluation import figures
 
     out = Path(out_dir)
     fig_dir = out / "figures"
@@ -369,7 +369,6 @@ def stream_headline(metrics: dict[str, Any]) -> str:
 def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
                          steps: list[dict]) -> Path:
     """Write the stream protocol's metrics.json, stream.json, figure and report.md."""
-    from iloci.evaluation import figures
 
     out = Path(out_dir)
     fig_dir = out / "figures"
