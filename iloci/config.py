@@ -539,15 +539,8 @@ class Config:
 _LINE_RE = re.compile(r"line (\d+)")
 
 
-def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
-    """The tables of a TOML file, read the one way every iloci file is read.
-
-    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
-    file, a directory and malformed TOML are each one :class:`ConfigError`
-    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
-    the kind of file.
-    """
-    path = Path(path)
+def _read_text(path: Path, what: str) -> str:
+    """The text of a TOML file (see :func:`read_toml`)."""
     try:
         raw = path.read_bytes()
         if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
@@ -570,6 +563,22 @@ def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, A
                           source=str(path)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read {what}: {exc.strerror}.", source=str(path)) from None
+    return text
+
+
+def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
+    """The tables of a TOML file, read the one way every iloci file is read.
+
+    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
+    file, a directory and malformed TOML are each one :class:`ConfigError`
+    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
+    the kind of file.
+    """
+    path = Path(path)
+    return _parse_toml(_read_text(path, what), path)
+
+
+def _parse_toml(text: str, path: Path) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -585,6 +594,12 @@ class ConfigData(dict[str, Any]):
     """
 
     source: str = "<dict>"
+    #: The iloci version that wrote the file (its ``# ... written by iloci X``
+    #: first line, as ``iloci config show`` writes it), "" when it says none.
+    written_by: str = ""
+
+
+_WRITTEN_BY_RE = re.compile(r"^#.*\bwritten by iloci ([0-9][^\s,;)]*)", re.MULTILINE)
 
 
 def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
@@ -598,8 +613,11 @@ def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
     sweep`` does with its base config).
     """
     path = Path(path)
-    data = ConfigData(read_toml(path))
+    text = _read_text(path, "config")
+    data = ConfigData(_parse_toml(text, path))
     data.source = str(path)
+    m = _WRITTEN_BY_RE.search(text[:2000])
+    data.written_by = m.group(1) if m else ""
     robot = data.get("robot")
     if isinstance(robot, dict):
         robot = data["robot"] = dict(robot)
@@ -661,6 +679,15 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     elif isinstance(source, (str, os.PathLike)):
         data = read_config_file(source)
         origin = data.source
+        from iloci._version import __version__, is_newer
+        if is_newer(data.written_by):
+            try:
+                return load_config(data, registry=registry, supplied=supplied)
+            except (ConfigError, UnknownComponentError) as exc:
+                raise ConfigError(
+                    f"written by iloci {data.written_by}, this is iloci {__version__}: upgrade "
+                    f"iloci (and its plugins) to read it, or remove what this version does not "
+                    f"know ({exc})", source=origin) from None
     else:
         raise ConfigError(f"load_config takes a path, a mapping or None, got "
                           f"{type(source).__name__}.")
@@ -832,4 +859,6 @@ def to_toml(config: Config) -> str:
     except TypeError as exc:
         raise ConfigError(f"cannot write the config as TOML: {exc}", source=config.source) \
             from None
-    return f"# iloci configuration (resolved from {config.source})\n\n{body}"
+    from iloci._version import __version__
+    return (f"# iloci configuration (resolved from {config.source}), written by iloci "
+            f"{__version__}\n\n{body}")

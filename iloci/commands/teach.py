@@ -135,9 +135,9 @@ def _describe(outcome) -> str:
 def run(args: argparse.Namespace) -> int:
     from iloci.progress import teaching_lock
 
-    memory_path = Path(args.memory)
-    if memory_path.parent != Path("") and not memory_path.parent.is_dir():
-        memory_path.parent.mkdir(parents=True, exist_ok=True)
+    from iloci.data.files import writable_file
+
+    memory_path = writable_file(args.memory, "--memory")  # before anything is learned
     with teaching_lock(memory_path):
         return _teach(args, memory_path)
 

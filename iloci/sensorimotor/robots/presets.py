@@ -90,9 +90,24 @@ def available_robots(plugin_manager: Any = None) -> dict[str, RobotPreset]:
     plugin_manager : pluggy.PluginManager, optional
         Default: :func:`iloci.plugins.get_plugin_manager`.
     """
+    from iloci.errors import PluginError
     pm = plugin_manager or get_plugin_manager()
     found: dict[str, RobotPreset] = dict(ROBOTS)
-    pm.hook.iloci_register_robots(robots=found)
+    info = getattr(pm, "iloci_plugin_info", {}) or {}
+    for impl in reversed(pm.hook.iloci_register_robots.get_hookimpls()):  # pluggy's order
+        before = dict(found)
+        returned = impl.function(**{arg: found for arg in impl.argnames})
+        bad = {k: v for k, v in found.items()
+               if not isinstance(v, RobotPreset) and before.get(k) is not v}
+        if returned is not None or bad:
+            what = (f"added {', '.join(f'{k!r}: {type(v).__name__}' for k, v in bad.items())}"
+                    if bad else f"returned {type(returned).__name__}")
+            dist = getattr(info.get(impl.plugin_name), "distribution", None)
+            raise PluginError(
+                f"plugin {impl.plugin_name!r} (distribution {dist or 'none'}): its "
+                f"iloci_register_robots {what}; it must add RobotPreset objects to the dict it "
+                "receives (robots[name] = RobotPreset(...)) and return nothing. Fix the "
+                f"plugin, or block it with ILOCI_BLOCK_PLUGINS={impl.plugin_name}.")
     return found
 
 
