@@ -21,6 +21,7 @@ import types
 import typing
 from typing import Any, Union
 
+from iloci.constraints import violations
 from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
                           PluginNotLoadedError, UnknownComponentError)
 from iloci.interfaces import COMPONENT_KINDS, KINDS
@@ -485,7 +486,12 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
         kwargs[key] = coerced
     try:
         obj = cls(**kwargs)
-        check = getattr(obj, "validate", None)
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
+    for name, message in violations(obj)[:1]:  # the declared constraints: one validator
+        raise ConfigError(f"[{section}]: {message}", source=source, key=f"{section}.{name}")
+    try:
+        check = getattr(obj, "validate", None)  # rules that tie fields together
         if callable(check):
             check()
     except (ValueError, TypeError, OverflowError) as exc:
