@@ -30,7 +30,7 @@ import pluggy
 from iloci import hookspecs
 from iloci.errors import PluginError
 from iloci.interfaces import COMPONENT_KINDS
-from iloci.registry import Registry
+from iloci.registry import FIRST_PARTY, Registry
 
 __all__ = [
     "DEFAULT_PLUGINS",
@@ -55,8 +55,8 @@ ENTRY_POINT_GROUP = "iloci"
 #: when autoloading is off by ``ILOCI_DISABLE_PLUGIN_AUTOLOAD`` (or
 #: ``autoload="first-party"``). Recognized by distribution name.
 FIRST_PARTY_DISTRIBUTIONS = frozenset({
-    "iloci-torch", "iloci-jax", "iloci-scipy", "iloci-sklearn", "iloci-pinocchio",
-    "iloci-pybullet", "iloci-mujoco", "iloci-ray", "iloci-robots", "iloci-ros",
+    # the back ends' (iloci.registry.FIRST_PARTY), and those adding commands or robots
+    *FIRST_PARTY.values(), "iloci-ray", "iloci-robots", "iloci-ros",
 })
 
 class PluginLoadWarning(UserWarning):
