@@ -65,8 +65,8 @@ def install(dist: Path) -> None:
 def smoke() -> None:
     import importlib.metadata as md
 
-    names = [md.distribution(n) for n in ("iloci", "iloci-torch", "iloci-jax", "iloci-scipy",
-                                          "iloci-sklearn", "iloci-pinocchio",
+    names = [md.distribution(n) for n in ("iloci", "iloci-native", "iloci-torch", "iloci-jax",
+                                          "iloci-scipy", "iloci-sklearn", "iloci-pinocchio",
                                           "iloci-pybullet", "iloci-mujoco", "iloci-ray",
                                           "iloci-robots", "iloci-ros")]
     for d in names:
@@ -75,7 +75,7 @@ def smoke() -> None:
             sys.exit(f"{d.metadata['Name']} is an editable install, not the wheel")
     with tempfile.TemporaryDirectory() as tmp:
         # outside the source tree, so `import iloci` finds the installed wheel
-        code = ("import iloci, iloci_torch, sys; "
+        code = ("import iloci, iloci_native, sys; "
                 "assert 'site-packages' in iloci.__file__, iloci.__file__; "
                 "print('iloci', iloci.__version__, 'from', iloci.__file__)")
         subprocess.run([sys.executable, "-c", code], cwd=tmp, check=True)

@@ -52,7 +52,7 @@ def _quality_config(row: str, seed: int) -> dict[str, Any]:
     import quality  # benchmarks/quality.py: its rows and base config
 
     from iloci.config import load_config
-    base = load_config({"perceptual_model": {"name": "torch-rnnpb"}}).to_dict()
+    base = load_config({"perceptual_model": {"name": "native-rnnpb"}}).to_dict()
     data = quality._merge(base, quality.ROWS[row])
     data.setdefault("evaluation", {})["seed"] = seed
     return data
@@ -84,6 +84,9 @@ def record(config: dict[str, Any], baseline: bool, jobs: int) -> dict[str, Any]:
                                            for name, part in robust.items()})
         folds.append(fields)
     kept = {k: v for k, v in metrics.items() if k not in VOLATILE}
+    if isinstance(kept.get("folds"), list):
+        kept["folds"] = [{k: v for k, v in f.items() if k not in VOLATILE_FOLD}
+                         for f in kept["folds"]]
     if "baseline" in kept:
         kept["baseline"] = {k: v for k, v in kept["baseline"].items() if k != "seconds"}
     return canonical({"metrics": kept, "folds": folds})

@@ -23,6 +23,7 @@ __all__ = [
     "InvalidInputError",
     "UnreachableTargetError",
     "FeedbackError",
+    "StaleAnswerError",
     "NotFittedError",
     "NotLoadedError",
     "MemoryFileError",
@@ -226,6 +227,33 @@ class UnreachableTargetError(InvalidInputError):
 
 class FeedbackError(IlociError, ValueError):
     """A teacher returned something other than +1 or -1."""
+
+
+class StaleAnswerError(InvalidInputError):
+    """A feedback names an answer that is not waiting for one; nothing changed.
+
+    Every answer the robot gives carries an id (:attr:`Answer.id
+    <iloci.concepts.learner.Answer.id>`) and a feedback names the id it
+    judges. An id that is not the pending answer's (a duplicate of a
+    feedback already taken, a late one for an answer since replaced, one
+    for another turn or a turn that is over) is refused with this error;
+    the memory and the turn are left as they were, so event-driven stacks
+    (buttons, ROS topics, web hooks) that deliver duplicates or late
+    messages can drop it.
+
+    Attributes
+    ----------
+    answer_id : str
+        The id the feedback named.
+    pending : str or None
+        The id of the answer waiting for a feedback (``None``: none is).
+    """
+
+    def __init__(self, message: str, *, answer_id: str = "",
+                 pending: str | None = None) -> None:
+        self.answer_id = answer_id
+        self.pending = pending
+        super().__init__(message)
 
 
 class NotFittedError(IlociError, RuntimeError):

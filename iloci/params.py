@@ -82,14 +82,16 @@ class RNNPBParams:
     #: or ``"float64"``. ``generate`` and ``prediction_error`` always run in
     #: float64, so both back ends agree on them.
     dtype: str = "float32"
-    #: Which code trains: ``"auto"`` (torch-rnnpb: its native C kernel where
-    #: it was built and the sizes fit, else torch operations), ``"native"``
-    #: (the native kernel or an error; float32 only) or ``"torch"`` (torch
-    #: operations). The native kernel runs the widest instruction set the
-    #: CPU has (AVX-512, AVX2 + FMA, portable C; the environment variable
-    #: ``ILOCI_RNNPB_ISA`` forces one); ``iloci plugins`` says which.
-    #: jax-rnnpb has one kernel, XLA's, and accepts ``"auto"`` only. Like
-    #: ``dtype``, a setting of the loading model, not of a state.
+    #: Which code trains: ``"auto"`` (native-rnnpb: its C kernel where it
+    #: was built and the sizes fit, else the numpy reference; torch-rnnpb:
+    #: torch operations), ``"native"`` (native-rnnpb's C kernel or an
+    #: error; float32 only) or ``"torch"`` (torch-rnnpb's torch
+    #: operations). The C kernel runs the widest instruction set the CPU
+    #: has (AVX-512, AVX2 + FMA, portable C; the environment variable
+    #: ``ILOCI_RNNPB_ISA`` forces one, with the same results); ``iloci
+    #: plugins`` says which. jax-rnnpb has one kernel, XLA's, and accepts
+    #: ``"auto"`` only. Like ``dtype``, a setting of the loading model, not
+    #: of a state.
     kernel: str = "auto"
 
     def validate(self) -> None:

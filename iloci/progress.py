@@ -1,4 +1,5 @@
-"""Progress through a learning stream, kept in the memory file, and the memory's lock.
+"""Progress through a learning stream, kept in the memory file, and the memory's lock;
+progress of one long step (:func:`long_step`).
 
 ``iloci teach`` saves the memory after every demonstration that changed it
 (atomically: a kill at any moment leaves the previous file or the new one).
@@ -30,15 +31,20 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import IlociError
+from iloci.interfaces import Demonstration
 
 __all__ = [
     "PROGRESS_KEY",
     "MemoryLockedError",
+    "SHOW_AFTER",
     "acquire_memory_lock",
     "lock_path_of",
     "memory_lock",
     "saving",
+    "why_not_saved",
     "item_digest",
+    "long_step",
+    "progress_sink",
     "prefix_digest",
     "progress_record",
     "resume_point",
@@ -58,7 +64,6 @@ def item_digest(item: Any) -> str:
 
     Two items get one digest exactly when they would teach the same thing.
     """
-    from iloci.interfaces import Demonstration
     h = hashlib.sha256()
     if isinstance(item, Demonstration):
         h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.true_concept).encode())
@@ -111,6 +116,21 @@ def resume_point(record: Any, digests: Sequence[str]) -> int:
     if not isinstance(n, int) or isinstance(n, bool) or not 0 < n <= len(digests):
         return 0
     return n if record.get("digest") == prefix_digest(digests, n) else 0
+
+
+def why_not_saved(path: str | os.PathLike[str], exc: OSError) -> str:
+    """``"could not save the memory to PATH: the disk is full (...)."``: a failed save in words."""
+    import errno
+    why = exc.strerror or str(exc)
+    if exc.errno in (errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", -1)):
+        what = "the disk is full (or the file size limit is reached)"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        what = "it may not be written (permissions, or a read-only disk)"
+    else:
+        what = "the system refused"
+    target = os.path.realpath(path)
+    where = str(path) if target == os.fspath(path) else f"{path} (a link to {target})"
+    return f"could not save the memory to {where}: {what} ({why})."
 
 
 #: Memory locks this process holds: real path of the memory -> (lock, holder record).
@@ -256,3 +276,60 @@ def saving(memory: str | os.PathLike[str]) -> Iterator[None]:
         yield
     finally:
         lock.release()
+
+
+# -- progress of one long step ---------------------------------------------------------
+
+#: Seconds a step runs before its progress is shown (a quick one shows nothing).
+SHOW_AFTER = 1.0
+#: Shortest time between two reports of one step (s).
+_EVERY = 1.0
+_SINKS: list[Callable[[str, float, float], None]] = []
+
+
+@contextlib.contextmanager
+def progress_sink(sink: Callable[[str, float, float], None]) -> Iterator[None]:
+    """Tell ``sink(what, fraction, seconds)`` the progress of every :func:`long_step`
+    run inside the block (the command line prints it to stderr).
+
+    ``fraction`` is in [0, 1] (1: the step is done); ``seconds`` the time it
+    has run. A step is reported once it has run :data:`SHOW_AFTER` seconds,
+    then at most once a second, and when it ends.
+    """
+    _SINKS.append(sink)
+    try:
+        yield
+    finally:
+        _SINKS.remove(sink)
+
+
+@contextlib.contextmanager
+def long_step(what: str) -> Iterator[Callable[[float], None]]:
+    """A step that may take seconds (reading a huge file, preprocessing a huge stroke).
+
+    Yields ``report(fraction)``, to call as the work advances; it costs a
+    clock reading when nobody listens (:func:`progress_sink`).
+
+    Parameters
+    ----------
+    what : str
+        What is being done, e.g. ``"reading stroke.csv (1,000,000 samples)"``.
+    """
+    start = time.monotonic()
+    last = [start - _EVERY]
+    shown = [False]
+
+    def report(fraction: float) -> None:
+        if not _SINKS:
+            return
+        now = time.monotonic()
+        if now - start >= SHOW_AFTER and now - last[0] >= _EVERY:
+            last[0] = now
+            shown[0] = True
+            for sink in list(_SINKS):
+                sink(what, min(max(float(fraction), 0.0), 1.0), now - start)
+
+    yield report
+    if shown[0] or (_SINKS and time.monotonic() - start >= SHOW_AFTER):
+        for sink in list(_SINKS):
+            sink(what, 1.0, time.monotonic() - start)

@@ -13,9 +13,28 @@ from typing import Any
 
 import numpy as np
 
-from iloci.errors import InvalidInputError
+from iloci.errors import InvalidDemonstrationError, InvalidInputError
 
-__all__ = ["check_array", "shape_text"]
+__all__ = ["MAX_POINTS", "check_array", "check_size", "shape_text"]
+
+#: Most samples one demonstration may have: 2,000,000 (a pen sampled at 1 kHz for
+#: 33 minutes). Reading a drawing takes time linear in its samples, about 3 s per
+#: million on one core (``benchmarks/results/preprocess.json``); more is refused by
+#: :func:`iloci.sensorimotor.preprocess.preprocess` and
+#: :func:`iloci.data.load_trajectory` with a clear error. Here, below both (the
+#: data layer may not import the sensorimotor one); also importable from
+#: :mod:`iloci.sensorimotor.preprocess`.
+MAX_POINTS = 2_000_000
+
+
+def check_size(n: int, what: str) -> None:
+    """Raise InvalidDemonstrationError when ``n`` samples exceed :data:`MAX_POINTS`."""
+    if n > MAX_POINTS:
+        raise InvalidDemonstrationError(
+            f"{what} has {n:,} samples; iloci reads at most {MAX_POINTS:,} per demonstration "
+            "(iloci.sensorimotor.preprocess.MAX_POINTS). Downsample it first (every k-th "
+            "sample keeps the drawing: 50 points along its path are all the robot reads), "
+            "or split a recording of several drawings into one file each.")
 
 
 def shape_text(shape: Sequence[int | str | None]) -> str:

@@ -17,11 +17,11 @@ import iloci
 from iloci.errors import InvalidInputError
 from iloci.sensorimotor.hardware import ArmExecutor, ArmMotion
 
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 EPOCHS = 30
-SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
@@ -108,7 +108,7 @@ def test_an_attached_background_arm_does_not_hold_observe_or_feedback(taught, tm
         assert motion is not None and not motion.done()
         assert turn.answer.response.execution is None     # drawn path: the generated one
         right = turn.answer.concept == "c2"
-        step = turn.feedback(1 if right else -1)       # returns too
+        step = turn.feedback(1 if right else -1, turn.answer.id)   # returns too
         if not right:
             assert executor.last_motion is not motion   # the next guess's motion, queued
         arm.gate.set()

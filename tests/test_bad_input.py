@@ -434,7 +434,7 @@ def test_evaluate_checks_its_report_libraries_before_fold_0(monkeypatch):
 
 
 def test_evaluate_refuses_an_unwritable_out_dir_before_fold_0(tmp_path, cli):
-    for plugin in ("iloci_torch", "iloci_scipy", "iloci_pinocchio"):  # the default config's
+    for plugin in ("iloci_native", "iloci_scipy", "iloci_pinocchio"):  # the default config's
         pytest.importorskip(plugin)
     blocker = tmp_path / "file"
     blocker.write_text("")

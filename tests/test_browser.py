@@ -27,7 +27,7 @@ import pytest
 
 pytest.importorskip("starlette")
 pytest.importorskip("uvicorn")
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 sync_api = pytest.importorskip("playwright.sync_api")
 
@@ -37,7 +37,7 @@ from iloci.web.app import create_app  # noqa: E402
 
 EPOCHS = 30
 CONFIG = os.environ.get("ILOCI_SERVE_TEST_CONFIG") or {
-    "perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS, "recognition_steps": EPOCHS},
+    "perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS, "recognition_steps": EPOCHS},
     "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 #: Debian's chromium; a browser is never downloaded.
 CHROMIUM = os.environ.get("ILOCI_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
@@ -55,11 +55,11 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def serving(memory, config=CONFIG):
+def serving(memory, config=CONFIG, protocol="paper"):
     """``iloci serve`` of ``memory`` in a thread of this process: yields (url, classroom)."""
     import uvicorn
 
-    classroom = build_classroom(memory, config)
+    classroom = build_classroom(memory, config, protocol=protocol)
     port = free_port()
     srv = uvicorn.Server(uvicorn.Config(create_app(classroom), host="127.0.0.1", port=port,
                                         log_level="warning"))

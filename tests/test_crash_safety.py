@@ -72,7 +72,7 @@ def iloci_on_interaction(event):
 
 @pytest.mark.slow
 def test_rerun_resumes_and_ends_like_an_uninterrupted_run(tmp_path, cli):
-    pytest.importorskip("iloci_torch")
+    pytest.importorskip("iloci_native")
     pytest.importorskip("iloci_pinocchio")
     from iloci.concepts.memory import entries_equal, load_memory
     site = tmp_path / "site"
@@ -83,7 +83,7 @@ def test_rerun_resumes_and_ends_like_an_uninterrupted_run(tmp_path, cli):
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: crasher\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text("[iloci]\ncrasher = crasher\n")
     config = tmp_path / "c.toml"
-    config.write_text('[perceptual_model]\nname = "torch-rnnpb"\nhidden = 12\nepochs = 30\n'
+    config.write_text('[perceptual_model]\nname = "native-rnnpb"\nhidden = 12\nepochs = 30\n'
                       "[learner]\nrehearsal_epochs = 30\n")
     stream = ["GShape/0", "Sine/1", "GShape/2", "Sine/3"]
     whole, cut = tmp_path / "whole.npz", tmp_path / "cut.npz"
@@ -109,3 +109,32 @@ def test_rerun_resumes_and_ends_like_an_uninterrupted_run(tmp_path, cli):
     assert all(np.array_equal(na[k], nb[k]) for k in na)
     out = teach(cut, *stream)
     assert "nothing to teach" in out and load_memory(cut)[0].demonstrations_seen == 4
+
+
+def test_a_full_disk_during_teach_names_the_file_and_what_was_not_saved(tmp_path, cli):
+    """`ulimit -f` below the memory's size (EFBIG, as ENOSPC on a full disk): one clear
+    error naming the file, what it still holds and what was not saved; the file intact."""
+    import resource
+    import subprocess
+    import sys
+
+    pytest.importorskip("iloci_torch")
+    pytest.importorskip("iloci_pinocchio")
+    config = tmp_path / "c.toml"
+    config.write_text('[perceptual_model]\nname = "torch-rnnpb"\nhidden = 12\nepochs = 30\n'
+                      "[learner]\nrehearsal_epochs = 30\n")
+    memory = tmp_path / "m.npz"
+    assert cli("teach", "--config", str(config), "--memory", str(memory),
+               "GShape/0").returncode == 0
+    before = memory.read_bytes()
+
+    def full_disk():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (len(before) // 2, len(before) // 2))
+    out = subprocess.run([sys.executable, "-m", "iloci", "teach", "--config", str(config),
+                          "--memory", str(memory), "Sine/0"], capture_output=True, text=True,
+                         timeout=600, preexec_fn=full_disk)
+    assert out.returncode == 2, out.stderr
+    assert f"could not save the memory to {memory}: the disk is full" in out.stderr
+    assert "Sine/0 was learned but not saved" in out.stderr and "still holds" in out.stderr
+    assert "Traceback" not in out.stderr
+    assert memory.read_bytes() == before

@@ -157,7 +157,7 @@ def snippets_and_outputs(text: str) -> list[tuple[str, str | None]]:
 
 
 def test_embedding_snippets_run_and_print_what_the_page_shows(tmp_path, monkeypatch, capsys):
-    pytest.importorskip("torch")  # the page's settings name torch-rnnpb
+    pytest.importorskip("iloci_native")  # the page's settings name native-rnnpb
     pytest.importorskip("pinocchio")
     from iloci.errors import MissingBackendError
 

@@ -8,7 +8,7 @@ import tomllib
 
 import pytest
 
-pytest.importorskip("iloci_torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("iloci_pinocchio")
 pytest.importorskip("iloci_scipy")
 pytest.importorskip("matplotlib")
@@ -20,7 +20,7 @@ from iloci.evaluation.results import FOLD_KEYS  # noqa: E402
 
 SMALL = """
 [perceptual_model]
-name = "torch-rnnpb"
+name = "native-rnnpb"
 epochs = 150
 recognition_steps = 40
 [learner]

@@ -1,6 +1,6 @@
 """Golden outputs (issue 28's guard): a scripted step-wise session and its saved memory.
 
-Two scripted sessions on real LASA demonstrations (torch-rnnpb, few epochs,
+Two scripted sessions on real LASA demonstrations (native-rnnpb, few epochs,
 seed 0) through the step-wise API (``Agent.observe`` / ``Turn.feedback``):
 one with the paper's protocol, one with every ``[learner]`` policy of the
 recommended settings on (the novelty answer, asked again after refused
@@ -34,7 +34,7 @@ from iloci.errors import MissingBackendError
 from iloci.testing.golden import (canonical, differences, digest, memory_record, read_golden,
                                   write_golden)
 
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 GOLDEN = Path(__file__).parent / "golden" / "stepwise.json"
@@ -54,7 +54,7 @@ SLIPS = {("GShape/1", 1), ("Sine/0", 2), ("GShape/3", 1), ("WShape/1", 1), ("Ang
 
 
 def session_config(learner: dict[str, Any]) -> dict[str, Any]:
-    return {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+    return {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS, **learner}, "evaluation": {"seed": 0}}
 
@@ -90,7 +90,7 @@ def run_session(learner: dict[str, Any], slips: set[tuple[str, int]], tmp: Path
                 "confidence": a.confidence, "distance": a.distance, "entry": a.entry,
                 "novel": a.response.novel, "dt": a.dt, "drawing": digest(a.drawing),
                 "joint_path": digest(a.joint_path)}, "feedback": fb})
-            turn.feedback(fb)
+            turn.feedback(fb, a.id)
         out = turn.outcome
         if out.action == "new_concept":
             taught[out.concept] = key.split("/")[0]

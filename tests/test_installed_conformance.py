@@ -18,6 +18,8 @@ from iloci.testing import check_component, registry_factory
 
 #: Smaller settings where the defaults would make the checks slow.
 SMALL = {
+    ("perceptual_model", "native-rnnpb"): {"hidden": 20, "context": 10, "epochs": 10,
+                                           "recognition_steps": 20},
     ("perceptual_model", "torch-rnnpb"): {"hidden": 20, "context": 10, "epochs": 10,
                                           "recognition_steps": 20},
     ("perceptual_model", "jax-rnnpb"): {"hidden": 20, "context": 10, "epochs": 10,

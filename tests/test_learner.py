@@ -1,7 +1,7 @@
 """The ILoCI learning and inference phases on real LASA demonstrations.
 
 Each branch of the learning phase (docs/method.md, "Learning phase") is driven with a real RNNPB
-(``torch-rnnpb``), the real IK and real clusterers, kept small: few
+(``native-rnnpb``), the real IK and real clusterers, kept small: few
 demonstrations, few epochs (set through the config). Learner constants are
 set through the config to make a branch certain (e.g. a similarity
 threshold larger than any PB distance makes every rewarded guess a
@@ -29,8 +29,9 @@ from iloci.interfaces import Response
 from iloci.plugins import get_plugin_manager
 
 #: The RNNPB back end under test (ILOCI_TEST_RNNPB=jax-rnnpb runs these on JAX).
-RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "torch-rnnpb")
-pytest.importorskip({"torch-rnnpb": "torch", "jax-rnnpb": "jax"}.get(RNNPB, "torch"))
+RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "native-rnnpb")
+pytest.importorskip({"native-rnnpb": "iloci_native", "torch-rnnpb": "torch",
+                     "jax-rnnpb": "jax"}[RNNPB])
 pytest.importorskip("pinocchio")
 
 EPOCHS = 30
@@ -441,9 +442,9 @@ def test_novelty_answer_asks_the_configured_familiarity(lasa, kind):
 
 
 def test_familiarity_setting_is_checked():
-    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be 'reproduction', "
-                                                       "'prediction' or 'regeneration', got "
-                                                       "'pb'"):
+    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be one of "
+                                                       "'reproduction', 'prediction', "
+                                                       "'regeneration', got 'pb'"):
         iloci.build(small_config(familiarity="pb"))
 
 

@@ -25,7 +25,8 @@ def test_exactly_the_expected_backends_are_registered_and_available():
 
 def test_missing_first_party_backend_is_reported_cleanly():
     registry = get_registry()
-    for kind, name in [("perceptual_model", "torch-rnnpb"), ("perceptual_model", "jax-rnnpb"),
+    for kind, name in [("perceptual_model", "native-rnnpb"), ("perceptual_model", "torch-rnnpb"),
+                       ("perceptual_model", "jax-rnnpb"),
                        ("clusterer", "sklearn"), ("simulator", "mujoco")]:
         if (kind, name) in registry:
             continue

@@ -289,7 +289,8 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
     done = cli("evaluate", "--data", str(root), "--split", "writers", "--config", str(cfg),
                "--out", str(out), "--jobs", "1", "--quiet")
     assert done.returncode == 0, done.stderr
-    assert "data set shapes (12 samples, 3 concepts, 4 writers)" in done.stderr
+    assert ("data set shapes (12 samples, 3 concepts, 4 writers; concepts: circle, line, "
+            "square)") in done.stderr
     metrics = json.loads((out / "metrics.json").read_text())
     ds = load_dataset(root)
     assert metrics["dataset"]["checksum"] == ds.checksum

@@ -12,6 +12,7 @@ import pytest
 
 import iloci
 from iloci.concepts import memory as memory_module
+from iloci.concepts import storage
 from iloci.concepts.memory import (FORMAT_VERSION, Entry, Memory, entries_equal, load_memory,
                                    save_memory)
 from iloci.errors import MemoryFileError
@@ -154,7 +155,7 @@ def test_newer_version_is_refused_with_upgrade_advice(tmp_path):
         header = json.loads(arrays["__header__"].tobytes())
         header["version"] = FORMAT_VERSION + 1
         rest = {k: v for k, v in arrays.items() if k != "__header__"}
-        header["checksum"] = memory_module._checksum(header, rest)
+        header["checksum"] = storage._checksum(header, rest)
         arrays["__header__"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
 
     _rewrite(path, edit)
@@ -192,7 +193,7 @@ def test_save_creates_parent_directories_and_overwrites(tmp_path):
 # -- with a real network -------------------------------------------------------------
 
 #: The RNNPB back end under test (ILOCI_TEST_RNNPB=jax-rnnpb runs these on JAX).
-RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "torch-rnnpb")
+RNNPB = os.environ.get("ILOCI_TEST_RNNPB", "native-rnnpb")
 
 SMALL_TOML = f"""
 [perceptual_model]
@@ -209,7 +210,8 @@ seed = 0
 @pytest.fixture(scope="module")
 def taught(tmp_path_factory):
     """An agent taught two concepts, saved to a file."""
-    pytest.importorskip({"torch-rnnpb": "torch", "jax-rnnpb": "jax"}.get(RNNPB, "torch"))
+    pytest.importorskip({"native-rnnpb": "iloci_native", "torch-rnnpb": "torch",
+                     "jax-rnnpb": "jax"}[RNNPB])
     pytest.importorskip("pinocchio")
     from iloci.data import load_lasa
     from iloci.errors import MissingBackendError
@@ -275,13 +277,20 @@ def test_cli_teach_then_recognize(taught, tmp_path, cli):
     out = cli("teach", "--memory", str(memory), "GShape/1")
     assert out.returncode == 0, out.stderr
     assert "continuing from" in out.stdout and load_memory(memory)[0].demonstrations_seen == 3
+    # the same strokes in another stream: recognized as learned, not learned again
+    before = memory.read_bytes()
+    out = cli("teach", "--memory", str(memory), "GShape/0", "GShape/1")
+    assert out.returncode == 0, out.stderr
+    assert "already learned, not learned again" in out.stdout and "GShape/0, GShape/1" in out.stdout
+    assert "memory unchanged" in out.stdout and memory.read_bytes() == before
 
 
 def _needs_default_back_ends():
     """The CLI below builds an agent from the default config (no --config)."""
     from iloci.config import DEFAULT_NAMES
     modules = {"jax-rnnpb": "iloci_jax", "torch-rnnpb": "iloci_torch",
-               "pinocchio": "iloci_pinocchio", "scipy": "iloci_scipy"}
+               "native-rnnpb": "iloci_native", "pinocchio": "iloci_pinocchio",
+               "scipy": "iloci_scipy"}
     for kind in ("perceptual_model", "ik", "clusterer"):
         name = DEFAULT_NAMES[kind]
         if name in modules:
@@ -324,7 +333,8 @@ class _HdbscanLike:
 def test_a_memory_recognizes_without_its_teaching_only_plugins(tmp_path):
     """Taught with a clusterer plugin that is then not installed: recognition still loads."""
     pytest.importorskip("iloci_scipy")
-    pytest.importorskip("torch")
+    pytest.importorskip({"native-rnnpb": "iloci_native", "torch-rnnpb": "torch",
+                         "jax-rnnpb": "jax"}[RNNPB])
     pytest.importorskip("pinocchio")
     from iloci.data import load_lasa
     from iloci.errors import NotLoadedError, UnknownComponentError

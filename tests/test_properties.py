@@ -149,8 +149,8 @@ KEYS = ["name", "k_cutoff", "num_threshold", "similarity_threshold", "rehearsal_
         "train_fraction", "seed", "jobs", "hidden", "pb", "epochs", "learning_rate",
         "input_size", "pb_bound", "p", "concepts", "gravity", "tolerance", "max_error",
         "picture_dir", "dtype", "bogus"]
-NAMES = ["torch-rnnpb", "jax-rnnpb", "scipy", "sklearn", "oracle", "noisy", "pinocchio",
-         "pybullet", "mujoco", "none", "nope"]
+NAMES = ["native-rnnpb", "torch-rnnpb", "jax-rnnpb", "scipy", "sklearn", "oracle", "noisy",
+         "pinocchio", "pybullet", "mujoco", "none", "nope"]
 VALUES = st.deferred(lambda: st.one_of(
     st.integers(-2**70, 2**70), FLOATS, st.booleans(), st.text(max_size=6),
     st.sampled_from(NAMES + ["GShape", "Sine", "time", "arc_length", "float64"]),
@@ -293,7 +293,7 @@ JSON = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(-10, 10**12)
 def test_a_memory_header_edited_consistently_still_loads_or_gives_an_iloci_error(
         tmp_path_factory, memory_bytes, data):
     """A header rewritten with a valid checksum (the file was edited on purpose)."""
-    from iloci.concepts.memory import _checksum
+    from iloci.concepts.storage import _checksum
     with np.load(io.BytesIO(memory_bytes), allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     header = json.loads(arrays.pop("__header__").tobytes())

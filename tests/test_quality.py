@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import pytest
 
-pytest.importorskip("iloci_torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("iloci_pinocchio")
 pytest.importorskip("iloci_scipy")
 
@@ -38,7 +38,7 @@ def fold_ccr(seed: int, epochs: int = 300, rehearsal_epochs: int = 150) -> float
     from iloci.evaluation.evaluate import evaluate
 
     config = load_config({
-        "perceptual_model": {"name": "torch-rnnpb", "epochs": epochs},
+        "perceptual_model": {"name": "native-rnnpb", "epochs": epochs},
         "clusterer": {"name": "scipy"},
         "teacher": {"name": "oracle"},
         "learner": {"rehearsal_epochs": rehearsal_epochs},

@@ -1,6 +1,6 @@
 """``iloci serve``: every HTTP endpoint and every bad input, through Starlette's TestClient.
 
-Real agent (torch-rnnpb, few epochs; pinocchio IK), real LASA shapes sent as
+Real agent (native-rnnpb, few epochs; pinocchio IK), real LASA shapes sent as
 a person's strokes would be: pixel coordinates, y up, at a pace unlike
 LASA's. The memory file must be untouched by every refused request.
 """
@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("starlette")
 pytest.importorskip("httpx")
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 from starlette.testclient import TestClient  # noqa: E402
@@ -26,10 +26,16 @@ from iloci.data import load_lasa  # noqa: E402
 from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, TOKEN_HEADER, create_app  # noqa: E402
 
 EPOCHS = 30
-CONFIG = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+CONFIG = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                "recognition_steps": EPOCHS},
           "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
+
+
+def judge(client, answer, value):
+    """POST /api/feedback judging ``answer`` (its turn and its id) with ``value``."""
+    return client.post("/api/feedback", json={"turn": answer["turn"], "answer": answer["id"],
+                                              "value": value})
 
 def page_client(classroom, **app_options) -> TestClient:
     """A client as the page is one: this computer's address, the server's token."""
@@ -58,7 +64,7 @@ def lasa():
 @pytest.fixture
 def served(tmp_path):
     memory = tmp_path / "memory.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False)
+    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
     try:
         with page_client(classroom) as client:
             yield client, classroom, memory
@@ -100,7 +106,7 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     assert answer["dt"] > 0 and len(answer["start_posture"]) == 4
     assert client.get("/api/state").json()["pending"]["turn"] == answer["turn"]
     assert client.get("/api/progress").json() == {"progress": None}
-    done = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}).json()
+    done = judge(client, answer, -1).json()
     assert done["outcome"]["action"] == "new_concept" and done["outcome"]["concept"] == "c2"
     assert [c["name"] for c in done["memory"]["concepts"]] == ["c1", "c2"]
 
@@ -111,7 +117,7 @@ def test_teach_a_concept_answer_it_rename_it_recognize_it(served, lasa, tmp_path
     # its drawing is shown where the stroke was drawn (pixels, y up)
     drawing = np.array(answer["drawing"])
     assert np.all(drawing.min(axis=0) > -200) and np.all(drawing.max(axis=0) < 600)
-    done = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1}).json()
+    done = judge(client, answer, 1).json()
     assert done["outcome"]["action"] in ("strengthen", "new_exemplar")
     assert done["outcome"]["feedbacks"] == [1]
 
@@ -144,7 +150,7 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
     lasa = {d.key: d for d in load_lasa(shapes)}
     cfg = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.8,
                                  "unknown_below": 0.8, "confirm_rewards": True}}
-    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False)
+    classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False, protocol="paper")
     novel = None
     with page_client(classroom) as client:
         for shape in shapes:
@@ -156,7 +162,7 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
                 if answer["novel"]:
                     assert answer["confidence"] is None
                     novel = answer
-                    r = client.post("/api/feedback", json={"turn": answer["turn"], "value": 1})
+                    r = judge(client, answer, 1)
                     outcome = r.json()["outcome"]
                     assert (outcome["action"], outcome["concept"]) == ("new_concept",
                                                                        answer["concept"])
@@ -165,7 +171,7 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
                     assert answer["confidence"] is None
                 else:
                     assert 0 <= answer["confidence"] <= 1
-                r = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1})
+                r = judge(client, answer, -1)
                 assert r.status_code == 200, r.text
             assert client.get("/api/state").status_code == 200
         assert novel is not None, "no novelty answer in six new shapes"
@@ -180,10 +186,12 @@ def test_feedback_refused_without_a_matching_guess(served, lasa):
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
     answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
     before = memory.read_bytes()
-    cases = [({"turn": answer["turn"] + 1, "value": 1}, 409),
-             ({"turn": answer["turn"], "value": 0}, 422),
-             ({"turn": answer["turn"], "value": True}, 422),
-             ({"turn": answer["turn"], "value": "yes"}, 422),
+    cases = [({"turn": answer["turn"] + 1, "answer": answer["id"], "value": 1}, 409),
+             ({"turn": answer["turn"], "answer": answer["id"] + "x", "value": 1}, 409),
+             ({"turn": answer["turn"], "value": 1}, 400),
+             ({"turn": answer["turn"], "answer": answer["id"], "value": 0}, 422),
+             ({"turn": answer["turn"], "answer": answer["id"], "value": True}, 422),
+             ({"turn": answer["turn"], "answer": answer["id"], "value": "yes"}, 422),
              ({"value": 1}, 400), ([1], 400)]
     for body, status in cases:
         r = client.post("/api/feedback", json=body)
@@ -191,10 +199,8 @@ def test_feedback_refused_without_a_matching_guess(served, lasa):
         assert r.json()["error"]
     assert memory.read_bytes() == before
     # the guess still waits: answered now, once
-    assert client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}
-                       ).status_code == 200
-    assert client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}
-                       ).status_code == 409
+    assert judge(client, answer, -1).status_code == 200
+    assert judge(client, answer, -1).status_code == 409
 
 
 def test_every_bad_drawing_is_a_4xx_json_error_and_the_memory_is_untouched(served, lasa):
@@ -254,7 +260,7 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
     assert r.status_code == 404 and "simulator" in r.json()["error"]
     pytest.importorskip("pybullet")
     cfg = {**CONFIG, "simulator": {"name": "pybullet"}}
-    classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False)
+    classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False, protocol="paper")
     with page_client(classroom) as sim:
         sim.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
         answer = sim.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}
@@ -266,14 +272,14 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
 
 
 def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
-    classroom = build_classroom(tmp_path / "w.npz", CONFIG)        # worker=True
+    classroom = build_classroom(tmp_path / "w.npz", CONFIG, protocol="paper")   # a worker
     try:
         assert type(classroom.agent.perceptual_model).__name__ == "WorkerModel"
         with page_client(classroom) as client:
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
             answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}
                                  ).json()["answer"]
-            out = client.post("/api/feedback", json={"turn": answer["turn"], "value": -1}).json()
+            out = judge(client, answer, -1).json()
             assert out["outcome"]["concept"] == "c2"
     finally:
         classroom.close()
@@ -391,20 +397,18 @@ def test_each_client_has_its_own_turn(served, lasa):
     assert sa["turn"] == a["turn"] and len(sa["points"]) == 120
     assert client.get("/api/state?client=b").json()["pending"]["turn"] == b["turn"]
     # B's drawing did not drop A's guess; B ends its turn (the memory changes) ...
-    out = client.post("/api/feedback", json={"turn": b["turn"], "value": 1}).json()
+    out = judge(client, b, 1).json()
     assert out["outcome"]["concept"] == "c1"
     # ... and A's answer is not lost: its drawing is looked at again, A is told why
-    again = client.post("/api/feedback", json={"turn": a["turn"], "value": -1}).json()
+    again = judge(client, a, -1).json()
     assert "notice" in again and "looked at your drawing again" in again["notice"]
-    done = client.post("/api/feedback", json={"turn": again["answer"]["turn"],
-                                              "value": -1}).json()
+    done = judge(client, again["answer"], -1).json()
     assert done["outcome"]["action"] == "new_concept"
     # a tab's new drawing replaces only its own guess
     a2 = client.post("/api/observe", json={"points": stroke(lasa["Angle/1"]),
                                            "client": "a"}).json()["answer"]
     client.post("/api/observe", json={"points": stroke(lasa["Angle/2"]), "client": "a"})
-    assert client.post("/api/feedback", json={"turn": a2["turn"], "value": 1}
-                       ).status_code == 409
+    assert judge(client, a2, 1).status_code == 409
 
 
 def test_something_new_founds_a_concept_in_one_click(served, lasa):
@@ -412,7 +416,7 @@ def test_something_new_founds_a_concept_in_one_click(served, lasa):
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
     client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])})
     a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
-    out = client.post("/api/feedback", json={"turn": a["turn"], "value": "new"}).json()
+    out = judge(client, a, "new").json()
     assert out["outcome"]["action"] == "new_concept"
     assert all(f == -1 for f in out["outcome"]["feedbacks"])
 
@@ -438,7 +442,7 @@ def test_undo_puts_memory_and_network_back_exactly(served, lasa):
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
     before, file_before = _state(classroom.agent), memory.read_bytes()
     a = client.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}).json()["answer"]
-    out = client.post("/api/feedback", json={"turn": a["turn"], "value": 1}).json()
+    out = judge(client, a, 1).json()
     assert out["memory"]["undo"].startswith("drawing")
     with pytest.raises(AssertionError):
         _same(before, _state(classroom.agent))                       # the step changed it
@@ -462,7 +466,7 @@ def test_forget_an_entry_and_a_concept(served, lasa):
     for key in ("GShape/0", "Angle/0"):
         r = client.post("/api/observe", json={"points": stroke(lasa[key])}).json()
         if "answer" in r:
-            client.post("/api/feedback", json={"turn": r["answer"]["turn"], "value": -1})
+            judge(client, r["answer"], -1)
     assert classroom.agent.memory.concepts() == ["c1", "c2"]
     r = client.post("/api/forget", json={"concept": "c9"})
     assert r.status_code == 404
@@ -478,7 +482,7 @@ def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
     exported = client.get("/api/export")
     assert exported.status_code == 200
     assert "attachment" in exported.headers["content-disposition"]
-    fresh = build_classroom(tmp_path / "fresh.npz", CONFIG, worker=False)
+    fresh = build_classroom(tmp_path / "fresh.npz", CONFIG, worker=False, protocol="paper")
     try:
         with page_client(fresh) as other:
             for bad in (b"", b"PK\x03\x04 not a zip", b"\x80\x04\x95 pickle"):
@@ -507,7 +511,7 @@ def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
     target.parent.mkdir()
     link = tmp_path / "link.npz"
     link.symlink_to(target)
-    classroom = build_classroom(link, CONFIG, worker=False)
+    classroom = build_classroom(link, CONFIG, worker=False, protocol="paper")
     try:
         # another writer of the same file, by any path, is refused
         with pytest.raises(MemoryLockedError, match="iloci serve, pid"):
@@ -522,7 +526,7 @@ def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
             soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
             resource.setrlimit(resource.RLIMIT_FSIZE, (size // 2, hard))   # the disk is full
             try:
-                r = client.post("/api/feedback", json={"turn": a["turn"], "value": -1})
+                r = judge(client, a, -1)
             finally:
                 resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
             assert r.status_code == 507, r.text
@@ -537,7 +541,7 @@ def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
             # space again: the same drawing is learned and saved
             a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}
                             ).json()["answer"]
-            out = client.post("/api/feedback", json={"turn": a["turn"], "value": -1}).json()
+            out = judge(client, a, -1).json()
             assert out["outcome"]["concept"] == "c2" and out["memory"]["save_error"] is None
     finally:
         classroom.close()
@@ -549,7 +553,7 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
     import sys
 
     memory = tmp_path / "m.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False)
+    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
     try:
         with page_client(classroom) as client:
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
@@ -569,3 +573,27 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
         classroom.close()
     # released: teach goes on from the served memory
     assert cli("teach", "--memory", str(memory), "Angle/0").returncode == 0
+
+
+def test_the_interactive_protocol_is_the_default_where_the_config_is_silent(tmp_path):
+    from iloci.commands.teach import INTERACTIVE
+
+    classroom = build_classroom(tmp_path / "a.npz", CONFIG, worker=False)
+    try:
+        learner = classroom.agent.config.learner
+        assert all(getattr(learner, k) == v for k, v in INTERACTIVE.items())
+    finally:
+        classroom.close()
+    own = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.0}}
+    classroom = build_classroom(tmp_path / "b.npz", own, worker=False)
+    try:
+        assert classroom.agent.config.learner.novelty_below == 0.0     # the config's word
+        assert classroom.agent.config.learner.unknown_below == 0.8
+    finally:
+        classroom.close()
+    classroom = build_classroom(tmp_path / "c.npz", CONFIG, worker=False, protocol="paper")
+    try:
+        assert classroom.agent.config.learner.novelty_below == 0.0
+        assert classroom.agent.config.learner.confirm_rewards is False
+    finally:
+        classroom.close()

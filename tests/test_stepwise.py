@@ -1,6 +1,6 @@
 """The step-wise learning phase (Agent.observe / Turn.feedback), its worker process, rename.
 
-Real RNNPB (torch-rnnpb, few epochs), real IK, real LASA demonstrations.
+Real RNNPB (native-rnnpb, few epochs), real IK, real LASA demonstrations.
 ``Agent.learn`` with a teacher and the same feedback given step by step
 must do exactly the same thing: they are one code path.
 """
@@ -19,17 +19,18 @@ from iloci.concepts.learner import Answer, LearnOutcome
 from iloci.concepts.memory import entries_equal
 from iloci.concepts.rehearsal import PHASES
 from iloci.data import load_lasa
-from iloci.errors import FeedbackError, InvalidInputError, MissingBackendError
+from iloci.concepts.learner import show_to_teacher
+from iloci.errors import FeedbackError, InvalidInputError, MissingBackendError, StaleAnswerError
 from iloci.sensorimotor.frames import TeacherFrame
 
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 EPOCHS = 30
 
 
 def config() -> dict:
-    return {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+    return {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
@@ -65,7 +66,7 @@ def test_step_by_step_is_the_same_as_learn_with_a_teacher(lasa):
         answers, step = [], turn.outcome
         while not turn.done:
             answers.append(turn.answer)
-            step = turn.feedback(oracle.feedback(demo, turn.answer.response))
+            step = turn.feedback(oracle.feedback(demo, turn.answer.response), turn.answer.id)
             assert isinstance(step, (Answer, LearnOutcome))
         assert turn.answer is None and step is turn.outcome
         got = turn.outcome
@@ -110,15 +111,99 @@ def test_a_bad_feedback_or_a_stale_turn_changes_nothing(lasa):
     before, net = agent.memory.copy(), state(agent)
     for bad in (0, 2, True, "yes", 1.0):
         with pytest.raises(FeedbackError, match=r"must be \+1 \(reward\) or -1"):
-            turn.feedback(bad)
+            turn.feedback(bad, turn.answer.id)
     assert entries_equal(agent.memory.entries, before.entries) and same_state(net, state(agent))
     other = agent.observe(lasa["GShape/1"])
-    other.feedback(1)                               # the memory changes under `turn`
+    pending = other.answer.id
+    other.feedback(1, pending)                      # the memory changes under `turn`
     with pytest.raises(InvalidInputError, match="memory changed since 'Angle/0'"):
-        turn.feedback(-1)
+        turn.feedback(-1, turn.answer.id)
     assert other.done
     with pytest.raises(InvalidInputError, match="is over"):
-        other.feedback(1)
+        other.feedback(1, pending)
+
+
+def counters(agent) -> tuple:
+    m = agent.memory
+    return (m.concept_count, m.demonstrations_seen, [e.num_samples for e in m.entries],
+            [e.sources for e in m.entries])
+
+
+def test_every_answer_has_an_id_and_a_duplicate_or_late_feedback_is_refused(lasa):
+    """Issue 30: a stack that sends every feedback twice, and late ones for answers
+    already judged or of earlier turns, ends with the memory of one that sent each once."""
+    stream = [lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1", "Sine/0", "Angle/1")]
+    once, twice = make_agent(), make_agent()
+    ids, refused = [], 0
+    for demo in stream:
+        for agent in (once, twice):
+            show_to_teacher(agent.teacher, demo)
+        turn = once.observe(demo)
+        while not turn.done:
+            turn.feedback(once.teacher.feedback(demo, turn.answer.response), turn.answer.id)
+        twice.observe(demo)
+        while twice.pending is not None:
+            answer = twice.pending
+            assert answer.id and answer.id not in ids
+            value = twice.teacher.feedback(demo, answer.response)
+            twice.feedback(value, answer.id)
+            before = (counters(twice), state(twice))
+            for late in [answer.id] + ids[-3:]:      # the duplicate, then late ones
+                with pytest.raises(StaleAnswerError, match="not waiting") as info:
+                    twice.feedback(-value, late)
+                assert info.value.answer_id == late
+                refused += 1
+            assert counters(twice) == before[0] and same_state(state(twice), before[1])
+            ids.append(answer.id)
+    assert refused >= 2 * len(ids)
+    assert entries_equal(twice.memory.entries, once.memory.entries)
+    assert counters(twice) == counters(once) and same_state(state(twice), state(once))
+
+
+def test_a_feedback_must_name_the_pending_answer(lasa):
+    agent = make_agent()
+    with pytest.raises(StaleAnswerError, match="no demonstration has been observed"):
+        agent.feedback(1, "0123abcd-1")
+    agent.learn(lasa["GShape/0"])
+    turn = agent.observe(lasa["Angle/0"])
+    with pytest.raises(FeedbackError, match="must name the answer"):
+        turn.feedback(-1)
+    with pytest.raises(StaleAnswerError, match="not an answer of this turn"):
+        turn.feedback(-1, "0123abcd-1")
+    first = turn.answer
+    newer = agent.observe(lasa["Angle/0"])            # the stack observed again
+    with pytest.raises(StaleAnswerError, match="not an answer of this turn"):
+        agent.feedback(-1, first.id)                  # the old turn's answer
+    outcome = agent.feedback(-1, newer.answer)        # an Answer stands for its id
+    assert outcome.action == "new_concept" and newer.done
+    with pytest.raises(StaleAnswerError, match="is over"):
+        newer.feedback(-1, first.id.replace(turn.token, newer.token))
+
+
+def test_a_demonstration_taught_twice_is_learned_once(lasa, tmp_path):
+    """Issue 30: the same stroke (same key, same samples) shown again is recognized as
+    learned and not learned again: one entry, every count unchanged, nothing asked."""
+    agent = make_agent()
+    first = agent.teach([lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1")])
+    before, counts, net = agent.memory.copy(), counters(agent), state(agent)
+    again = agent.teach([lasa["GShape/1"], lasa["GShape/0"]])
+    assert [o.action for o in again.outcomes] == ["already_learned"] * 2
+    assert again.already_learned == ["GShape/1", "GShape/0"] and again.feedbacks == []
+    assert [o.concept for o in again.outcomes] == [first.outcomes[2].concept, "c1"]
+    turn = agent.observe(lasa["Angle/0"])
+    assert turn.done and turn.answer is None and turn.outcome.action == "already_learned"
+    assert entries_equal(agent.memory.entries, before.entries)
+    assert counters(agent) == counts and same_state(state(agent), net)
+    assert sum(e.sources.count("GShape/1") for e in agent.memory.entries) == 1
+    # the record is saved with the memory
+    back = iloci.Agent.load(agent.save(tmp_path / "m.npz"))
+    assert back.learn(lasa["GShape/0"]).action == "already_learned"
+    # the same key with other samples is another demonstration
+    g = lasa["GShape/1"]
+    other = iloci.Demonstration(g.positions * 1.01, times=g.times, shape="GShape", index=1,
+                                true_concept="GShape")
+    assert agent.learn(other).action != "already_learned"
+    assert agent.memory.demonstrations_seen == counts[1] + 1
 
 
 def test_the_first_demonstration_ends_its_turn_at_once(lasa):
@@ -140,13 +225,13 @@ def test_on_progress_set_after_observe_applies_to_that_turn(lasa):
     phases = []
     agent.on_progress = phases.append              # set while the turn waits
     while not turn.done:
-        turn.feedback(-1)
+        turn.feedback(-1, turn.answer.id)
     assert turn.outcome.action == "new_concept"
     assert [p.phase for p in phases] == list(PHASES)
     agent.on_progress = None                       # and unset: no more reports
     turn = agent.observe(lasa["Sine/0"])
     while not turn.done:
-        turn.feedback(-1)
+        turn.feedback(-1, turn.answer.id)
     assert len(phases) == len(PHASES)
 
 
@@ -163,7 +248,7 @@ def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(la
             agent.learn(d)
         assert same_state(state(agent), state(local))   # state() read from the worker
         recognized = agent.recognize(lasa["GShape/2"])
-    assert pid is not None and type(agent.perceptual_model).__name__ == "TorchRNNPB"
+    assert pid is not None and type(agent.perceptual_model) is type(local.perceptual_model)
     assert entries_equal(agent.memory.entries, local.memory.entries)
     assert same_state(state(agent), state(local))
     assert recognized.concept == local.recognize(lasa["GShape/2"]).concept
@@ -195,7 +280,7 @@ def test_asyncio_steps_leave_the_event_loop_free(lasa):
         turn = await agent.aobserve(lasa["GShape/0"])   # a rehearsal, in a thread
         seconds = time.perf_counter() - t0
         turn = await agent.aobserve(lasa["Angle/0"])
-        outcome = await turn.afeedback(-1)
+        outcome = await turn.afeedback(-1, turn.answer.id)
         task.cancel()
         return ticks, seconds, outcome
 

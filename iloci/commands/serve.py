@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from iloci.commands.teach import DEFAULT_MEMORY
+from iloci.commands.teach import DEFAULT_MEMORY, add_protocol_argument, command_config
 from iloci.errors import InvalidInputError, MissingBackendError
 
 __all__ = ["register", "run", "build_classroom"]
@@ -32,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1: this computer only)")
     p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    add_protocol_argument(p)
     p.add_argument("--allow-host", metavar="NAME", action="append", default=[],
                    help="also accept requests whose Host header is NAME (a name this computer "
                         "is reached by, e.g. behind a proxy; repeatable). Requests under any "
@@ -41,9 +42,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = True,
-                    lock: bool = True):
+                    lock: bool = True, protocol: str = "interactive"):
     """The :class:`~iloci.web.app.Classroom` of a memory file (new when it does not exist).
 
+    The config is ``config`` (a TOML path or a mapping), else the memory's,
+    else the defaults; with ``protocol="interactive"`` the ``[learner]``
+    settings of :data:`iloci.commands.teach.INTERACTIVE` fill what
+    ``config`` does not set (see :func:`~iloci.commands.teach.command_config`).
     The agent's network runs in a worker process unless ``worker=False``.
     With ``lock`` (the default) the memory's lock is taken first, the one
     ``iloci teach`` takes (:func:`iloci.progress.acquire_memory_lock`), and
@@ -58,7 +63,7 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
     from iloci.progress import acquire_memory_lock
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:
-        classroom = _build(memory, config, worker)
+        classroom = _build(memory, config, worker, protocol)
     except BaseException:
         if release is not None:
             release()
@@ -67,20 +72,14 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
     return classroom
 
 
-def _build(memory: str | Path, config: Any, worker: bool):
+def _build(memory: str | Path, config: Any, worker: bool, protocol: str):
     from iloci.agent import Agent, build
     from iloci.concepts.memory import load_memory
-    from iloci.config import load_config
     from iloci.web.app import Classroom
 
     path = Path(memory)
     header = load_memory(path)[2] if path.exists() else None
-    if config:
-        cfg = load_config(config)
-    elif header is not None and isinstance(header.get("config"), dict):
-        cfg = load_config(header["config"])
-    else:
-        cfg = load_config(None)
+    cfg = command_config(config, header, protocol)
     # the person at the page is the teacher: no teacher object is asked
     agent = Agent.load(path, cfg) if header is not None else build(cfg)
     if worker:
@@ -98,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
                                   "pip install 'iloci[serve]'") from exc
     if not 0 < args.port < 65536:
         raise InvalidInputError(f"--port must be 1..65535, got {args.port}.")
-    classroom = build_classroom(args.memory, args.config)
+    classroom = build_classroom(args.memory, args.config, protocol=args.protocol)
     hosts = [args.host, *args.allow_host]
     app = create_app(classroom, hosts=hosts, on_shutdown=classroom.agent.close)
     mem = classroom.agent.memory

@@ -1,239 +1,53 @@
-"""ILoCI's learning phase, one demonstration at a time, and its inference phase.
+"""ILoCI's learner: the learning phase's steps on a memory, and the inference phase.
 
-Learning (docs/method.md, "Learning phase"; the paper's "Learning Phase")::
-
-    PB_obs = recognize(sequence)                   (multi-start from the stored PBs)
-    tried = {}
-    loop:
-        untried = concepts in Mem not in tried
-        none left -> new concept: the demonstration becomes its first
-                     exemplar (memory rehearsal); stop
-        guess   = the untried concept whose nearest PB_rec is closest to PB_obs
-        respond = perform the guess's entry of lowest generationError
-        +1, distance(PB_obs, nearest PB_rec) <  similarity_threshold
-             -> strengthen: the nearest entry's numSamples += 1; stop
-        +1, otherwise
-             -> new exemplar of the guess (memory rehearsal); when the
-                concept's numSamples then exceed num_threshold, cluster it
-                and replace each valid cluster by its medoid (rehearsal); stop
-        -1 -> tried += guess; loop
-
-The very first demonstration (empty memory) becomes the first exemplar of
-the first concept without asking the teacher.
+The learning phase runs one demonstration at a time as a :class:`Turn`, the
+state machine of :mod:`iloci.concepts.turn` (the paper's procedure and its
+transition table are in that module's docstring); :meth:`Learner.observe`
+starts one and :meth:`Learner.learn` drives it with a teacher object
+(:func:`run_turn`). The ``[learner]`` options are read once, into the
+named :class:`~iloci.concepts.policies.Policies`.
 
 Inference: PB_obs of each demonstration against every PB_rec; the nearest
 entry's concept is the answer (see :class:`Recognition` for the
 confidence).
+
+This module also gives the names the learner's parts had when they lived
+here (:class:`Answer`, :class:`LearnOutcome`, :func:`perform`,
+:func:`familiarity`, ...).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterator, Sequence
+import contextlib
+from dataclasses import replace
 import threading
 from typing import Any
 
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from iloci.concepts import clustering, rehearsal
+from iloci.concepts import rehearsal
+from iloci.concepts.answers import ACTIONS, Answer, LearnOutcome
+from iloci.concepts.inference import (TILT_MARGIN, Recognition, confidence, familiarity,
+                                      novelty_scale, pattern_distances,
+                                      regenerated_patterns, regeneration_scale)
 from iloci.concepts.memory import Entry, Memory
+from iloci.concepts.perform import ik_joint_limits, perform, perform_novel
+from iloci.concepts.policies import Policies
 from iloci.concepts.rehearsal import RehearsalProgress
+from iloci.concepts.turn import Phase, Turn
 from iloci.config import LearnerConfig
-from iloci.errors import InvalidInputError, NotFittedError
+from iloci.errors import NotFittedError, ObserverError
 from iloci.events import InteractionEvent, RehearsalEvent
 from iloci.interfaces import (Clusterer, Demonstration, PerceptualModel, Response, Simulator,
                               Teacher, check_feedback)
 from iloci.sensorimotor.frames import TeacherFrame
 
-__all__ = ["Answer", "Learner", "LearnOutcome", "Recognition", "Turn", "confidence",
-           "familiarity", "ik_joint_limits", "novelty_scale", "pattern_distances", "perform",
-           "regenerated_patterns", "regeneration_scale"]
-
-#: A turned reading of the tilt search (``[learner] tilts``) is recognized
-#: only when its entry prediction error is below this fraction of the
-#: upright reading's, so the drawing as drawn wins near ties (measured on
-#: LASA's folds: docs/guide.md, "How a drawing is read").
-TILT_MARGIN = 0.9
-
-#: Actions the learner takes on a feedback (InteractionEvent.action).
-ACTIONS = ("strengthen", "new_exemplar", "next_guess", "new_concept", "confirm")
-
-
-@dataclass(frozen=True)
-class LearnOutcome:
-    """What learning one demonstration did.
-
-    Attributes
-    ----------
-    demo : str
-        Key of the demonstration.
-    concept : str
-        The robot's concept it was assigned to.
-    action : str
-        The final action: ``"strengthen"``, ``"new_exemplar"`` or
-        ``"new_concept"``.
-    feedbacks : tuple of int
-        Every feedback the teacher gave for it, in order (empty for the
-        very first demonstration).
-    events : tuple of InteractionEvent
-    rehearsals : tuple of RehearsalEvent
-    clustered : int
-        Valid clusters replaced by their medoid.
-    """
-
-    demo: str
-    concept: str
-    action: str
-    feedbacks: tuple[int, ...]
-    events: tuple[InteractionEvent, ...]
-    rehearsals: tuple[RehearsalEvent, ...] = ()
-    clustered: int = 0
-
-    @property
-    def first_guess_correct(self) -> bool | None:
-        """Whether the first guess was rewarded (``None`` if nothing was guessed)."""
-        return self.feedbacks[0] == 1 if self.feedbacks else None
-
-
-@dataclass(frozen=True)
-class Recognition:
-    """The inference-phase answer for one demonstration.
-
-    Attributes
-    ----------
-    demo : str
-        Key of the demonstration.
-    concept : str
-        The robot's concept label of the nearest entry.
-    confidence : float
-        In [0, 1]: ``1 - d_best / d_other``, where ``d_best`` is the PB
-        distance from PB_obs to the nearest PB_rec and ``d_other`` the
-        distance to the nearest PB_rec of any *other* concept. 0 means the
-        demonstration lies as close to another concept as to the answer;
-        values near 1 mean it lies much closer to the answer. 1 when the
-        memory holds a single concept. (The paper reports a confidence per
-        answer without defining it; this margin is the project's
-        definition.) With ``[learner] decision = "reproduction"`` the same
-        margin is taken on the entries' prediction errors
-        (:meth:`Learner.entry_errors`) instead of PB distances.
-    distance : float
-        PB distance from PB_obs to the answering entry's PB_rec.
-    entry : int
-        Index of the answering entry in ``Memory.entries`` at recognition
-        time (the nearest one, or the best reproducing one).
-    source : str
-        Key of the demonstration the nearest entry holds.
-    sources : tuple of str
-        Every demonstration the nearest entry stands for.
-    pb_obs : ndarray, shape (P,)
-    error : float
-        Closed-loop prediction error (mean squared, encoded units) of the
-        sequence from PB_obs: how well the network can reproduce it at all.
-    reproduction_error : float
-        The lowest closed-loop prediction error of the sequence generated
-        from any memory entry's PB (:meth:`Learner.entry_errors`): how well
-        the nearest thing the robot *knows* reproduces it. Computed when
-        ``[learner] decision = "reproduction"`` or ``unknown_below > 0``,
-        else NaN.
-    """
-
-    demo: str
-    concept: str
-    confidence: float
-    distance: float
-    entry: int
-    source: str
-    sources: tuple[str, ...]
-    pb_obs: np.ndarray = field(repr=False)
-    error: float = float("nan")
-    #: How well what the memory knows reproduces the demonstration against
-    #: the memory's own error scale (:func:`familiarity` of
-    #: ``reproduction_error`` when computed and ``[learner] familiarity`` is
-    #: ``"reproduction"``, else of ``error``); NaN when the
-    #: memory cannot calibrate it (fewer than two concepts).
-    familiarity: float = float("nan")
-    #: True when ``familiarity`` is below ``[learner] unknown_below``: the
-    #: robot answers "I don't know" (``concept`` is still the nearest one).
-    unknown: bool = False
-    reproduction_error: float = float("nan")
-    #: Degrees the drawing was turned (counter-clockwise as the teacher
-    #: sees it) in the reading recognized: 0 for the drawing as drawn, else
-    #: the angle of ``[learner] tilts`` whose reading the memory reproduced
-    #: best (:meth:`Learner.recognize`).
-    tilt: float = 0.0
-
-
-def perform(memory: Memory, model: PerceptualModel, index: int, *,
-            joint_limits: tuple[np.ndarray, np.ndarray] | None = None,
-            simulator: Simulator | None = None, attempt: int = 1,
-            frame: TeacherFrame | None = None) -> Response:
-    """The robot's answer: entry ``index`` of ``memory`` regenerated, decoded and performed.
-
-    A free function of the network (``model``, its weights) and the memory
-    (the data it regenerates from), so performing needs no clusterer and no
-    teacher: :meth:`Learner.respond`, :meth:`~iloci.agent.Agent.respond` and
-    :func:`iloci.drawing.draw` all call it.
-
-    Parameters
-    ----------
-    memory : Memory
-        With a fitted encoder.
-    model : PerceptualModel
-        The memory's network.
-    index : int
-        Entry of ``memory.entries`` to perform (the paper performs a
-        concept's entry of lowest generation error:
-        :meth:`Memory.performer_of`).
-    joint_limits : (ndarray, ndarray), each shape (J,), optional
-        Lower and upper joint limits (rad) the decoded joint path is
-        clipped to (:func:`ik_joint_limits` reads them off an IK solver).
-    simulator : Simulator, optional
-        Executes the joint path when given.
-    attempt : int
-        1 for the first guess on a demonstration, 2 for the second, ...
-    frame : TeacherFrame, optional
-        The frame of the demonstration answered.
-
-    Returns
-    -------
-    Response
-        ``motion`` (T, 2): the regenerated sensory channels decoded into
-        plane points (m); ``joint_path`` (T, J): the regenerated motor
-        channels decoded (rad) and clipped to the joint limits (``T =
-        numSteps + 1``); the simulator's
-        :class:`~iloci.interfaces.Execution` of that joint path when one is
-        given; ``dt`` (s) between joint-path rows; ``teacher_drawing``, the
-        drawing in ``frame``, when one is given. ``extra`` holds ``entry``, ``generation_error`` and
-        ``clipped`` (how many joint values were moved onto a limit).
-
-    Raises
-    ------
-    NotFittedError
-        The memory has no fitted encoder.
-    """
-    entry = memory.entries[index]
-    encoder = memory.encoder
-    if encoder is None:
-        raise NotFittedError("the memory has no fitted sensorimotor encoder.")
-    seq = rehearsal.regenerate(model, [entry])[0]
-    plane, joints = encoder.decode(seq, entry.start)
-    clipped = 0
-    if joint_limits is not None:
-        lower, upper = (np.asarray(a, dtype=np.float64) for a in joint_limits)
-        inside = np.clip(joints, lower, upper)
-        clipped = int(np.count_nonzero(inside != joints))
-        joints = inside
-    execution = None
-    if simulator is not None:
-        execution = simulator.execute(joints, entry.dt)
-    drawing = plane if execution is None else np.asarray(execution.end_effector)[:, 1:3]
-    return Response(concept=entry.concept, motion=plane, joint_path=joints,
-                    source=entry.source, sources=tuple(entry.sources), dt=float(entry.dt),
-                    teacher_drawing=None if frame is None else frame.to_teacher(drawing),
-                    execution=execution, attempt=attempt,
-                    extra={"entry": index, "generation_error": entry.generation_error,
-                           "clipped": clipped})
+__all__ = ["ACTIONS", "Answer", "Learner", "LearnOutcome", "Phase", "Recognition", "TILT_MARGIN",
+           "Turn", "confidence", "familiarity", "ik_joint_limits", "novelty_scale", "perform",
+           "pattern_distances", "regenerated_patterns", "regeneration_scale",
+           "run_turn", "show_to_teacher"]
 
 
 def show_to_teacher(teacher: Any, demo: Demonstration) -> None:
@@ -249,227 +63,36 @@ def show_to_teacher(teacher: Any, demo: Demonstration) -> None:
         show(demo)
 
 
-def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(lower, upper)`` joint limits (rad, shape (J,) each) of an IK solver, if it has them.
+def run_turn(teacher: Teacher, demo: Demonstration, observe: Callable[[], Turn]
+             ) -> LearnOutcome:
+    """Learn ``demo`` with a teacher object: the one observe -> feedback loop.
 
-    The learner clips regenerated joint paths to them before execution.
+    Every caller with a teacher object runs it (:meth:`Learner.learn
+    <iloci.concepts.learner.Learner.learn>`, :meth:`Agent.learn
+    <iloci.agent.Agent.learn>` and so :meth:`~iloci.agent.Agent.teach`,
+    ``iloci teach`` with the console teacher, the evaluation): the teacher
+    is shown the demonstration (:func:`show_to_teacher`), ``observe()``
+    starts the turn, and each answer is judged by ``teacher.feedback(demo,
+    answer.response)``, whose checked value goes to :meth:`Turn.feedback`
+    with the answer's id, as an event-driven caller (the web page, a ROS
+    node) gives it.
+
+    Raises
+    ------
+    FeedbackError
+        The teacher returned something other than +1 or -1; the memory is
+        left as it was.
+    ObserverError
+        See :meth:`Learner.learn <iloci.concepts.learner.Learner.learn>`.
     """
-    if ik_solver is None or not hasattr(ik_solver, "lower"):
-        return None
-    return np.asarray(ik_solver.lower), np.asarray(ik_solver.upper)
-
-
-def novelty_scale(model: PerceptualModel, memory: Memory) -> float:
-    """The memory's own prediction-error scale for "unlike everything it knows".
-
-    Each entry's pattern is regenerated from its PB (what the network
-    knows) and its closed-loop prediction error is measured under the PB
-    of the nearest entry (by PB_rec) of *another* concept: how badly one
-    known concept reproduces its neighbour. The median over entries is the
-    scale. This is the project's calibration; the paper has none.
-
-    Parameters
-    ----------
-    model : PerceptualModel
-    memory : Memory
-
-    Returns
-    -------
-    float
-        Mean squared error, encoded units; NaN when the memory holds fewer
-        than two concepts (nothing to calibrate on).
-    """
-    entries = memory.entries
-    labels = np.asarray(memory.concept_labels)
-    if len(set(labels.tolist())) < 2:
-        return float("nan")
-    rec = memory.pbs_rec
-    d = np.linalg.norm(rec[:, None, :] - rec[None, :, :], axis=2)
-    other = np.where(labels[:, None] != labels[None, :], d, np.inf).argmin(axis=1)
-    patterns = rehearsal.regenerate(model, entries)
-    errors = np.asarray(model.prediction_error(patterns, memory.pbs[other]), dtype=np.float64)
-    errors = errors[np.isfinite(errors)]
-    return float(np.median(errors)) if errors.size else float("nan")
-
-
-def regenerated_patterns(model: PerceptualModel, memory: Memory) -> list[np.ndarray]:
-    """Every entry's pattern as the network regenerates it: closed-loop from its PB and initialInfo.
-
-    Unlike :func:`iloci.concepts.rehearsal.regenerate`, never the entry's
-    kept demonstration: this is what the robot's network itself makes of
-    each entry (what it would perform), the ground of ``[learner] decision
-    = "regeneration"``.
-
-    Returns
-    -------
-    list of ndarray, each (numSteps_i, D)
-        Encoded units, one per entry of ``memory`` (empty for an empty memory).
-    """
-    entries = memory.entries
-    if not entries:
-        return []
-    made = model.generate(memory.pbs, _stack_rows([e.initial_input for e in entries]),
-                          [e.num_steps for e in entries])
-    return [np.asarray(g, dtype=np.float64) for g in made]
-
-
-def _stack_rows(rows: Sequence[np.ndarray]) -> np.ndarray:
-    return np.asarray(np.stack([np.asarray(r, dtype=np.float64) for r in rows]),
-                      dtype=np.float64)
-
-
-def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
-    """``pattern`` (T, D) linearly resampled in time to ``steps`` rows (itself when T = steps)."""
-    if len(pattern) == steps:
-        return pattern
-    t = np.linspace(0.0, 1.0, len(pattern))
-    u = np.linspace(0.0, 1.0, steps)
-    return np.stack([np.interp(u, t, pattern[:, j]) for j in range(pattern.shape[1])], axis=1)
-
-
-def pattern_distances(sequences: Sequence[np.ndarray],
-                      patterns: Sequence[np.ndarray], warp: int = 0) -> np.ndarray:
-    """Mean squared difference of each encoded sequence to each regenerated pattern, (B, M).
-
-    Over the sequence's rows and every feature (encoded units; pen
-    displacement and joint displacements alike); a pattern of another
-    length is first resampled linearly in time to the sequence's. Both
-    sides come from the same preprocessing (arc-length resampling to
-    ``[sensorimotor] steps`` points), so step ``t`` is the same fraction of
-    the path's length in both. With ``warp = 0`` step ``t`` is compared
-    with step ``t``; with ``warp > 0`` the steps are aligned by dynamic
-    time warping (Sakoe and Chiba 1978, symmetric steps, a band of
-    ``warp`` steps around the diagonal) and the squared differences along
-    the alignment are summed and divided by the sequence's length times
-    ``D``: a corner drawn a little earlier or later along the path then
-    costs its shape difference, not a shift of every later step.
-
-    Parameters
-    ----------
-    sequences : sequence of ndarray, each (T_b, D)
-    patterns : sequence of ndarray, each (T_m, D)
-    warp : int
-        Band half-width of the alignment, in steps; 0 aligns step by step.
-
-    Returns
-    -------
-    ndarray, shape (B, M)
-    """
-    seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
-    pats = [np.asarray(p, dtype=np.float64) for p in patterns]
-    out = np.zeros((len(seqs), len(pats)), dtype=np.float64)
-    if not pats:
-        return out
-    by_len: dict[int, list[int]] = {}
-    for b, s in enumerate(seqs):
-        by_len.setdefault(len(s), []).append(b)
-    for n, rows in by_len.items():
-        S = np.stack([seqs[b] for b in rows])                        # (b, T, D)
-        P = np.stack([_on_steps(p, n) for p in pats])                # (M, T, D)
-        if warp <= 0:
-            out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
-        else:
-            out[rows] = _warped(S, P, int(warp)) / (n * S.shape[2])
-    return out
-
-
-def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:
-    """DTW cost (summed squared differences) of every (sequence, pattern) pair, (B, M).
-
-    ``S`` (B, T, D), ``P`` (M, T, D); cells further than ``band`` steps from
-    the diagonal are not visited. Vectorised over the pairs, one cell at a time.
-    """
-    b, t = S.shape[0], S.shape[1]
-    m = P.shape[0]
-    # squared distance of step i of S[b] to step j of P[m], laid out (i, j, pair)
-    cost = ((S * S).sum(-1).T[:, None, :, None] + (P * P).sum(-1).T[None, :, None, :]
-            - 2.0 * np.einsum("bid,mjd->ijbm", S, P)).reshape(t, t, b * m)
-    np.maximum(cost, 0.0, out=cost)
-    acc = np.full((t + 1, t + 1, b * m), np.inf)
-    acc[0, 0] = 0.0
-    for i in range(1, t + 1):
-        for j in range(max(1, i - band), min(t, i + band) + 1):
-            acc[i, j] = cost[i - 1, j - 1] + np.minimum(np.minimum(acc[i - 1, j], acc[i, j - 1]),
-                                                        acc[i - 1, j - 1])
-    return acc[t, t].reshape(b, m)
-
-
-def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],
-                       warp: int = 0) -> float:
-    """The memory's own scale for "unlike everything it knows", on regenerated patterns.
-
-    For each entry, :func:`pattern_distances` (with ``warp``) from its regenerated pattern to
-    the nearest regenerated pattern of an entry of *another* concept (how
-    far apart two known concepts lie); the median over entries. The
-    project's calibration (the paper has none), the counterpart of
-    :func:`novelty_scale` for ``[learner] familiarity = "regeneration"``.
-
-    Returns
-    -------
-    float
-        Mean squared difference, encoded units; NaN with fewer than two concepts.
-    """
-    lab = np.asarray(list(labels))
-    if len(set(lab.tolist())) < 2:
-        return float("nan")
-    pats = list(patterns)
-    d = np.stack([pattern_distances([p], pats, warp)[0] for p in pats])
-    other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
-    other = other[np.isfinite(other)]
-    return float(np.median(other)) if other.size else float("nan")
-
-
-def familiarity(error: np.ndarray | float, scale: float) -> np.ndarray:
-    """``scale / (scale + error)``: near 1 for what the network reproduces, 0.5 at the scale.
-
-    Parameters
-    ----------
-    error : float or ndarray
-        Closed-loop prediction error of a demonstration (mean squared,
-        encoded units): by default (``[learner] familiarity =
-        "reproduction"``) the lowest over memory entries of the error with
-        which the entry's PB reproduces it (:meth:`Learner.entry_errors`),
-        else the error from its PB_obs.
-    scale : float
-        :func:`novelty_scale` of the memory.
-
-    Returns
-    -------
-    ndarray (or 0-d)
-        In (0, 1]; NaN where ``scale`` is NaN or not positive.
-    """
-    e = np.asarray(error, dtype=np.float64)
-    if not np.isfinite(scale) or scale <= 0:
-        return np.full(e.shape, np.nan)
-    return scale / (scale + np.maximum(e, 0.0))
-
-
-def confidence(distances: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest entry and the margin confidence of each row of a distance matrix.
-
-    Parameters
-    ----------
-    distances : ndarray, shape (B, M)
-        PB distance of each observation to each entry's PB_rec.
-    labels : sequence of str, length M
-        Concept of each entry.
-
-    Returns
-    -------
-    nearest : ndarray of int, shape (B,)
-    confidence : ndarray, shape (B,)
-        ``1 - d_best / d_other`` clipped to [0, 1] (see :class:`Recognition`).
-    """
-    d = np.asarray(distances, dtype=np.float64)
-    lab = np.asarray(labels)
-    nearest = np.argmin(d, axis=1)
-    d_best = d[np.arange(len(d)), nearest]
-    other = np.where(lab[None, :] != lab[nearest][:, None], d, np.inf)
-    d_other = other.min(axis=1) if d.shape[1] else np.full(len(d), np.inf)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        conf = np.where(np.isinf(d_other), 1.0,
-                        np.where(d_other > 0, 1.0 - d_best / d_other, 0.0))
-    return nearest, np.clip(conf, 0.0, 1.0)
+    show_to_teacher(teacher, demo)
+    turn = observe()
+    while turn.answer is not None:
+        answer = turn.answer
+        value = teacher.feedback(demo, answer.response)
+        turn.feedback(check_feedback(value, teacher), answer.id)
+    assert turn.outcome is not None
+    return turn.outcome
 
 
 class Learner:
@@ -515,6 +138,8 @@ class Learner:
         self.clusterer = clusterer
         self.teacher = teacher
         self.config = config or LearnerConfig()
+        #: The named policies the config chooses (its one reading).
+        self.policies = Policies.of(self.config)
         self.simulator = simulator
         self.hook = hook
         self.joint_limits = joint_limits
@@ -536,12 +161,28 @@ class Learner:
         """
         if not self.memory.entries:
             return None
-        return self.config.rehearsal_epochs or None
+        return self.policies.rehearsal.epochs
 
-    def _emit_interaction(self, event: InteractionEvent) -> None:
+    # -- the turn's events: sent to observers once the turn is committed -----------
+    def emit(self, event: InteractionEvent) -> None:
+        """Queue an interaction for the observers (sent by :meth:`deliver`)."""
         self._pending.append(("iloci_on_interaction", event))
 
-    def _deliver(self, outcome: LearnOutcome) -> None:
+    def discard_events(self) -> None:
+        """Drop every queued event (a new turn starts)."""
+        self._pending = []
+
+    @contextlib.contextmanager
+    def uncommitted(self) -> Iterator[None]:
+        """A step of a turn: the events it queues are dropped if it raises (it changed nothing)."""
+        mark = len(self._pending)
+        try:
+            yield
+        except BaseException:
+            del self._pending[mark:]
+            raise
+
+    def deliver(self, outcome: LearnOutcome) -> None:
         """Send the events of one committed learning step to every observer.
 
         Each observer (hook implementation) gets every event, even when
@@ -569,11 +210,11 @@ class Learner:
                 except Exception as exc:
                     faults.append((hook_name, impl.plugin_name, exc))
         if faults:
-            from iloci.errors import ObserverError
             hook_name, plugin, first = faults[0]
             raise ObserverError(hook_name, plugin, first, outcome, len(faults)) from first
 
-    def _rehearse(self, reason: str, entries: list[Entry],
+    # -- the memory's changes that need the network or the clusterer ---------------
+    def rehearse(self, reason: str, entries: list[Entry],
                   new_entry: Entry | None = None,
                   new_pattern: np.ndarray | None = None) -> RehearsalEvent:
         """Rehearse ``entries`` (plus a new pattern) and install the result in the memory.
@@ -589,8 +230,7 @@ class Learner:
                                     progress=self.on_progress)
         updated = [e.copy() for e in entries] + ([] if new_entry is None else [new_entry])
         rehearsal.apply(result, updated)
-        self.memory.entries = updated
-        self.memory.revision += 1
+        self.memory.install(updated)
         event = RehearsalEvent(entries=len(result.patterns), epochs=result.epochs or 0,
                                loss=result.loss, seconds=result.seconds, reason=reason,
                                extra={"concepts": len(self.memory.concepts())})
@@ -627,21 +267,22 @@ class Learner:
                                patterns: Sequence[np.ndarray] | None = None) -> np.ndarray:
         """How far each sequence lies from each entry's regenerated pattern, shape (B, M).
 
-        :func:`pattern_distances` of the sequences to the memory's
-        :func:`regenerated_patterns` (``patterns`` when given, e.g. computed
-        once for several calls): ``[learner] decision = "regeneration"``
-        answers with the entry of the lowest one.
+        :func:`~iloci.concepts.inference.pattern_distances` (with ``[learner]
+        warp``) of the sequences to the memory's
+        :func:`~iloci.concepts.inference.regenerated_patterns` (``patterns``
+        when given, e.g. computed once for several calls): ``[learner]
+        decision = "regeneration"`` answers with the entry of the lowest one.
         """
         pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
-        return pattern_distances(sequences, pats, self.config.warp)
+        return pattern_distances(sequences, pats, self.policies.warp)
 
-    def _tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
+    def tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
         """Per sequence, how well the memory reproduces it: the tilt search's criterion.
 
         The best over entries of the quantity ``[learner] decision`` ranks
-        by (regeneration distance, else the entry prediction error).
+        by (regeneration distance, else the entry prediction error), shape (B,).
         """
-        if self.config.decision == "regeneration":
+        if self.policies.rank_by_regeneration:
             return self.regeneration_distances(sequences).min(axis=1)
         return self.entry_errors(sequences).min(axis=1)
 
@@ -658,35 +299,13 @@ class Learner:
     def respond_novel(self, sequence: np.ndarray, start: np.ndarray, dt: float,
                       attempt: int = 1, fam: float = float("nan"),
                       frame: TeacherFrame | None = None) -> Response:
-        """The novelty answer: the demonstration imitated back as something new.
+        """The novelty answer: the demonstration imitated back (see :func:`perform_novel`).
 
-        The robot performs the demonstration as it perceived it (its encoded
-        sequence decoded, joints clipped to the limits; executed when a
-        simulator is set), labelled with the concept it would found.
-
-        Returns
-        -------
-        Response
-            ``novel=True``, ``source=None``, ``sources`` every demonstration
-            the memory stands for; ``extra["familiarity"]``.
+        ``fam``: the demonstration's familiarity, kept in ``extra``.
         """
-        encoder = self.memory.encoder
-        if encoder is None:
-            raise NotFittedError("the memory has no fitted sensorimotor encoder.")
-        plane, joints = encoder.decode(sequence, start)
-        if self.joint_limits is not None:
-            lower, upper = (np.asarray(a, dtype=np.float64) for a in self.joint_limits)
-            joints = np.clip(joints, lower, upper)
-        execution = None
-        if self.simulator is not None:
-            execution = self.simulator.execute(joints, dt)
-        sources = tuple(dict.fromkeys(k for e in self.memory.entries for k in e.sources))
-        drawing = plane if execution is None else np.asarray(execution.end_effector)[:, 1:3]
-        return Response(concept=f"c{self.memory.concept_count + 1}", motion=plane,
-                        joint_path=joints, source=None, sources=sources, execution=execution,
-                        attempt=attempt, extra={"familiarity": fam}, novel=True,
-                        dt=float(dt),
-                        teacher_drawing=None if frame is None else frame.to_teacher(drawing))
+        return perform_novel(self.memory, sequence, start, dt, joint_limits=self.joint_limits,
+                             simulator=self.simulator, attempt=attempt, familiarity=fam,
+                             frame=frame)
 
     # -- learning phase ------------------------------------------------------------
     def observe(self, demo: Demonstration, sequence: np.ndarray, start: np.ndarray,
@@ -721,7 +340,8 @@ class Learner:
         InvalidInputError
             ``sequence`` is not a finite (T, D) array with T >= 2.
         """
-        return Turn(self, demo, sequence, start, dt, frame)
+        return Turn(self, demo, sequence, start, dt, frame,
+                    learned=self.memory.learned_concept(demo))
 
     def learn(self, demo: Demonstration, sequence: np.ndarray, start: np.ndarray,
               dt: float, frame: TeacherFrame | None = None) -> LearnOutcome:
@@ -747,40 +367,21 @@ class Learner:
             error's ``outcome`` says how) and must not be taught again.
             Every other observer received every event.
         """
-        show_to_teacher(self.teacher, demo)
-        turn = self.observe(demo, sequence, start, dt, frame)
-        while turn.answer is not None:
-            value = self.teacher.feedback(demo, turn.answer.response)
-            turn.feedback(check_feedback(value, self.teacher))
-        assert turn.outcome is not None
-        return turn.outcome
+        return run_turn(self.teacher, demo,
+                        lambda: self.observe(demo, sequence, start, dt, frame))
 
-    def _cluster(self, entries: list[Entry], concept: str
-                 ) -> tuple[list[Entry], int, float]:
-        """``entries`` with ``concept``'s valid clusters replaced by their medoids.
+    def cluster(self, concept: str) -> tuple[list[Entry], int, float]:
+        """The memory's entries with ``concept``'s valid clusters replaced by their medoids.
 
-        Works on (and returns) copies; the caller rehearses them when any
-        cluster was replaced. Returns ``(entries, clusters replaced, D_cutoff)``.
+        :meth:`Memory.clustered <iloci.concepts.memory.Memory.clustered>`
+        with this learner's clusterer and the placement policy's
+        ``k_cutoff`` and ``num_threshold``: copies, rehearsed by the caller
+        when any cluster was replaced. Returns ``(entries, clusters
+        replaced, D_cutoff)``.
         """
-        entries = [e.copy() for e in entries]
-        idx = [i for i, e in enumerate(entries) if e.concept == concept]
-        own = [entries[i] for i in idx]
-        plan = clustering.plan_clusters(
-            np.array([e.pb for e in own]), [e.num_samples for e in own],
-            [e.exemplar for e in own], clusterer=self.clusterer,
-            k_cutoff=self.config.k_cutoff, num_threshold=self.config.num_threshold)
-        if not plan.valid:
-            return entries, 0, plan.d_cutoff
-        drop: set[int] = set()
-        for members, med in zip(plan.valid, plan.medoids):
-            keep = own[med]
-            others = [own[j] for j in members if j != med]
-            keep.num_samples = sum(own[j].num_samples for j in members)
-            keep.sources = tuple(dict.fromkeys(
-                list(keep.sources) + [s for o in others for s in o.sources]))
-            keep.prototype = True
-            drop.update(idx[j] for j in members if j != med)
-        return [e for i, e in enumerate(entries) if i not in drop], len(plan.valid), plan.d_cutoff
+        placement = self.policies.placement
+        return self.memory.clustered(concept, self.clusterer, k_cutoff=placement.k_cutoff,
+                                     num_threshold=placement.num_threshold)
 
     # -- inference phase -------------------------------------------------------------
     def recognize(self, sequences: Sequence[np.ndarray],
@@ -815,9 +416,9 @@ class Learner:
         # the memory's calibration, once for the readings as drawn and turned
         scale = novelty_scale(self.model, self.memory)
         out = self._recognize(sequences, keys, scale)
-        if tilted is None or not self.config.tilts:
+        if tilted is None or not self.policies.inference.tilts:
             return out
-        ask = [b for b, r in enumerate(out) if r.distance > self.config.tilt_beyond]
+        ask = [b for b, r in enumerate(out) if r.distance > self.policies.inference.tilt_beyond]
         owners: list[tuple[int, float]] = []
         turned: list[np.ndarray] = []
         for b in ask:
@@ -827,9 +428,9 @@ class Learner:
         if not turned:
             return out
         seqs = list(sequences)
-        upright = self._tilt_scores([seqs[b] for b in ask])
+        upright = self.tilt_scores([seqs[b] for b in ask])
         best = {b: (TILT_MARGIN * float(e), -1) for b, e in zip(ask, upright)}
-        for j, e in enumerate(self._tilt_scores(turned)):
+        for j, e in enumerate(self.tilt_scores(turned)):
             b = owners[j][0]
             if e < best[b][0]:
                 best[b] = (float(e), j)
@@ -855,17 +456,19 @@ class Learner:
         pbs_rec = self.memory.pbs_rec
         dist = cdist(pb_obs, pbs_rec, "euclidean")
         labels = self.memory.concept_labels
-        reproduction = self.config.familiarity == "reproduction"
-        entry_errors = (self.entry_errors(seqs) if self.config.decision == "reproduction"
-                        or (self.config.unknown_below > 0 and reproduction) else None)
+        policies = self.policies
+        reproduction = policies.familiar_by_reproduction
+        below = policies.inference.unknown_below
+        entry_errors = (self.entry_errors(seqs) if policies.rank_by_reproduction
+                        or (below > 0 and reproduction) else None)
         regen = None
-        if "regeneration" in (self.config.decision, self.config.familiarity):
+        if policies.rank_by_regeneration or policies.familiar_by_regeneration:
             patterns = regenerated_patterns(self.model, self.memory)
             regen = self.regeneration_distances(seqs, patterns)
-            if self.config.familiarity == "regeneration":
-                scale = regeneration_scale(patterns, labels, self.config.warp)
-        ranking = {"reproduction": entry_errors, "regeneration": regen}.get(
-            self.config.decision)
+            if policies.familiar_by_regeneration:
+                scale = regeneration_scale(patterns, labels, policies.warp)
+        ranking = (entry_errors if policies.rank_by_reproduction
+                   else regen if policies.rank_by_regeneration else dist)
         nearest, conf = confidence(dist if ranking is None else ranking, labels)
         # "unknown" asks whether anything the robot knows reproduces the
         # demonstration (its best entry's error), on the scale at which one
@@ -875,12 +478,11 @@ class Learner:
         # it never learned.
         rep = (entry_errors.min(axis=1) if entry_errors is not None
                else np.full(len(seqs), np.nan))
-        if regen is not None and self.config.familiarity == "regeneration":
+        if regen is not None and policies.familiar_by_regeneration:
             fam = familiarity(regen.min(axis=1), scale)
         else:
             fam = familiarity(rep if entry_errors is not None and reproduction else errors,
                               scale)
-        below = self.config.unknown_below
         out = []
         for b, i in enumerate(nearest):
             e = self.memory.entries[int(i)]
@@ -889,437 +491,3 @@ class Learner:
                                    float(errors[b]), float(fam[b]),
                                    bool(below > 0 and fam[b] < below), float(rep[b])))
         return out
-
-
-@dataclass(frozen=True)
-class Answer:
-    """The robot's guess for a demonstration, as a person or a controller needs it.
-
-    Attributes
-    ----------
-    demo : str
-        Key of the demonstration answered.
-    concept : str
-        The guessed concept (the robot's label, or the name given with
-        :meth:`~iloci.concepts.memory.Memory.rename`).
-    confidence : float
-        In [0, 1]: ``1 - d_guess / d_other``, ``d_guess`` the PB distance
-        from PB_obs to the nearest PB_rec of the guessed concept, ``d_other``
-        the distance to the nearest PB_rec of any other concept not yet
-        tried for this demonstration (1 when no other is left): the margin
-        of :class:`Recognition` over the concepts still in play.
-    attempt : int
-        1 for the first guess on this demonstration, 2 for the next, ...
-    drawing : ndarray, shape (T, 2)
-        What the robot drew (:attr:`Response.drawing
-        <iloci.interfaces.Response.drawing>`) in the demonstration's own
-        frame: its units and orientation, scaled and centred as the
-        demonstration was (see :class:`~iloci.sensorimotor.frames.TeacherFrame`),
-        so it can be shown beside what was drawn. The drawing plane's
-        ``(y, z)`` in m when the turn was observed without a frame.
-    joint_path : ndarray, shape (T, J)
-        Joint angles (rad, within the joint limits) to perform, one row
-        every ``dt`` seconds.
-    dt : float
-        Time step of ``joint_path`` (s).
-    start_posture : ndarray, shape (J,)
-        ``joint_path[0]``: where the arm must be before it starts.
-    response : Response
-        Everything else (the generated pen path in m, the simulator's
-        execution, the answering entry's sources).
-    entry : int
-        Index of the performed entry in ``Memory.entries``.
-    distance : float
-        ``d_guess``.
-    """
-
-    demo: str
-    concept: str
-    confidence: float
-    attempt: int
-    drawing: np.ndarray = field(repr=False)
-    joint_path: np.ndarray = field(repr=False)
-    dt: float
-    start_posture: np.ndarray = field(repr=False)
-    response: Response = field(repr=False)
-    entry: int
-    distance: float
-
-
-class Turn:
-    """One demonstration's turn of the learning phase, driven one feedback at a time.
-
-    Made by :meth:`Learner.observe` (:meth:`Agent.observe
-    <iloci.agent.Agent.observe>`): PB_obs is recognized once, then the
-    turn waits. :attr:`answer` is the guess to judge; :meth:`feedback`
-    with +1 or -1 moves on, returning the next :class:`Answer` or, once
-    the demonstration is placed, the :class:`LearnOutcome` (also kept in
-    :attr:`outcome`; :attr:`answer` is then ``None``).
-
-    Guarantees
-    ----------
-    * The memory changes only when the turn ends (strengthening, a new
-      exemplar or a new concept), and a rehearsal's result is installed in
-      one assignment of ``memory.entries`` after it has succeeded: other
-      threads see the old memory or the new one. An error (a bad feedback
-      value, a diverging rehearsal) leaves memory and turn as they were,
-      so the same feedback can be given again.
-    * A turn is bound to the memory it was observed on: if the memory
-      changed since (another turn ended, a rename), :meth:`feedback`
-      raises :class:`~iloci.errors.InvalidInputError`; observe the
-      demonstration again. One turn at a time per memory.
-    * Nothing blocks on a person: a turn holds no thread between
-      feedbacks. Each call computes and returns (a rehearsal can take
-      seconds: run it in a worker process with :meth:`Agent.start_worker
-      <iloci.agent.Agent.start_worker>`, from asyncio with
-      :meth:`afeedback`).
-
-    Extending: the learner's reaction to each kind of feedback is one
-    method (``_reward``, ``_punish``); a new kind of answer adds one.
-    """
-
-    def __init__(self, learner: Learner, demo: Demonstration, sequence: np.ndarray,
-                 start: np.ndarray, dt: float, frame: TeacherFrame | None = None) -> None:
-        seq = np.asarray(sequence, dtype=np.float64)
-        if seq.ndim != 2 or len(seq) < 2 or not np.all(np.isfinite(seq)):
-            raise InvalidInputError(f"sequence of {demo.key!r} must be a finite (T, D) array "
-                                    f"with T >= 2, got shape {seq.shape}.")
-        self.learner = learner
-        self.demo = demo
-        self.sequence = seq
-        self.start = np.asarray(start, dtype=np.float64).copy()
-        self.dt = float(dt)
-        self.frame = frame
-        mem = learner.memory
-        self.step = mem.demonstrations_seen
-        self.tried: list[str] = []
-        self.feedbacks: list[int] = []
-        self.events: list[InteractionEvent] = []
-        self.rehearsals: list[RehearsalEvent] = []
-        self.answer: Answer | None = None
-        self.outcome: LearnOutcome | None = None
-        self._revision = mem.revision
-        learner._pending = []
-        self.labels: list[str] = []
-        if not mem.entries:
-            # the very first demonstration: nothing to guess, a new concept
-            self.pb_obs = np.zeros(learner.model.pb_size)
-            self.distances = np.zeros(0)
-            self._step(self._new_concept)
-            return
-        self.pb_obs = learner.recognize_pbs([seq])[0]
-        self.distances = np.linalg.norm(mem.pbs_rec - self.pb_obs, axis=1)
-        self.labels = mem.concept_labels
-        # what orders the guesses: PB distance (the paper) or how well each
-        # entry's PB reproduces the demonstration ([learner] decision)
-        decision = learner.config.decision
-        self.ranking = (learner.entry_errors([seq])[0] if decision == "reproduction"
-                        else learner.regeneration_distances([seq])[0]
-                        if decision == "regeneration" else self.distances)
-        self._novel = False        # the current answer is the novelty answer
-        self._confirming = False   # the current answer asks to confirm a reward after a no
-        self._fam = float("nan")   # the demonstration's familiarity, once computed
-        self._refused = 0          # guesses refused since the turn or a novelty answer began
-        self._novelty_again = learner.config.novelty_after > 0   # the re-offer is unused
-        self._confirmations = 0    # confirmations given for the current guess's reward
-        self._deep = False         # the novelty answer asked again was refused too
-        if learner.config.novelty_below > 0:
-            fam = self._familiarity()
-            if fam < learner.config.novelty_below:
-                self._step(self._novelty)
-                return
-        self._step(self._next)
-
-    def _familiarity(self) -> float:
-        """The demonstration's familiarity (``[learner] familiarity``), computed once."""
-        if np.isnan(self._fam):
-            learner, seq = self.learner, self.sequence
-            # is it like an entry the robot knows (reproduction), or can the
-            # network reproduce it at all (prediction)
-            if learner.config.familiarity == "regeneration":
-                patterns = regenerated_patterns(learner.model, learner.memory)
-                self._fam = float(familiarity(
-                    float(np.min(learner.regeneration_distances([seq], patterns)[0])),
-                    regeneration_scale(patterns, learner.memory.concept_labels,
-                                       learner.config.warp)))
-                return self._fam
-            if learner.config.familiarity == "reproduction":
-                error = float(np.min(self.ranking if learner.config.decision == "reproduction"
-                                     else learner.entry_errors([seq])[0]))
-            else:
-                error = float(np.asarray(learner.model.prediction_error(
-                    [seq], self.pb_obs[None]))[0])
-            self._fam = float(familiarity(error, novelty_scale(learner.model,
-                                                               learner.memory)))
-        return self._fam
-
-    @property
-    def key(self) -> str:
-        """Key of the demonstration."""
-        return self.demo.key
-
-    @property
-    def done(self) -> bool:
-        """Whether the demonstration has been placed (:attr:`outcome` is set)."""
-        return self.outcome is not None
-
-    def __repr__(self) -> str:
-        state = (f"outcome={self.outcome.action!r}" if self.outcome is not None
-                 else f"guess={self.answer.concept!r}" if self.answer is not None else "")
-        return f"Turn({self.key!r}, attempt={len(self.feedbacks) + 1}, {state})"
-
-    # -- steps -------------------------------------------------------------------
-    def feedback(self, value: int) -> Answer | LearnOutcome:
-        """Judge the current :attr:`answer`: +1 (right) or -1 (wrong).
-
-        Returns
-        -------
-        Answer
-            The next guess (after -1, while untried concepts remain).
-        LearnOutcome
-            The demonstration's place in the memory, with its rehearsals.
-
-        Raises
-        ------
-        FeedbackError
-            ``value`` is not +1 or -1; nothing changed.
-        InvalidInputError
-            The turn is over, or the memory changed since it was observed.
-        """
-        with self.learner.lock:
-            return self._feedback(value)
-
-    def _feedback(self, value: int) -> Answer | LearnOutcome:
-        if self.outcome is not None or self.answer is None:
-            raise InvalidInputError(f"the turn of {self.key!r} is over; observe a new "
-                                    "demonstration.")
-        if self.learner.memory.revision != self._revision:
-            raise InvalidInputError(f"the memory changed since {self.key!r} was observed "
-                                    "(another demonstration was learned, or a concept "
-                                    "renamed); observe it again.")
-        fb = check_feedback(value, "Turn.feedback()")
-        if self._novel:
-            return self._step(self._novel_yes if fb == 1 else self._novel_no)
-        return self._step(self._reward if fb == 1 else self._punish)
-
-    def _step(self, action: Callable[[], Answer | LearnOutcome]) -> Answer | LearnOutcome:
-        """Run one step; observers hear of the turn's events once it is committed.
-
-        The events of a step that fails are dropped (it changed nothing);
-        those of earlier steps wait for the end of the turn, when they are
-        delivered with its own (see ``Learner._deliver``; an observer's
-        fault then raises :class:`~iloci.errors.ObserverError`, the
-        demonstration learned).
-        """
-        pending = self.learner._pending
-        mark = len(pending)
-        try:
-            result = action()
-        except BaseException:
-            del pending[mark:]
-            raise
-        if self.outcome is not None:
-            self.learner._deliver(self.outcome)
-        return result
-
-    async def afeedback(self, value: int) -> Answer | LearnOutcome:
-        """:meth:`feedback` from asyncio code: runs in a thread, the event loop stays free."""
-        import asyncio
-        return await asyncio.to_thread(self.feedback, value)
-
-    # -- the learner's reactions ---------------------------------------------------
-    def _common(self, answer: Answer, fb: int) -> tuple[dict[str, Any], dict[str, Any]]:
-        nearest = self._nearest
-        common = {"demo": self.key, "step": self.step, "attempt": answer.attempt,
-                  "guessed": answer.concept, "tried": tuple(self.tried),
-                  "answered": answer.response.source, "feedback": fb,
-                  "distance": float(self.distances[answer.entry])}
-        extra = {"nearest_entry": nearest, "nearest_distance": float(self.distances[nearest]),
-                 "answer_entry": answer.entry}
-        return common, extra
-
-    def _novelty(self) -> Answer:
-        """The novelty answer ([learner] novelty_below, novelty_after): the
-        demonstration imitated back."""
-        attempt = len(self.feedbacks) + 1
-        response = self.learner.respond_novel(self.sequence, self.start, self.dt, attempt,
-                                              self._familiarity(), self.frame)
-        drawing = (response.teacher_drawing if response.teacher_drawing is not None
-                   else response.drawing)
-        joints = np.asarray(response.joint_path, dtype=np.float64)
-        self._novel = True
-        self.answer = Answer(demo=self.key, concept=response.concept, confidence=float("nan"),
-                             attempt=attempt, drawing=np.asarray(drawing, dtype=np.float64),
-                             joint_path=joints, dt=self.dt, start_posture=joints[0].copy(),
-                             response=response, entry=-1, distance=float("nan"))
-        return self.answer
-
-    def _novel_yes(self) -> LearnOutcome:
-        """"Yes, that is new": the robot founds the concept."""
-        self.feedbacks.append(1)
-        self._novel = False
-        return self._new_concept(novel=True)
-
-    def _novel_no(self) -> Answer | LearnOutcome:
-        """"No": back to guessing among the known concepts."""
-        assert self.answer is not None
-        self.feedbacks.append(-1)
-        self._novel = False
-        self._refused = 0
-        if not self._novelty_again and self.tried:
-            # asked after refused guesses and refused too ([learner]
-            # confirm_twice_after_novelty)
-            self._deep = True
-        ev = InteractionEvent(demo=self.key, step=self.step, attempt=self.answer.attempt,
-                              guessed=None, tried=tuple(self.tried), answered=None,
-                              feedback=-1, action="next_guess",
-                              extra={"novel": True, "familiarity": self._fam})
-        self.events.append(ev)
-        self.learner._emit_interaction(ev)
-        return self._next()
-
-    def _punish(self) -> Answer | LearnOutcome:
-        answer = self.answer
-        assert answer is not None
-        if self._confirming:
-            # the reward was not confirmed: the first "yes" stands recorded
-            # as given, the "no" that denies it is this attempt's feedback
-            self._confirming = False
-            self._confirmations = 0
-        common, extra = self._common(answer, -1)
-        ev = InteractionEvent(action="next_guess", extra=extra, **common)
-        self.feedbacks.append(-1)
-        self.events.append(ev)
-        self.tried.append(answer.concept)
-        self.learner._emit_interaction(ev)
-        self._refused += 1
-        if (self._novelty_again and self._refused >= self.learner.config.novelty_after
-                and any(c not in self.tried for c in self.labels)):
-            # [learner] novelty_after: the "no"s go against the refused
-            # novelty answer (or the familiarity that kept it back): asked
-            # (again) before the next guess, once per demonstration
-            self._novelty_again = False
-            return self._novelty()
-        return self._next()
-
-    def _reward(self) -> Answer | LearnOutcome:
-        answer = self.answer
-        assert answer is not None
-        learner, mem = self.learner, self.learner.memory
-        guess, nearest = answer.concept, self._nearest
-        common, extra = self._common(answer, 1)
-        if self._confirming:
-            self._confirming = False
-            self._confirmations += 1
-        config = learner.config
-        # a reward after a "no" goes against the robot's own ranking, and one
-        # that makes a new exemplar widens a concept: a teacher's slip there
-        # would merge two concepts, so it is kept only when the teacher
-        # confirms it (asked once more; twice far down the ranking, after the
-        # novelty answer asked again was refused)
-        required = (2 if self._deep and config.confirm_twice_after_novelty
-                    else 1 if ((config.confirm_rewards and -1 in self.feedbacks)
-                               or (config.confirm_new_exemplars
-                                   and self.distances[nearest] >= config.similarity_threshold))
-                    else 0)
-        if self._confirmations < required:
-            ev = InteractionEvent(action="confirm", extra=extra, **common)
-            self.feedbacks.append(1)
-            self.events.append(ev)
-            learner._emit_interaction(ev)
-            self._confirming = True
-            response = replace(answer.response, attempt=answer.attempt + 1)
-            self.answer = replace(answer, attempt=answer.attempt + 1, response=response)
-            return self.answer
-        clustered = 0
-        if self.distances[nearest] < learner.config.similarity_threshold:
-            action = "strengthen"
-            e = mem.entries[nearest]
-            e.num_samples += 1
-            e.sources = tuple(e.sources) + (self.key,)
-            mem.revision += 1
-        else:
-            action = "new_exemplar"
-            new = self._new_entry(self.pb_obs, guess)
-            # a failed rehearsal leaves the memory as it was: nothing recorded yet
-            rehearsed = [learner._rehearse("new_exemplar", list(mem.entries), new,
-                                           self.sequence)]
-            if mem.num_samples_of(guess) > learner.config.num_threshold:
-                entries, clustered, cut = learner._cluster(mem.entries, guess)
-                extra["d_cutoff"] = cut
-                if clustered:
-                    rehearsed.append(learner._rehearse("clustering", entries))
-            self.rehearsals.extend(rehearsed)
-        self.feedbacks.append(1)
-        mem.demonstrations_seen += 1
-        extra.update(concept=guess, entries=len(mem), clustered=clustered)
-        ev = InteractionEvent(action=action, extra=extra, **common)
-        self.events.append(ev)
-        self.learner._emit_interaction(ev)
-        return self._finish(guess, action, clustered)
-
-    def _new_concept(self, novel: bool | None = None) -> LearnOutcome:
-        """The demonstration founds a concept; ``novel``: after a novelty answer's "yes"
-        (None for the very first demonstration, when nothing was asked)."""
-        learner, mem = self.learner, self.learner.memory
-        label = mem.new_concept_label()
-        try:
-            self.rehearsals.append(learner._rehearse(
-                "new_concept", list(mem.entries), self._new_entry(self.pb_obs, label),
-                self.sequence))
-        except BaseException:
-            mem.concept_count -= 1   # the label was not used
-            raise
-        mem.demonstrations_seen += 1
-        extra: dict[str, Any] = {"concept": label, "entries": len(mem)}
-        if novel is not None:
-            extra["novel"] = novel
-        ev = InteractionEvent(demo=self.key, step=self.step,
-                              attempt=len(self.feedbacks) if novel else len(self.feedbacks) + 1,
-                              guessed=None, tried=tuple(self.tried), answered=None,
-                              feedback=1 if novel else 0, action="new_concept", extra=extra)
-        self.events.append(ev)
-        learner._emit_interaction(ev)
-        return self._finish(label, "new_concept")
-
-    def _finish(self, concept: str, action: str, clustered: int = 0) -> LearnOutcome:
-        self.answer = None
-        self.outcome = LearnOutcome(self.key, concept, action, tuple(self.feedbacks),
-                                    tuple(self.events), tuple(self.rehearsals), clustered)
-        return self.outcome
-
-    def _next(self) -> Answer | LearnOutcome:
-        """The guess among untried concepts, or a new concept when none is left."""
-        labels, mem = self.labels, self.learner.memory
-        untried = [i for i, c in enumerate(labels) if c not in self.tried]
-        if not untried:
-            return self._new_concept(novel=False)
-        nearest = min(untried, key=lambda i: self.ranking[i])
-        guess = labels[nearest]
-        members = [i for i, c in enumerate(labels) if c == guess]
-        performer = min(members, key=lambda i: mem.entries[i].generation_error)
-        attempt = len(self.feedbacks) + 1
-        response = self.learner.respond(performer, attempt, self.frame)
-        others = [self.distances[i] for i in untried if labels[i] != guess]
-        d = float(self.distances[nearest])
-        conf = 1.0 if not others else float(np.clip(
-            1.0 - d / min(others), 0.0, 1.0)) if min(others) > 0 else 0.0
-        drawing = (response.teacher_drawing if response.teacher_drawing is not None
-                   else response.drawing)
-        joints = np.asarray(response.joint_path, dtype=np.float64)
-        self._nearest = nearest
-        self.answer = Answer(demo=self.key, concept=guess, confidence=conf, attempt=attempt,
-                             drawing=np.asarray(drawing, dtype=np.float64), joint_path=joints,
-                             dt=float(mem.entries[performer].dt),
-                             start_posture=joints[0].copy(), response=response,
-                             entry=performer, distance=d)
-        return self.answer
-
-    def _new_entry(self, pb: np.ndarray, label: str) -> Entry:
-        seq, key = self.sequence, self.key
-        return Entry(pb=pb.copy(), pb_rec=pb.copy(), num_samples=1, num_steps=len(seq),
-                     initial_input=seq[0].copy(), start=self.start.copy(), dt=self.dt,
-                     concept=label, generation_error=float("nan"), source=key,
-                     sources=(key,),
-                     pattern=(seq.copy() if self.learner.config.rehearse_from == "demonstrations"
-                              else None))

@@ -21,8 +21,20 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["TrajectoryFile", "load_trajectory", "trajectory_files", "write_atomic",
-           "write_text_atomic"]
+__all__ = ["TrajectoryFile", "load_trajectory", "shape_name", "trajectory_files", "writable_dir",
+           "writable_file", "write_atomic", "write_text_atomic"]
+
+def shape_name(path: str | os.PathLike[str]) -> str:
+    """The shape name a trajectory file gives its demonstration: the file's stem, as text.
+
+    A file name the OS gives as bytes that are not UTF-8 (a Latin-1 name on a
+    UTF-8 system, say: Python holds such bytes as lone surrogates, which cannot
+    be printed, drawn, hashed or saved as text) is accepted: each such byte is
+    written ``\\xNN`` in the name (``caf\\xe9`` for ``café`` in Latin-1); the
+    file itself is read by its own name.
+    """
+    return os.fsencode(Path(path).stem).decode("utf-8", "backslashreplace")
+
 
 def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
                     true_concept: str | None = None, index: int = 0) -> Demonstration:
@@ -78,7 +90,7 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
     if not p.is_file():
         raise InvalidInputError(f"trajectory file {str(p)!r} does not exist.")
     suffix = p.suffix.lower()
-    name = shape if shape is not None else p.stem
+    name = shape if shape is not None else shape_name(p)
     if suffix == ".npy":
         positions, times = _read_npy(p)
     elif suffix == ".csv":
@@ -171,10 +183,10 @@ def trajectory_files(paths: Iterable[str | os.PathLike[str]],
     out = []
     for path in paths:
         p = Path(path)
-        same_stem = seen.setdefault(p.stem, {})
+        same_stem = seen.setdefault(shape_name(p), {})
         ident = os.path.normcase(os.path.abspath(p))
         index = same_stem.setdefault(ident, len(same_stem))
-        out.append(TrajectoryFile(str(path), p.stem, index))
+        out.append(TrajectoryFile(str(path), shape_name(p), index))
     return out
 
 
@@ -255,7 +267,7 @@ def _rows(text: str, delimiter: str | None) -> list[tuple[int, list[str]]]:
     out = []
     try:
         for fields in reader:
-            if fields and any(f.strip() for f in fields):
+            if fields and "".join(fields).strip():
                 out.append((reader.line_num, fields))
     except csv.Error as exc:
         raise InvalidDemonstrationError(f"line {reader.line_num}: {exc}") from None
@@ -312,13 +324,48 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
         raw = p.read_bytes()
     except OSError as exc:
         raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror}.") from None
+    from iloci.progress import long_step
+    from iloci.validation import MAX_POINTS, check_size
+    lines = raw.count(b"\n")
+    if lines > MAX_POINTS + 1:  # before any parsing: the file is refused at once
+        check_size(lines - 1, f"{p.name} (about {lines:,} lines)")
+    if len(raw) < 1_000_000:  # read in well under a second
+        return _parse_csv(raw, p, lambda fraction: None)
+    with long_step(f"reading {p.name} ({lines:,} lines)") as tell:
+        return _parse_csv(raw, p, tell)
+
+
+def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
+               ) -> tuple[np.ndarray, np.ndarray | None]:
     text, encoding = _decode(raw, p.name)
-    delimiter, decimal_comma = _dialect(text)
+    # a big file's dialect is found on its first 64 kB (whole lines): the rest is
+    # checked row by row below, with the line named
+    sample = text if len(text) <= _SAMPLE else text[:text.rfind("\n", 0, _SAMPLE) + 1] or text
+    delimiter, decimal_comma = _dialect(sample)
     how = _describe_dialect(delimiter, decimal_comma, encoding)
+    tell(0.1)
+    head = _rows(sample, delimiter) if sample is not text else None
+    if head and not _numeric_rows(head[:1], decimal_comma):
+        head_names = [c.strip() for c in head[0][1]]
+        cols = _columns(head_names, len(head_names), p.name, how)
+        body = text
+        for _ in range(head[0][0]):  # the body starts after the header's line
+            body = body[body.find("\n") + 1:]
+        values = _loadtxt(body, delimiter, decimal_comma, len(head_names))
+        if values is not None:
+            tell(0.9)
+            positions = values[:, [cols["x"], cols["y"]]]
+            if cols["t"] is None:
+                return positions, None
+            times = values[:, cols["t"]] * cols["unit"]
+            if np.all(np.diff(times) > 0):
+                return positions, times
+            # a time out of order: read again below, to name its line
     try:
         rows = _rows(text, delimiter)
     except InvalidDemonstrationError as exc:
         raise InvalidDemonstrationError(f"{p.name}: {exc} ({how}).") from None
+    tell(0.5)
     if not rows:
         raise InvalidDemonstrationError(f"{p.name}: the file holds no rows of numbers.")
     header: list[str] | None = None
@@ -337,7 +384,7 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
                        for i in range(width)]
     used = [c for c in (cols["t"], cols["x"], cols["y"]) if c is not None]
     values = np.empty((len(rows), width), dtype=np.float64)
-    lines = [line for line, _ in rows]
+    tell(0.7)
     for r, (line, fields) in enumerate(rows):
         for c in used:
             v = _number(fields[c], decimal_comma)
@@ -354,8 +401,36 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
     times = None
     if cols["t"] is not None:
         times = values[:, cols["t"]] * cols["unit"]
-        _check_times(times, [f"line {n}" for n in lines], p.name)
+        _check_times(times, [f"line {line}" for line, _ in rows], p.name)
     return positions, times
+
+
+#: Characters of a CSV file its dialect is found on (all of a smaller file).
+_SAMPLE = 65_536
+
+
+def _loadtxt(body: str, delimiter: str | None, decimal_comma: bool, width: int
+             ) -> np.ndarray | None:
+    """A big file's rows of numbers after its header, read by numpy's C parser: (N, width).
+
+    None whenever the rows are not plainly ``width`` finite numbers each (a quote, a
+    decimal comma, a blank cell, a word, NaN, a row of another width, ``1_000``
+    which Python reads and :func:`_number` does not): the row-by-row reading then
+    takes over and names the line at fault.
+    """
+    if delimiter is None or decimal_comma or '"' in body or "_" in body:
+        return None
+    import warnings
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # numpy's "empty input" warning
+            values = np.loadtxt(io.StringIO(body), delimiter=delimiter, comments=None,
+                                ndmin=2, dtype=np.float64)
+    except ValueError:
+        return None
+    if values.shape[1] != width or len(values) < 3 or not np.isfinite(values).all():
+        return None
+    return values
 
 
 def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[str, Any]:
@@ -407,6 +482,55 @@ def _check_times(times: np.ndarray, rows: list[str], name: str) -> None:
         raise InvalidDemonstrationError(
             f"{name}: {rows[i]}: time {times[i]:g} is not after the previous row's "
             f"{times[i - 1]:g}; times must be strictly increasing.")
+
+
+def writable_dir(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a directory files can be written to, created if missing; checked by
+    writing (and removing) a temporary file in it, before any work that would end there.
+
+    Parameters
+    ----------
+    path : path-like
+    what : str
+        How the error names it, e.g. ``"--memories"``.
+
+    Raises
+    ------
+    InvalidInputError
+        It is a file, cannot be created, or nothing can be written in it (read-only,
+        no permission, no space): naming the reason, and that nothing was done.
+    """
+    import tempfile
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InvalidInputError(f"{what} {str(p)!r} is a file, not a directory; give a "
+                                "directory. Nothing was done.")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=p):
+            pass
+    except OSError as exc:
+        raise InvalidInputError(
+            f"{what} {str(p)!r}: nothing can be written there ({exc.strerror or exc}); choose "
+            "another directory or make it writable. Nothing was done.") from None
+    return p
+
+
+def writable_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a file that can be (re)written atomically (:func:`write_atomic`): its
+    directory (created if missing) takes new files, and it is not a directory.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`writable_dir`, naming ``what`` (e.g. ``"--memory"``).
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise InvalidInputError(f"{what} {str(p)!r} is a directory; give a file name. "
+                                "Nothing was done.")
+    writable_dir(p.parent, f"{what} {str(p)!r}: its folder")
+    return p
 
 
 def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any], *,

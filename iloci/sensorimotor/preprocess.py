@@ -48,10 +48,16 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 from iloci.sensorimotor.robots import DrawingPlane
-from iloci.validation import check_array
+from iloci.validation import MAX_POINTS, check_array, check_size
 
-__all__ = ["POLYORDER", "PRESMOOTH", "densify", "fit_to_plane", "local_linear", "path_parameter",
+__all__ = ["MAX_POINTS", "POLYORDER", "PRESMOOTH", "check_size", "densify", "fit_to_plane",
+           "local_linear", "path_parameter",
            "preprocess", "resample", "resample_path", "smooth", "trim_rests"]
+
+#: Drawings of at least this many samples show their progress (:func:`iloci.progress.long_step`)
+#: when reading them takes over a second; smaller ones take far less.
+SHOWN_ABOVE = 20_000
+
 
 #: Order of the Savitzky-Golay polynomial.
 POLYORDER = 3
@@ -221,8 +227,7 @@ def path_parameter(positions: np.ndarray, presmooth: float = PRESMOOTH) -> np.nd
     p = _points(positions)
     sigma = presmooth * len(p)
     if sigma >= 0.5:
-        from scipy.ndimage import gaussian_filter1d
-        p = gaussian_filter1d(p, sigma, axis=0, mode="nearest")
+        p = _gaussian(p, sigma)
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     if not s[-1] > 0:
@@ -230,8 +235,69 @@ def path_parameter(positions: np.ndarray, presmooth: float = PRESMOOTH) -> np.nd
     return s / s[-1]
 
 
+#: Above this many samples, :func:`path_parameter`'s Gaussian (whose width grows
+#: with the samples) is applied by FFT, O(N log N) instead of O(N^2); below, by
+#: direct convolution. Both give the same result to 1e-12 of the path's extent.
+FFT_ABOVE = 20_000
+
+
+def _gaussian(p: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing along axis 0 (edges extended; scipy's ``mode="nearest"``,
+    truncated at 4 sigma), shape of ``p``."""
+    if len(p) <= FFT_ABOVE:
+        from scipy.ndimage import gaussian_filter1d
+        return gaussian_filter1d(p, sigma, axis=0, mode="nearest")
+    r = int(4.0 * sigma + 0.5)  # scipy.ndimage's radius for truncate=4
+    x = np.arange(-r, r + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (x / sigma) ** 2)
+    kernel /= kernel.sum()
+    # one row per coordinate (contiguous: an FFT along strided memory is slow)
+    rows = np.ascontiguousarray(p.T)
+    padded = np.concatenate([np.repeat(rows[:, :1], r, axis=1), rows,
+                             np.repeat(rows[:, -1:], r, axis=1)], axis=1)
+    size = padded.shape[1] + len(kernel) - 1
+    nfft = 1 << (size - 1).bit_length()
+    full = np.fft.irfft(np.fft.rfft(padded, nfft) * np.fft.rfft(kernel, nfft), nfft)
+    return full[:, 2 * r:2 * r + len(p)].T  # the "valid" part: each sees 2r + 1 samples
+
+
+#: Above this many samples, :func:`local_linear` pools the samples falling in each
+#: stretch of ``width / POOL_PER_WIDTH`` of the parameter into one (their weighted
+#: mean parameter and position, their summed weight) before it fits: time linear in
+#: N with a small constant. Pooling leaves out the spread within a stretch, a
+#: relative change of about ``1 / (12 * POOL_PER_WIDTH**2)`` to the fit's sums; the
+#: drawing moves by under 1e-4 of its size (``benchmarks/results/preprocess.json``).
+POOL_ABOVE = 50_000
+#: Pooled stretches per bandwidth (see :data:`POOL_ABOVE`).
+POOL_PER_WIDTH = 64
+
+
+def _pool(s: np.ndarray, p: np.ndarray, share: np.ndarray, delta: float
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Samples (sorted ``s``) pooled per stretch ``delta``: weighted means, summed weights."""
+    if not delta > 0:
+        return s, p, share
+    b = np.floor((s - s[0]) / delta).astype(np.int64)
+    if b[-1] + 1 >= len(s) // 4:  # too few samples per stretch to gain anything
+        return s, p, share
+    # s is sorted, so each stretch's samples are one run: sums by np.add.reduceat, O(N)
+    starts = np.flatnonzero(np.concatenate([[True], b[1:] != b[:-1]]))
+    w = np.add.reduceat(share, starts)
+    keep = w > 0
+    safe = np.where(keep, w, 1.0)
+    ps = np.add.reduceat(share * s, starts) / safe
+    px = np.add.reduceat(share * p[:, 0], starts) / safe
+    py = np.add.reduceat(share * p[:, 1], starts) / safe
+    return ps[keep], np.column_stack([px, py])[keep], w[keep]
+
+
+#: Grid points of :func:`local_linear` evaluated together: bounds its memory to about
+#: ``_CELLS`` window entries (8 bytes each, a few arrays) however many samples a path has.
+_CELLS = 2_000_000
+
+
 def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
-                 width: float) -> np.ndarray:
+                 width: float, progress: Any = None) -> np.ndarray:
     """Gaussian-weighted local linear regression of ``positions`` on ``s``, at ``u``.
 
     At each ``u_k`` a line is fitted to the samples by weighted least
@@ -257,10 +323,19 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
         Where to evaluate.
     width : float
         Bandwidth, in the units of ``s``; 0 interpolates linearly.
+    progress : callable, optional
+        ``progress(fraction)`` as the evaluation points are done.
 
     Returns
     -------
     ndarray, shape (K, 2)
+
+    Notes
+    -----
+    Time and memory are linear in ``N``: each point sees the samples within
+    6 bandwidths, points are evaluated in blocks of about ``_CELLS``
+    (sample, point) pairs, and above :data:`POOL_ABOVE` samples the samples
+    are pooled first.
     """
     s = np.asarray(s, dtype=np.float64)
     p = np.asarray(positions, dtype=np.float64)
@@ -277,6 +352,8 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     share = np.concatenate([[0.0], gaps]) + np.concatenate([gaps, [0.0]])
     if not np.any(share > 0):
         share = np.ones_like(s)
+    if len(s) > POOL_ABOVE:
+        s, p, share = _pool(s, p, share, width / POOL_PER_WIDTH)
     n = len(s)
     # bandwidth per point: widened to the second nearest sample where sparse
     at = np.searchsorted(s, u)
@@ -286,6 +363,22 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     # samples beyond 6 bandwidths weigh under 1.6e-8 of the peak: left out
     lo = np.maximum(np.searchsorted(s, u - 6 * h, side="left") - 1, 0)
     hi = np.minimum(np.searchsorted(s, u + 6 * h, side="right") + 1, n)
+    span = int((hi - lo).max()) if len(u) else 0
+    block = max(1, _CELLS // max(1, span))
+    out = np.empty((len(u), 2))
+    for k in range(0, len(u), block):
+        sl = slice(k, k + block)
+        out[sl] = _local_linear_block(s, p, u[sl], h[sl], lo[sl], hi[sl], share, at[sl])
+        if progress is not None:
+            progress(min(1.0, (k + block) / len(u)))
+    return out
+
+
+def _local_linear_block(s: np.ndarray, p: np.ndarray, u: np.ndarray, h: np.ndarray,
+                        lo: np.ndarray, hi: np.ndarray, share: np.ndarray,
+                        at: np.ndarray) -> np.ndarray:
+    """:func:`local_linear` at points ``u`` whose windows are ``lo:hi``."""
+    n = len(s)
     idx = lo[:, None] + np.arange(int((hi - lo).max()))[None, :]       # (K, M)
     inside = idx < hi[:, None]
     idx = np.minimum(idx, n - 1)
@@ -299,13 +392,12 @@ def local_linear(s: np.ndarray, positions: np.ndarray, u: np.ndarray,
     safe_den = np.where(ok, den, 1.0)[:, None]
     safe_s0 = np.where(s0 > 0, s0, 1.0)[:, None]
     nearest = p[np.clip(at, 0, n - 1)]
-    out = np.where(ok[:, None], (s2[:, None] * t0 - s1[:, None] * t1) / safe_den,
-                   np.where((s0 > 0)[:, None], t0 / safe_s0, nearest))
-    return out
+    return np.where(ok[:, None], (s2[:, None] * t0 - s1[:, None] * t1) / safe_den,
+                    np.where((s0 > 0)[:, None], t0 / safe_s0, nearest))
 
 
 def resample_path(positions: np.ndarray, steps: int = 50, smoothing: float = 0.04,
-                  presmooth: float = PRESMOOTH) -> np.ndarray:
+                  presmooth: float = PRESMOOTH, progress: Any = None) -> np.ndarray:
     """``steps`` points evenly spaced along the drawn path, smoothed along it.
 
     The path's parameter is its normalised length (:func:`path_parameter`),
@@ -323,27 +415,34 @@ def resample_path(positions: np.ndarray, steps: int = 50, smoothing: float = 0.0
         Bandwidth as a fraction of the path's length.
     presmooth : float
         See :func:`path_parameter`.
+    progress : callable, optional
+        ``progress(fraction)`` as the work advances (time is linear in N:
+        about 3 s for 10^6 samples, ``benchmarks/results/preprocess.json``).
 
     Returns
     -------
     ndarray, shape (steps, 2)
     """
+    tell = progress or (lambda fraction: None)
     p = _points(positions)
     if int(steps) != steps or steps < 3:
         raise InvalidInputError(f"steps must be an integer >= 3, got {steps}.")
     if len(p) < DENSE:
         p = densify(p)
     s = path_parameter(p, presmooth)
-    for _ in range(REFINE):
+    tell(0.1)
+    for r in range(REFINE):
         # re-measure the length along the smoothed path: the presmoothing is
         # in samples, hence paced by the teacher; this one is in path units
         grid = np.linspace(0.0, 1.0, DENSE)
-        curve = local_linear(s, p, grid, smoothing)
+        curve = local_linear(s, p, grid, smoothing, progress=lambda f, r=r: tell(
+            0.1 + 0.7 * (r + f) / REFINE))
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
         if not arc[-1] > 0:
             break
         s = np.interp(s, grid, arc / arc[-1])
-    return local_linear(s, p, np.linspace(0.0, 1.0, int(steps)), smoothing)
+    return local_linear(s, p, np.linspace(0.0, 1.0, int(steps)), smoothing,
+                        progress=lambda f: tell(0.8 + 0.2 * f))
 
 
 #: Paths with fewer samples are interpolated by a cubic spline to this many
@@ -443,6 +542,7 @@ def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_
                                 "raw arrays with iloci.Demonstration(positions, times).")
     if y_axis not in ("up", "down"):
         raise InvalidInputError(f"y_axis must be 'up' or 'down', got {y_axis!r}.")
+    check_size(len(demo.positions), f"demonstration {demo.key!r}")
     positions = demo.positions
     if y_axis == "down":
         positions = positions * np.array([1.0, -1.0])
@@ -455,7 +555,13 @@ def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_
             f"{min_points} are needed to read a drawing (a tap or a click is not one): "
             "sample the pen more often or draw a longer stroke ([sensorimotor] min_points).")
     if resample_by == "arc_length":
-        path = resample_path(positions, steps, smoothing)
+        if len(positions) < SHOWN_ABOVE:
+            path = resample_path(positions, steps, smoothing)
+        else:
+            from iloci.progress import long_step
+            with long_step(f"reading the drawing {demo.key} ({len(demo.positions):,} "
+                           "samples)") as tell:
+                path = resample_path(positions, steps, smoothing, progress=tell)
     elif resample_by == "time":
         path = resample(smooth(positions, smoothing_window), times, steps, "time")
     else:

@@ -22,8 +22,11 @@ what the file still holds):
     memory, the ``outcome`` (a new concept). The client's own guess still
     pending is dropped (nothing learned from it); other clients' guesses
     are kept (each tab has its own turn).
-``POST /api/feedback`` ``{"turn": id, "value": 1 | -1 | "new"}``
-    Judge the pending guess: the next ``answer`` or the ``outcome``.
+``POST /api/feedback`` ``{"turn": id, "answer": id, "value": 1 | -1 | "new"}``
+    Judge the pending guess, named by its turn and its answer's ``id``
+    (every answer carries one): the next ``answer`` or the ``outcome``. A
+    feedback naming an answer that is no longer pending (a double click, a
+    late request) is refused with 409 and changes nothing.
     ``"new"``: none of the robot's concepts, something new (every guess
     left is refused at once). When the memory changed since the guess was
     made (another tab taught, an undo), the drawing is looked at again and
@@ -66,7 +69,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import errno
 import hmac
 import json
 import logging
@@ -82,7 +84,7 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import (FeedbackError, IlociError, InvalidDemonstrationError,
-                          InvalidInputError, NotFittedError)
+                          InvalidInputError, NotFittedError, StaleAnswerError)
 from iloci.progress import MemoryLockedError
 
 __all__ = ["Classroom", "create_app", "plain_words", "MAX_BODY", "MAX_POINTS",
@@ -123,7 +125,7 @@ class HTTPError(Exception):
 
 
 def _status_of(exc: IlociError) -> int:
-    if isinstance(exc, NotFittedError):
+    if isinstance(exc, (NotFittedError, StaleAnswerError)):
         return 409
     if isinstance(exc, MemoryLockedError):
         return 423
@@ -243,18 +245,10 @@ class _Turn:
 
 
 def _save_failure(path: Path, exc: OSError) -> str:
-    why = exc.strerror or str(exc)
-    if exc.errno in (errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", -1)):
-        what = "the disk is full (or the file size limit is reached)"
-    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        what = "it may not be written (permissions, or a read-only disk)"
-    else:
-        what = "the system refused"
-    target = os.path.realpath(path)
-    where = str(path) if target == str(path) else f"{path} (a link to {target})"
-    return (f"could not save the memory to {where}: {what} ({why}). The file still holds "
-            "the memory shown here, from before this step; this step was not learned. "
-            "Free some space or fix the permissions, then do it again.")
+    from iloci.progress import why_not_saved
+    return (f"{why_not_saved(path, exc)} The file still holds the memory shown here, from "
+            "before this step; this step was not learned. Free some space or fix the "
+            "permissions, then do it again.")
 
 
 class Classroom:
@@ -359,7 +353,7 @@ class Classroom:
         if rec is not None and not r.novel:
             concepts = set(self.agent.memory.concepts())
             last = len(concepts - set(rec.turn.tried) - {answer.concept}) == 0
-        out = {"turn": tid, "concept": answer.concept, "novel": bool(r.novel),
+        out = {"id": answer.id, "turn": tid, "concept": answer.concept, "novel": bool(r.novel),
                "confidence": None if last else confidence, "last_guess": last,
                "attempt": answer.attempt,
                "drawing": _polyline(answer.drawing), "dt": answer.dt,
@@ -447,9 +441,11 @@ class Classroom:
             return await self._observe(demo, body["points"], client)
 
     async def feedback(self, body: Any) -> dict[str, Any]:
-        if not isinstance(body, dict) or "value" not in body or "turn" not in body:
-            raise HTTPError(400, 'expected {"turn": id, "value": 1, -1 or "new"}.')
-        value, turn_id = body["value"], body["turn"]
+        if not isinstance(body, dict) or "value" not in body or "turn" not in body \
+                or not isinstance(body.get("answer"), str):
+            raise HTTPError(400, 'expected {"turn": id, "answer": "<the answer\'s id>", '
+                                 '"value": 1, -1 or "new"}.')
+        value, turn_id, answer_id = body["value"], body["turn"], body["answer"]
         if value != "new" and (isinstance(value, bool) or value not in (1, -1)):
             raise HTTPError(422, 'value must be 1 (yes), -1 (no) or "new" (something new), '
                                  f"got {json.dumps(value)[:40]}.")
@@ -476,13 +472,16 @@ class Classroom:
             learner._pending = rec.pending        # this turn's observer events only
 
             def step() -> Any:
+                # the feedback judges the answer it names (issue 30): a double
+                # click or a late request for an answer since replaced is refused
                 if value != "new":
-                    return turn.feedback(int(value))
+                    return turn.feedback(int(value), answer_id)
                 # something new: every guess left refused, the novelty answer taken
-                out = None
+                out, named = None, answer_id
                 while turn.answer is not None:
                     novel = bool(turn.answer.response.novel)
-                    out = turn.feedback(1 if novel else -1)
+                    out = turn.feedback(1 if novel else -1, named)
+                    named = turn.answer.id if turn.answer is not None else named
                 return out
 
             try:

@@ -114,10 +114,10 @@ def test_render_without_opengl_is_a_clear_error(tmp_path):
 @needs_gl
 def test_draw_png_in_mujoco(tmp_path, capsys):
     """`iloci draw --simulator mujoco` on a small taught memory."""
-    pytest.importorskip("torch")
+    pytest.importorskip("iloci_native")
     import iloci
     from iloci.cli import main
-    agent = iloci.build({"perceptual_model": {"name": "torch-rnnpb", "epochs": 30}})
+    agent = iloci.build({"perceptual_model": {"name": "native-rnnpb", "epochs": 30}})
     agent.teach(load_lasa("Angle")[:1])
     memory = tmp_path / "memory.npz"
     agent.save(memory)

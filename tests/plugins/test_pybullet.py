@@ -46,9 +46,9 @@ def test_config_section():
 @pytest.fixture(scope="module")
 def memory_file(tmp_path_factory):
     """A small taught memory: two concepts, a briefly trained torch RNNPB."""
-    pytest.importorskip("torch")
+    pytest.importorskip("iloci_native")
     import iloci
-    agent = iloci.build({"perceptual_model": {"name": "torch-rnnpb", "epochs": 30}})
+    agent = iloci.build({"perceptual_model": {"name": "native-rnnpb", "epochs": 30}})
     agent.teach(load_lasa("GShape")[:1] + load_lasa("Angle")[:1])
     path = tmp_path_factory.mktemp("memory") / "memory.npz"
     agent.save(path)
@@ -117,7 +117,7 @@ def test_learning_run_executes_responses_and_the_console_teacher_sees_the_drawin
     """``[simulator] name = "pybullet"``: every response of a learning run is
     executed on the arm, and the console teacher's picture draws the pen path
     the arm reached, not the one the network generated."""
-    pytest.importorskip("torch")
+    pytest.importorskip("iloci_native")
     pytest.importorskip("matplotlib")
     import io
     import sys
@@ -131,7 +131,7 @@ def test_learning_run_executes_responses_and_the_console_teacher_sees_the_drawin
     config = tmp_path / "iloci.toml"
     config.write_text(f"""
 [perceptual_model]
-name = "torch-rnnpb"
+name = "native-rnnpb"
 epochs = 30
 [teacher]
 name = "console"

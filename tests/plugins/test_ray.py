@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -56,9 +57,9 @@ def test_a_bad_spec_is_one_config_error_naming_what_is_wrong(tmp_path, top, valu
 
 def test_bad_spec_on_the_command_line_exits_2_without_traceback(tmp_path, cli):
     r = cli("sweep", str(write(tmp_path, "not = [toml")), "--out", str(tmp_path / "o"))
-    assert r.returncode == 2 and "not a TOML file" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and "malformed TOML" in r.stderr and "Traceback" not in r.stderr
     r = cli("sweep", str(tmp_path / "missing.toml"))
-    assert r.returncode == 2 and "no such sweep spec" in r.stderr
+    assert r.returncode == 2 and "sweep spec file not found" in r.stderr
 
 
 def test_grid_is_settings_x_seeds_x_folds_with_stable_distinct_keys(tmp_path):
@@ -127,6 +128,10 @@ def test_sweep_stores_each_run_and_resumes_without_recomputing(tmp_path, ray_loc
     report = write_report(out, spec, third, info3)
     text = report.read_text()
     assert "Best setting" in text and "figures/learner-k_cutoff.png" in text
+    # the baselines ran on each run's fold (same for both settings: same folds)
+    assert [r["baselines"] for r in third] == [records[0]["baselines"]] * 2
+    assert set(records[0]["baselines"]) == {"dtw_normalised", "dollar1", "dtw_raw"}
+    assert "Baselines on the same folds" in text and "the best baseline" in text
     assert (out / "figures/learner-k_cutoff.png").stat().st_size > 1000
     with open(out / "results.csv") as fh:
         rows = list(csv.DictReader(fh))
@@ -176,3 +181,115 @@ def test_a_swept_component_name_keeps_what_the_base_wrote_and_takes_its_defaults
     assert [r.config["clusterer"]["name"] for r in runs] == ["scipy", "sklearn"]
     assert all(r.config["perceptual_model"]["epochs"] == 60 for r in runs)
     assert runs[0].key != runs[1].key
+
+
+# -- faults of the world (issue 29): a worker killed, the driver killed, a BOM base ------
+
+def _session(sid: int) -> list[str]:
+    """Live processes of session ``sid`` (pid and command line), zombies left out."""
+    out = []
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (d / "stat").read_text().rpartition(")")[2].split()
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if int(stat[3]) == sid and stat[0] not in "ZX":
+            out.append(f"{d.name} {cmd[:100]}")
+    return out
+
+
+def _sweep(tmp_path: Path, values: str) -> Any:
+    import os
+    import subprocess
+    import sys
+
+    spec = write(tmp_path, SMALL.replace("folds = [0]\n", "") + f"[values]\n{values}\n")
+    iloci = Path(sys.executable).with_name("iloci")
+    return subprocess.Popen(["setsid", str(iloci), "sweep", str(spec), "--out",
+                             str(tmp_path / "out"), "--jobs", "2", "-q"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ})
+
+
+def _first_worker(sid: int, timeout: float = 300) -> int:
+    import time
+
+    t = time.monotonic()
+    while time.monotonic() - t < timeout:
+        for line in _session(sid):
+            pid, cmd = line.split(" ", 1)
+            if cmd.startswith("ray::fold_run"):
+                return int(pid)
+        time.sleep(0.3)
+    raise AssertionError("no ray::fold_run worker appeared")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_a_killed_worker_is_retried_and_the_sweep_leaves_no_ray_process(tmp_path):
+    import os
+    import signal
+    import time
+
+    d = _sweep(tmp_path, '"learner.k_cutoff" = [1.0]')  # 2 runs: fold 0 and fold 1
+    time.sleep(1)
+    os.kill(_first_worker(d.pid), signal.SIGKILL)  # what the OOM killer does
+    log = d.communicate(timeout=900)[0]
+    assert d.returncode == 0, log
+    assert len(list((tmp_path / "out" / "runs").glob("*.json"))) == 2
+    assert "2 runs: 2 stored (2 computed now, 1 of them after a retry" in log
+    assert "WorkerCrashedError" not in log.split("2 runs:")[1]
+    time.sleep(1)
+    assert _session(d.pid) == []
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_ray_left_by_a_driver_killed_with_sigkill_is_stopped_by_the_next_start(tmp_path):
+    import os
+    import signal
+    import time
+
+    from iloci_ray.lifecycle import marker_dir, reap_orphans
+
+    d = _sweep(tmp_path, '"learner.k_cutoff" = [1.0]')
+    _first_worker(d.pid)
+    assert (marker_dir() / f"{d.pid}.json").is_file()
+    os.kill(d.pid, signal.SIGKILL)
+    d.wait()
+    time.sleep(3)
+    left = _session(d.pid)
+    try:
+        assert reap_orphans() >= len(left)  # what the next `iloci sweep` does first
+        time.sleep(1)
+        assert _session(d.pid) == []
+        assert not (marker_dir() / f"{d.pid}.json").exists()
+    finally:
+        for line in _session(d.pid):
+            os.kill(int(line.split()[0]), signal.SIGKILL)
+
+
+def test_a_failed_run_is_reported_with_how_to_resume(tmp_path):
+    from iloci_ray.sweep import summary_lines
+
+    info = {"runs": 4, "computed": 2, "retried": 1, "reused": 1, "retries": 2, "failed": [
+        {"key": "abc", "setting": {"learner.k_cutoff": 0.5}, "seed": 0, "fold": 1,
+         "error": "WorkerCrashedError: its Ray worker process died", "attempts": 3}]}
+    text = "\n".join(summary_lines(info, [{}, {}, {}], "iloci sweep s.toml"))
+    assert "4 runs: 3 stored (2 computed now, 1 of them after a retry; 1 stored before), " \
+        "1 failed." in text
+    assert "abc" in text and "WorkerCrashedError" in text and "{'learner.k_cutoff': 0.5}" in text
+    assert "Run the same command again to resume (iloci sweep s.toml)" in text
+
+
+def test_a_base_config_with_a_byte_order_mark_passes_check_and_sweep(tmp_path, capsys):
+    from iloci.cli import main
+
+    base = tmp_path / "bom.toml"
+    base.write_bytes(b"\xef\xbb\xbf[learner]\nk_cutoff = 0.5\n")
+    assert main(["config", "check", str(base)]) == 0
+    spec = load_spec(write(tmp_path, f'base = "{base.name}"\n[values]\n'
+                                     '"learner.num_threshold" = [3]\n'))
+    assert spec.base["learner"]["k_cutoff"] == 0.5
+    assert plan_runs(spec)[0].config["learner"]["k_cutoff"] == 0.5

@@ -30,15 +30,15 @@ RECIPES = {
 def _kernels():
     out = []
     try:
-        from iloci_torch.native import ISAS, native_isas
+        from iloci_native.native import ISAS, native_isas
     except ImportError:
-        native = []
+        pass
     else:
-        native = [isa for isa in ISAS if isa in native_isas()]
+        out += [("native", "float64", "auto")]
+        out += [("native", "float32", f"native-{isa}") for isa in ISAS if isa in native_isas()]
     try:
         import iloci_torch  # noqa: F401
         out += [("torch", "float64", "torch"), ("torch", "float32", "torch")]
-        out += [("torch", "float32", f"native-{isa}") for isa in native]
     except ImportError:
         pass
     try:
@@ -51,9 +51,16 @@ def _kernels():
 
 def _model(backend, dtype, kernel, monkeypatch, **params):
     if kernel.startswith("native-"):
-        from iloci_torch.native import ISA_ENV
+        from iloci_native.native import ISA_ENV
         monkeypatch.setenv(ISA_ENV, kernel.split("-", 1)[1])
         kernel = "native"
+    if backend == "native":
+        import warnings
+
+        from iloci_native.rnnpb import NativeFallbackWarning, NativeRNNPB
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NativeFallbackWarning)   # float64: the reference
+            return NativeRNNPB(seed=3, dtype=dtype, kernel=kernel, **params)
     if backend == "torch":
         from iloci_torch.rnnpb import TorchRNNPB
         return TorchRNNPB(seed=3, dtype=dtype, kernel=kernel, **params)

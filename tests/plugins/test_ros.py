@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("iloci_ros", reason="the iloci-ros plugin is not installed")
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 from iloci.errors import MissingBackendError  # noqa: E402
@@ -39,7 +39,7 @@ if shutil.which("roscore") is None or shutil.which("rostopic") is None:
                 allow_module_level=True)
 
 EPOCHS = 30
-SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
@@ -68,6 +68,8 @@ def ros_env(tmp_path_factory):
         time.sleep(0.5)
     os.environ.update({k: env[k] for k in ("ROS_MASTER_URI", "ROS_HOSTNAME")})
     yield env
+    if rospy.core.is_initialized():   # this process's test node, before its master goes
+        rospy.signal_shutdown("iloci-ros tests done")
     os.killpg(core.pid, 15)
     core.wait(timeout=30)
 

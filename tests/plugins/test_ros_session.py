@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("iloci_ros", reason="the iloci-ros plugin is not installed")
-pytest.importorskip("torch")
+pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
 import iloci  # noqa: E402
@@ -20,7 +20,7 @@ from iloci.errors import FeedbackError, InvalidDemonstrationError  # noqa: E402
 from iloci_ros.session import Guess, Placed, StaleAnswerError, TeachingSession  # noqa: E402
 
 EPOCHS = 30
-SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS,
+SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
                                  "recognition_steps": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 

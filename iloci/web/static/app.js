@@ -262,7 +262,7 @@ async function judge(value) {
   say(value === "new" ? "Something new: learning..." :
       value > 0 ? "Yes: learning..." : "No: thinking again...");
   try {
-    const data = await withProgress(api("/api/feedback", {turn: pending.turn, value}));
+    const data = await withProgress(api("/api/feedback", {turn: pending.turn, answer: pending.id, value}));
     if (data.answer) { say(""); showAnswer(data.answer); }
     else learned(data);
   } catch (err) {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 
 
@@ -21,6 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output directory (default: runs/sweep-<spec name>)")
     p.add_argument("--jobs", "-j", type=int, default=None,
                    help="runs at once (default: the cluster's CPUs)")
+    p.add_argument("--retries", type=int, default=None, metavar="N",
+                   help="times a run whose worker died (out of memory, a signal, a crash) is "
+                   "started again before it is recorded as failed (default: 2)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
@@ -31,37 +35,53 @@ def run(args: argparse.Namespace) -> int:
     from iloci.errors import InvalidInputError
     from iloci.display import Bars
     from iloci_ray.report import write_report
-    from iloci_ray.sweep import check_out, load_spec, plan_runs, run_sweep
+    from iloci_ray.sweep import (RETRIES, check_out, load_spec, plan_runs, run_sweep,
+                                 summary_lines)
 
     if args.jobs is not None and args.jobs < 1:
         raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}.")
+    retries = RETRIES if args.retries is None else args.retries
+    if retries < 0:
+        raise InvalidInputError(f"--retries must be >= 0, got {retries}.")
     spec = load_spec(args.spec)
     out = check_out(args.out or f"runs/sweep-{Path(args.spec).stem}")
     total = len(plan_runs(spec))
     print(f"iloci sweep: {spec.source}, {total} runs, out {out}, Ray "
           f"{args.address or 'on this machine'}", file=sys.stderr)
     bars = Bars(unit="runs")
-    counts = {"finished": 0, "skipped": 0}
+    counts = {"finished": 0, "skipped": 0, "failed": 0}
 
     def on_event(kind, run, metrics) -> None:
         if kind == "started":
             return
+        if kind in ("retried", "failed"):
+            what = "started again" if kind == "retried" else "recorded as failed"
+            bars.log(f"run {run.key}: {run.setting}, seed {run.seed}, fold {run.fold}: "
+                     f"{metrics['error']} (try {metrics['attempts']} of {retries + 1}); "
+                     f"{what}")
+            if kind == "retried":
+                return
         counts[kind] += 1
         if kind == "finished":
             bars.log(f"run {run.key}: {run.setting}, seed {run.seed}, fold {run.fold}: "
                      f"CCR {100 * metrics['ccr']:.1f} %, {metrics['wall_seconds']:.0f} s")
-        bars.update("sweep", counts["finished"] + counts["skipped"],
-                    f"{counts['skipped']} stored before")
+        bars.update("sweep", sum(counts.values()),
+                    f"{counts['skipped']} stored before, {counts['failed']} failed")
 
     if args.quiet:
-        records, info = run_sweep(spec, out, address=args.address, jobs=args.jobs)
+        records, info = run_sweep(spec, out, address=args.address, jobs=args.jobs,
+                                  retries=retries)
     else:
         with bars:
             bars.add("sweep", "sweep", total)
             records, info = run_sweep(spec, out, address=args.address, jobs=args.jobs,
-                                      on_event=on_event)
-    report = write_report(out, spec, records, info)
-    print(f"{info['runs']} runs: {info['computed']} computed, {info['reused']} stored "
-          f"before (not recomputed); wall {info['wall_seconds']:.1f} s")
-    print(f"wrote {out}/results.csv, {report} and figures/")
-    return 0
+                                      retries=retries, on_event=on_event)
+    command = " ".join(["iloci sweep", *(shlex.quote(a) for a in sys.argv[2:])]) \
+        if sys.argv[1:2] == ["sweep"] else "iloci sweep ..."
+    for line in summary_lines(info, records, command):
+        print(line)
+    print(f"wall {info['wall_seconds']:.1f} s")
+    if records:
+        report = write_report(out, spec, records, info)
+        print(f"wrote {out}/results.csv, {report} and figures/")
+    return 1 if info["failed"] else 0

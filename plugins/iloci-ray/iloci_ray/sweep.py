@@ -35,7 +35,6 @@ import itertools
 import json
 from pathlib import Path
 import time
-import tomllib
 from typing import Any
 
 import numpy as np
@@ -43,11 +42,15 @@ import numpy as np
 from iloci.errors import ConfigError, InvalidInputError
 
 __all__ = ["SweepSpec", "Run", "load_spec", "plan_runs", "run_key", "run_sweep",
-           "RUN_METRICS"]
+           "summary_lines", "RUN_METRICS"]
 
 #: Metrics stored per run (from the fold's result; see iloci.evaluation.evaluate).
 RUN_METRICS = ("ccr", "feedbacks", "rewarded", "interactions_per_demo", "entries",
                "concepts", "generation_error", "wall_seconds")
+#: Also stored per run when ``dtaidistance`` (the ``report`` extra) is installed:
+#: ``baselines``, name -> CCR of each baseline of iloci.evaluation.baselines on the
+#: run's fold (the same learning and test sets).
+BASELINES_METRIC = "baselines"
 
 
 @dataclass(frozen=True)
@@ -91,16 +94,11 @@ def load_spec(path: str | Path) -> SweepSpec:
         The file is missing, not TOML, or has unknown keys or bad values
         (the message names the key and what is expected).
     """
-    from iloci.config import load_config
+    from iloci.config import load_config, read_config_file, read_toml
 
     path = Path(path)
     source = str(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise _error(source, "no such sweep spec file.") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise _error(source, f"not a TOML file: {exc}") from None
+    raw = read_toml(path, "sweep spec")
     unknown = set(raw) - _SPEC_KEYS
     if unknown:
         raise _error(source, f"unknown key(s) {sorted(unknown)}; a sweep spec has "
@@ -110,9 +108,9 @@ def load_spec(path: str | Path) -> SweepSpec:
         # what the base file says (checked by loading it), not its resolved
         # values: a component changed by [config] or [values] then takes its
         # own defaults for what the base leaves out
-        base_path = (path.parent / str(raw["base"])).resolve()
-        load_config(base_path)
-        base = tomllib.loads(base_path.read_text(encoding="utf-8"))
+        # read once, through the reader every config file goes through
+        base = read_config_file((path.parent / str(raw["base"])).resolve())
+        load_config(base)
     for sec, value in dict(raw.get("config", {})).items():
         if not isinstance(value, dict):
             raise _error(source, f"[config] {sec} must be a table of values.")
@@ -245,23 +243,43 @@ def plan_runs(spec: SweepSpec) -> list[Run]:
 
 
 def fold_run(config: dict[str, Any], fold: int) -> dict[str, Any]:
-    """One run, in a Ray task: fold ``fold`` of the config's k-fold split; its metrics."""
+    """One run, in a Ray task: fold ``fold`` of the config's k-fold split; its metrics.
+
+    The data are LASA or the config's ``[data] path`` (split as
+    ``[evaluation] split`` says); the baselines run on the same fold when
+    ``dtaidistance`` is installed (``baselines``: name -> CCR).
+    """
     from iloci.data import load_lasa
     from iloci.evaluation.evaluate import fold_plan, run_fold
 
     from iloci.config import load_config
+    from iloci.errors import MissingBackendError
 
     cfg = load_config(config)
-    demos = load_lasa(list(cfg.data.shapes) or None)
-    learn, test = fold_plan(demos, cfg)[fold]
+    samples = None
+    if cfg.data.path:
+        from iloci.data.datasets import load_dataset
+        dataset = load_dataset(cfg.data.path)
+        demos, samples = dataset.demos, dataset.samples
+    else:
+        demos = load_lasa(list(cfg.data.shapes) or None)
+    learn, test = fold_plan(demos, cfg, samples)[fold]
     res = run_fold(cfg, fold, [demos[i] for i in learn], [demos[i] for i in test],
                    baseline=False, details=False)
     fb = res.feedbacks
-    return {"ccr": res.ccr, "feedbacks": len(fb),
-            "rewarded": sum(1 for f in fb if f == 1) / max(1, len(fb)),
-            "interactions_per_demo": res.interactions_per_demo, "entries": res.entries,
-            "concepts": res.concepts, "generation_error": res.generation_error,
-            "wall_seconds": res.wall_seconds}
+    out: dict[str, Any] = {
+        "ccr": res.ccr, "feedbacks": len(fb),
+        "rewarded": sum(1 for f in fb if f == 1) / max(1, len(fb)),
+        "interactions_per_demo": res.interactions_per_demo, "entries": res.entries,
+        "concepts": res.concepts, "generation_error": res.generation_error,
+        "wall_seconds": res.wall_seconds}
+    try:
+        from iloci.evaluation.baselines import run_baselines
+        runs = run_baselines([demos[i] for i in learn], [demos[i] for i in test])
+        out[BASELINES_METRIC] = {name: r["ccr"] for name, r in runs.items()}
+    except MissingBackendError:  # without the report extra: iloci's metrics only
+        pass
+    return out
 
 
 def _store(out: Path, run: Run, metrics: dict[str, Any]) -> None:
@@ -286,11 +304,27 @@ def load_done(out: Path) -> dict[str, dict[str, Any]]:
     return done
 
 
+#: Times a run whose worker died (or that failed otherwise than with an iloci error) is
+#: started again before it is recorded as failed (``iloci sweep --retries``).
+RETRIES = 2
+
+#: What a worker that died without a word most likely met.
+DIED = ("its Ray worker process died (killed by the out-of-memory killer or a signal, or "
+        "crashed)")
+
+
 def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
-              jobs: int | None = None,
+              jobs: int | None = None, retries: int = RETRIES,
               on_event: Callable[[str, Run, dict[str, Any] | None], None] | None = None,
               ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run every run of ``spec`` not stored in ``out`` yet, on Ray; store each at once.
+
+    A run that fails is started again up to ``retries`` times when its worker
+    died (out-of-memory killer, a signal, a crash) or it failed otherwise
+    than with an iloci error; then, or at once for an iloci error (the same on
+    every try: a bad setting, a back end missing on the cluster), it is
+    recorded as failed and the other runs go on. A Ray started here is
+    stopped, all of it, however the sweep ends (:mod:`iloci_ray.lifecycle`).
 
     Parameters
     ----------
@@ -301,28 +335,33 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
         A running Ray cluster (``HOST:PORT``); None starts Ray here.
     jobs : int, optional
         Runs in flight at once (default: the cluster's CPUs).
+    retries : int
+        Times a failed run is started again (default :data:`RETRIES`).
     on_event : callable, optional
         ``on_event(kind, run, metrics)`` with kind ``"skipped"`` (stored
-        before), ``"started"`` or ``"finished"``.
+        before), ``"started"``, ``"finished"``, ``"retried"`` or ``"failed"``
+        (``metrics`` then ``{"error": message, "attempts": n}``).
 
     Returns
     -------
     records : list of dict
-        Every run of the sweep (stored and new), in plan order.
+        Every finished run of the sweep (stored before and new), in plan order.
     info : dict
         ``runs``, ``reused`` (runs not recomputed), ``computed``,
-        ``wall_seconds``, ``jobs``, ``address``.
-
-    Raises
-    ------
-    IlociError
-        A run's own error (e.g. a back end missing on the cluster), after
-        the runs in flight are cancelled; finished runs stay stored.
+        ``retried`` (runs that finished after a retry), ``failed`` (one dict
+        per failed run: ``key``, ``setting``, ``seed``, ``fold``, ``error``,
+        ``attempts``), ``retries``, ``wall_seconds``, ``jobs``, ``address``.
     """
-    from iloci_ray.executor import connect, unwrap
+    from iloci.errors import IlociError
+    from iloci_ray.executor import unwrap
+    from iloci_ray.lifecycle import owned_ray, reap_orphans
 
+    if retries < 0:
+        raise InvalidInputError(f"retries must be >= 0, got {retries}.")
     out = Path(out)
     t0 = time.perf_counter()
+    if address is None:  # a Ray left by a sweep killed with SIGKILL, even if nothing runs now
+        reap_orphans()
     runs = plan_runs(spec)
     done = load_done(out)
     emit = on_event or (lambda kind, run, metrics: None)
@@ -336,42 +375,91 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
     unique = list({r.key: r for r in todo}.values())
     reused = len(runs) - len(todo)
     n_jobs = jobs
+    attempts: dict[str, int] = {}
+    failed: dict[str, dict[str, Any]] = {}
     if unique:
-        ray = connect(address, jobs)
-        n_jobs = jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        remote = ray.remote(num_cpus=1, max_retries=0)(fold_run)
-        waiting = list(unique)
-        running: dict[Any, Run] = {}
-        try:
-            while waiting or running:
-                while waiting and len(running) < n_jobs:
-                    run = waiting.pop(0)
-                    running[remote.remote(run.config, run.fold)] = run
-                    emit("started", run, None)
-                ready, _ = ray.wait(list(running), num_returns=1)
-                for ref in ready:
-                    run = running.pop(ref)
-                    try:
-                        metrics = ray.get(ref)
-                    except Exception as exc:
-                        raise unwrap(exc) from None
-                    _store(out, run, metrics)
-                    done[run.key] = {"metrics": metrics}
-                    emit("finished", run, metrics)
-        finally:
-            for ref in running:
-                ray.cancel(ref, force=True)
+        with owned_ray(address, jobs) as (ray, refresh):
+            n_jobs = jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
+            remote = ray.remote(num_cpus=1, max_retries=0)(fold_run)
+            waiting = list(unique)
+            running: dict[Any, Run] = {}
+            try:
+                while waiting or running:
+                    while waiting and len(running) < n_jobs:
+                        run = waiting.pop(0)
+                        attempts[run.key] = attempts.get(run.key, 0) + 1
+                        running[remote.remote(run.config, run.fold)] = run
+                        emit("started", run, None)
+                    refresh()
+                    ready, _ = ray.wait(list(running), num_returns=1)
+                    for ref in ready:
+                        run = running.pop(ref)
+                        try:
+                            metrics = ray.get(ref)
+                        except Exception as exc:  # noqa: BLE001  (kept, reported, retried)
+                            err = unwrap(exc)
+                            why = _why(err)
+                            if isinstance(err, IlociError) or attempts[run.key] > retries:
+                                failed[run.key] = {
+                                    "key": run.key, "setting": run.setting, "seed": run.seed,
+                                    "fold": run.fold, "error": why,
+                                    "attempts": attempts[run.key]}
+                                emit("failed", run, {"error": why,
+                                                     "attempts": attempts[run.key]})
+                            else:
+                                waiting.insert(0, run)
+                                emit("retried", run, {"error": why,
+                                                      "attempts": attempts[run.key]})
+                            continue
+                        _store(out, run, metrics)
+                        done[run.key] = {"metrics": metrics}
+                        emit("finished", run, metrics)
+            finally:
+                for ref in running:
+                    ray.cancel(ref, force=True)
     records = [{"key": r.key, "setting": r.setting, "seed": r.seed, "fold": r.fold,
-                **done[r.key]["metrics"]} for r in runs]
-    info = {"runs": len(runs), "reused": reused, "computed": len(unique),
+                **done[r.key]["metrics"]} for r in runs if r.key in done]
+    info = {"runs": len(runs), "reused": reused, "computed": len(unique) - len(failed),
+            "retried": sum(1 for k, n in attempts.items() if n > 1 and k not in failed),
+            "failed": list(failed.values()), "retries": retries,
             "wall_seconds": time.perf_counter() - t0, "jobs": n_jobs, "address": address}
     return records, info
 
 
+def _why(err: BaseException) -> str:
+    """One line saying why a run failed."""
+    from iloci.errors import IlociError
+
+    if isinstance(err, IlociError):
+        return f"{type(err).__name__}: {err}"
+    name = type(err).__name__
+    if name in ("WorkerCrashedError", "NodeDiedError", "OutOfMemoryError",
+                "LocalRayletDiedError", "ActorDiedError"):
+        return f"{name}: {DIED}"
+    first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+    return f"{name}: {first[:300]}"
+
+
+def summary_lines(info: dict[str, Any], records: list[dict[str, Any]], command: str
+                  ) -> list[str]:
+    """The table a sweep ends with: what ran, what failed, and how to resume."""
+    failed = info["failed"]
+    lines = [f"{info['runs']} runs: {len(records)} stored ({info['computed']} computed now, "
+             f"{info['retried']} of them after a retry; {info['reused']} stored before), "
+             f"{len(failed)} failed."]
+    if failed:
+        lines.append(f"{'run':20s}  {'seed':>4s}  {'fold':>4s}  {'tries':>5s}  setting: error")
+        for f in failed:
+            lines.append(f"{f['key']:20s}  {f['seed']:4d}  {f['fold']:4d}  {f['attempts']:5d}  "
+                         f"{f['setting']}: {f['error']}")
+        lines.append(f"Every finished run is stored. Run the same command again to resume "
+                     f"({command}): the {len(records)} stored run(s) are skipped and only "
+                     f"the {len(failed)} failed one(s) run again; one that fails the same "
+                     "way every time needs its error fixed first.")
+    return lines
+
+
 def check_out(out: str | Path) -> Path:
     """``out`` as a directory to write to (created), or an InvalidInputError."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InvalidInputError(f"--out {out} is a file; give a directory.")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    from iloci.data.files import writable_dir
+    return writable_dir(out, "--out")

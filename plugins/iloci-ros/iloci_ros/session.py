@@ -37,13 +37,18 @@ from typing import Any
 
 import numpy as np
 
+from iloci import errors
 from iloci.errors import InvalidInputError
 
 __all__ = ["Guess", "Placed", "StaleAnswerError", "TeachingSession"]
 
 
-class StaleAnswerError(InvalidInputError):
-    """A feedback names an answer that is not the one pending; nothing was changed."""
+class StaleAnswerError(errors.StaleAnswerError):
+    """A feedback names an answer that is not the one pending; nothing was changed.
+
+    The kernel's :class:`iloci.errors.StaleAnswerError`, which
+    :meth:`Turn.feedback <iloci.concepts.turn.Turn.feedback>` raises too.
+    """
 
 
 @dataclass(frozen=True)
@@ -223,7 +228,7 @@ class TeachingSession:
                     "published.")
             from iloci.interfaces import check_feedback
             value = check_feedback(value, "TeachingSession.feedback()")
-            self._turn.feedback(value)
+            self._turn.feedback(value, self._turn.answer.id)
             result = self._after(self._turn)
         self.last_seconds = self._clock() - t0
         return result

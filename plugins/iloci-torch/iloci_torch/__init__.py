@@ -11,7 +11,6 @@ from iloci.params import RNNPBParams
 def iloci_register_perceptual_models(registry) -> None:
     registry.add("torch-rnnpb", "iloci_torch.rnnpb:TorchRNNPB", params=RNNPBParams,
                  requires=("torch",), install="pip install torch==2.13.0",
-                 summary="RNNPB in PyTorch: hand-written batched closed-loop BPTT (float32 "
-                         "training in a native C kernel: AVX-512, AVX2 or portable), "
-                         "multi-start recognition",
-                 describe="iloci_torch.native:describe")
+                 summary="RNNPB in PyTorch operations: hand-written batched closed-loop "
+                         "BPTT, multi-start recognition (float32 results depend on the CPU; "
+                         "native-rnnpb's do not)")

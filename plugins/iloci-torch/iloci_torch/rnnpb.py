@@ -11,12 +11,12 @@ eager RNN slow on a CPU. The weights live in one flat tensor, so Adam and
 gradient clipping are a handful of vector operations.
 
 Even so, at paper size (36 sequences x 50 steps) a step issues ~450 torch
-operations of a microsecond or two each, more than their arithmetic. Float32
-training therefore runs, where it can, in ``_native.c``: the same algorithm
-in C with register-blocked vector loops for AVX-512, AVX2 + FMA or portable
-C, chosen at run time (:mod:`iloci_torch.native`), every epoch in one call.
-Figures: ``benchmarks/results/rnnpb_speed.json`` (``step_ms_by_kernel``).
-Recognition, scoring, generation and float64 training use torch operations.
+operations of a microsecond or two each, more than their arithmetic: the C
+kernel of native-rnnpb (plugins/iloci-native) runs the same algorithm
+several times faster, with one result on every CPU. This back end is torch
+operations throughout (their float32 results depend on the CPU's BLAS
+kernels). Figures: ``benchmarks/results/rnnpb_speed.json``
+(``step_ms_by_kernel``).
 
 The layers compute ``tanh`` directly: in torch 2.13 ``tanh_`` is faster than
 ``2 sigmoid(2z) - 1``, and in float32 it keeps its relative precision near
@@ -28,7 +28,6 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-import ctypes
 
 import numpy as np
 import torch
@@ -36,8 +35,6 @@ import torch
 from iloci.errors import IlociError
 from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
                          WEIGHT_NAMES, RNNPBBase, diverged_error, weight_shapes)
-from iloci_torch.native import (ISAS, NATIVE_CODES, NATIVE_WIDTH_MAX, RecognizeArgs, TrainArgs,
-                                kernel_info, native_lib, requested_isa)
 
 __all__ = ["TorchRNNPB"]
 
@@ -291,26 +288,16 @@ class TorchRNNPB(RNNPBBase):
     :mod:`iloci.rnnpb`. Runs on the CPU, single-threaded (the
     caller's ``torch.set_num_threads`` is restored after each call).
 
-    Training in float32 (the default ``dtype``) runs in a native kernel
-    (``_native.c``: register-blocked vector loops, all epochs in one call)
-    when the package was installed with a C compiler; it picks at run time
-    the widest instruction set the CPU has (AVX-512, AVX2 + FMA, or portable
-    C; ``ILOCI_RNNPB_ISA`` forces one) and :func:`kernel_info` says which.
-    Recognition's Levenberg-Marquardt steps run there too (float32 network,
-    each PB's ``P x P`` system in float64): about 3 ms instead of 16 to
-    recognize one sequence from 3 starts against 25 stored PBs (measured by
-    ``benchmarks/rnnpb.py --speed``, ``recognize_one_ms``).
-    Float64 training, ``kernel = "torch"``, and sizes beyond the kernel
-    (more than 256 hidden or state units) use torch operations. Both follow
-    the same algorithm and update order as the numpy reference
-    (:mod:`iloci.rnnpb.reference`); their float32 results differ in
-    rounding only.
+    Training, recognition, scoring and generation are torch operations,
+    following the algorithm and update order of the numpy reference
+    (:mod:`iloci.rnnpb.reference`); float32 results differ from it (and
+    between CPUs) in rounding only. The C kernel with one result on every
+    CPU is native-rnnpb's (the default perceptual model).
 
     Attributes
     ----------
     kernel_ : str
-        The kernel the last :meth:`train` ran: ``"native kernel (avx512)"``,
-        ``"native kernel (avx2)"``, ``"native kernel (portable)"`` or ``"torch operations"``.
+        ``"torch operations"``.
 
     Parameters
     ----------
@@ -318,7 +305,13 @@ class TorchRNNPB(RNNPBBase):
         Seeds the initial weights (identical to the JAX back end's).
     **params
         Fields of :class:`iloci.params.RNNPBParams` (sizes, epochs, learning
-        rates, ``closed_loop``, ``dtype``, ...).
+        rates, ``closed_loop``, ``dtype``, ...); ``kernel``: ``"auto"`` or
+        ``"torch"`` (the same here).
+
+    Raises
+    ------
+    IlociError
+        ``kernel = "native"`` (native-rnnpb's).
 
     Examples
     --------
@@ -329,7 +322,13 @@ class TorchRNNPB(RNNPBBase):
 
     backend = "torch"
 
+    kernel_ = "torch operations"
+
     def _setup(self) -> None:
+        if self.params.kernel == "native":
+            raise IlociError('kernel = "native" is the C kernel of native-rnnpb; set '
+                             'perceptual_model = "native-rnnpb", or kernel = "auto" for '
+                             'torch operations.')
         self._dtype = torch.float64 if self.params.dtype == "float64" else torch.float32
         p = self.params
         self._sizes = (p.input_size, p.hidden, p.context, p.pb)
@@ -349,23 +348,7 @@ class TorchRNNPB(RNNPBBase):
     def _t(self, a: np.ndarray, dtype: torch.dtype | None = None) -> torch.Tensor:
         return torch.from_numpy(np.ascontiguousarray(a)).to(dtype or self._dtype)
 
-    def _train_multiple(self) -> int:
-        # the native kernel compiles nothing per shape, and a padded row costs
-        # what a real one does (a memory of 5 entries padded to 8 trained 33 %
-        # slower); its results do not depend on the padding (tested)
-        d, h, c, _ = self._sizes
-        fits = max(-(-h // 16), -(-(d + c) // 16)) * 16 <= NATIVE_WIDTH_MAX
-        if (self.params.kernel != "torch" and self._dtype == torch.float32 and fits
-                and native_lib() is not None):
-            return 1
-        # torch operations: their results may depend on the row count
-        return self.batch_multiple
-
     def _train_kernel(self, X, mask, weight, u, epochs):
-        if self.params.kernel != "torch" and self._dtype == torch.float32:
-            done = self._train_native(X, mask, weight, u, epochs)
-            if done is not None:
-                return done
         p = self.params
         net = self._net
         backup = net.flat.clone()
@@ -392,82 +375,9 @@ class TorchRNNPB(RNNPBBase):
         self.kernel_ = "torch operations"
         return ut.numpy().astype(np.float64), float(loss)
 
-    def _native_library(self) -> ctypes.CDLL | None:
-        """The native kernel; None where it was not built (an error with kernel = "native")."""
-        lib = native_lib()
-        if lib is None and self.params.kernel == "native":
-            raise IlociError(kernel_info("auto") + '; kernel = "native" needs it: '
-                             'install a C compiler and reinstall, or set kernel = "auto".')
-        return lib
-
-    def _native_ran(self, code: int, what: str) -> bool:
-        """Whether the native kernel's call to ``what`` ("train", "recognize") succeeded.
-
-        False where the sizes exceed the kernel's widths (torch operations
-        then run, unless ``kernel = "native"``).
-
-        Raises
-        ------
-        IlociError
-            Out of memory, or any other refusal (the model is unchanged).
-        """
-        if code == 1:
-            raise IlociError(f"not enough memory to {what} this batch; {what} fewer or shorter "
-                             "sequences at once. The model was left unchanged.")
-        if code == 2 and self.params.kernel != "native":  # wider than the kernel's tiles
-            return False
-        if code != 0:
-            raise IlociError(f"the native kernel refused to {what} (code {code}: "
-                             f"{NATIVE_CODES.get(code, 'unknown')}); set kernel = \"torch\" "
-                             f"to {what} with torch operations.")
-        return True
-
-    def _train_native(self, X, mask, weight, u, epochs):
-        """``_train_kernel`` in the native kernel; None where it cannot run.
-
-        It cannot where the extension was not built or the sizes exceed its
-        widths; with ``kernel = "native"`` that is an error instead.
-        """
-        lib = self._native_library()
-        if lib is None:
-            return None
-        isa = requested_isa()
-        p, net = self.params, self._net
-        d, h, c, pb = self._sizes
-        # copies: the model changes only once the kernel has finished and succeeded
-        w = {k: np.array(net.views[k].numpy(), dtype=np.float32, order="C")
-             for k in WEIGHT_NAMES}
-        f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-        Xf, mw, uf = f32(X), f32(mask * weight[None, :]), np.array(u, np.float32, order="C")
-        history = np.zeros(max(int(epochs), 1), np.float32)
-        args = TrainArgs(
-            size=ctypes.sizeof(TrainArgs), isa=ISAS.get(isa, 0), epochs=int(epochs),
-            T=X.shape[0], R=X.shape[1], D=d, C=c, H=h, P=pb, warmup=int(p.warmup_epochs),
-            alpha=float(p.closed_loop), bound=float(p.pb_bound),
-            lr=float(p.learning_rate), pb_lr=float(p.pb_learning_rate),
-            decay=float(p.learning_rate_decay), clip=float(p.grad_clip),
-            X=Xf.ctypes.data, mw=mw.ctypes.data, w_in=w["w_in"].ctypes.data,
-            b_hidden=w["b_hidden"].ctypes.data, w_out=w["w_out"].ctypes.data,
-            b_out=w["b_out"].ctypes.data, u=uf.ctypes.data,
-            loss_history=history.ctypes.data)
-        if not self._native_ran(lib.iloci_rnnpb_train(ctypes.byref(args)), "train"):
-            return None
-        if not all(np.isfinite(a).all() for a in w.values()):
-            raise diverged_error()
-        for k in WEIGHT_NAMES:
-            net.views[k].copy_(torch.from_numpy(w[k]))
-        self._net64 = None
-        self._loss_history = history[:args.epochs_run].astype(np.float64)
-        self.kernel_ = "native kernel (" + {v: k for k, v in ISAS.items()}[args.isa_used] + ")"
-        return uf.astype(np.float64), float(args.loss)
-
     def _recognize_kernel(self, X, mask, weight, u):
         if self.params.recognition_method == "adam":
             return self._recognize_adam(X, mask, weight, u)
-        if self.params.kernel != "torch" and self._dtype == torch.float32:
-            done = self._recognize_native(X, mask, weight, u)
-            if done is not None:
-                return done
         p = self.params
         net = self._net
         Xt, ut = self._t(X), self._t(u)
@@ -497,37 +407,6 @@ class TorchRNNPB(RNNPBBase):
                 lam = torch.where(ok, lam * LM_DOWN, lam * LM_UP).clamp_(LM_MIN, LM_MAX)
                 e = torch.where(ok, e_new, e)
         return ut.numpy().astype(np.float64)
-
-    def _recognize_native(self, X, mask, weight, u):
-        """The Levenberg-Marquardt steps below in the native kernel; None where it cannot run.
-
-        The same steps, constants and acceptance rule as the torch
-        operations, in float32 with each row's ``P x P`` system in float64;
-        ``iloci_rnnpb_recognize`` in ``_native.c``. It cannot run where the
-        extension was not built or the sizes exceed its widths (then torch
-        operations run, or with ``kernel = "native"`` an error is raised).
-        """
-        lib = self._native_library()
-        if lib is None:
-            return None
-        p, net = self.params, self._net
-        d, h, c, pb = self._sizes
-        f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-        w = {k: f32(net.views[k].numpy()) for k in WEIGHT_NAMES}
-        Xf, sw = f32(X), f32(np.sqrt(mask * weight[None, :]))
-        uf = np.array(u, np.float32, order="C")
-        args = RecognizeArgs(
-            size=ctypes.sizeof(RecognizeArgs), isa=ISAS.get(requested_isa(), 0),
-            steps=int(p.recognition_steps), T=X.shape[0], R=X.shape[1], D=d, C=c, H=h, P=pb,
-            bound=float(p.pb_bound), damping=float(p.recognition_damping),
-            down=LM_DOWN, up=LM_UP, lam_min=LM_MIN, lam_max=LM_MAX, tiny=LM_TINY,
-            u_max=LM_U_MAX, X=Xf.ctypes.data, sw=sw.ctypes.data,
-            w_in=w["w_in"].ctypes.data, b_hidden=w["b_hidden"].ctypes.data,
-            w_out=w["w_out"].ctypes.data, b_out=w["b_out"].ctypes.data,
-            u=uf.ctypes.data, err=None)
-        if not self._native_ran(lib.iloci_rnnpb_recognize(ctypes.byref(args)), "recognize"):
-            return None
-        return uf.astype(np.float64)
 
     def _recognize_adam(self, X, mask, weight, u):
         p = self.params

@@ -6,8 +6,8 @@
  *   SUFFIX  appended to every name defined here (avx512, avx2, portable)
  *   TARGET  the function attribute selecting the instruction set (empty for
  *           the portable path: the compiler's default for the platform)
- *   RECIP   how to take 1 / q of a vector (a reciprocal estimate refined by
- *           one Newton step where the instruction set has one)
+ *   VFMA(a, b, c)  a b + c on vectors, fused (one rounding): the instruction
+ *           set's fused multiply-add, or fmaf lane by lane where it has none
  *   WIDE    1 where there are 32 vector registers (AVX-512): larger tiles
  *   GEMM_NB_ROWS, TN_NB_ROWS  the register tiles (see _native.c)
  *   TN_CHUNK  rows of the weight gradients' sums per pass over W's tiles
@@ -15,13 +15,21 @@
  *           them (otherwise a compare and a blend)
  *   SET1    the instruction set's broadcast of a float, where it has one
  *   K_UNROLL  a pragma unrolling the products' loop over K, or nothing
- *   SFMA(a, b, c)  a b + c on floats, fused where the instruction set has FMA
  *
  * The arithmetic is GNU C vector extensions (GCC, Clang): the compiler maps
  * them to the target's registers, so the portable path is the same source
- * as the AVX paths, vectorized for SSE2 on x86-64, NEON on aarch64, or
+ * as the AVX paths, vectorized for SSE on x86-64, NEON on aarch64, or
  * split into scalars where there is no vector unit. The element-wise loops
  * are plain C, vectorized by -O3.
+ *
+ * One arithmetic on every path (see "The float32 arithmetic" in _native.c):
+ * every element's sums run in the same order whatever the vector width
+ * (a vector holds VW independent columns, never parts of one sum), the
+ * matrix and dot products' steps are explicit fused multiply-adds (VFMA,
+ * fmaf), every other operation is separately rounded IEEE (the module is
+ * compiled with -ffp-contract=off, so the compiler fuses nothing on its
+ * own), and tanh is our own rational function with a true division. So
+ * AVX-512, AVX2, SSE and NEON round identically: bit-identical results.
  */
 
 #define CAT_(a, b) a##_##b
@@ -55,8 +63,15 @@ typedef int32_t VI __attribute__((vector_size(VW * 4)));
 #ifdef SET1
 INL V F(splat)(float a) { return (V)SET1(a); }
 #else
-INL V F(splat)(float a) { return (V){0} + a; }
+INL V F(splat)(float a) {  /* not (V){0} + a: 0 + -0 is +0 */
+    V r;
+    for (int i = 0; i < VW; i++) r[i] = a;
+    return r;
+}
 #endif
+
+/* a b + c rounded once, lane by lane */
+INL V F(vfma)(V a, V b, V c) { return (V)VFMA(a, b, c); }
 
 #ifdef VMIN
 INL V F(vmin)(V a, V b) { return (V)VMIN(a, b); }
@@ -67,23 +82,41 @@ INL V F(vmax)(V a, V b) { VI m = a > b; return (V)((m & (VI)a) | (~m & (VI)b)); 
 #endif
 
 /* tanh in float32: a [13/6] rational approximation on [-7.9, 7.9] (the one
- * Eigen and XLA use; beyond, tanh rounds to +-1). */
+ * Eigen and XLA use; beyond, tanh rounds to +-1), Horner steps fused, one
+ * correctly rounded division: the same bits on every instruction set (no
+ * reciprocal estimate, whose bits differ between AVX2's rcpps and
+ * AVX-512's rcp14ps). */
+#define TANH_CLAMP 7.90531110763549805f
+#define TANH_P(x2, FMA, K) \
+    FMA(x2, FMA(x2, FMA(x2, FMA(x2, FMA(x2, FMA(x2, K(-2.76076847742355e-16f), \
+        K(2.00018790482477e-13f)), K(-8.60467152213735e-11f)), K(5.12229709037114e-08f)), \
+        K(1.48572235717979e-05f)), K(6.37261928875436e-04f)), K(4.89352455891786e-03f))
+#define TANH_Q(x2, FMA, K) \
+    FMA(x2, FMA(x2, FMA(x2, K(1.19825839466702e-06f), K(1.18534705686654e-04f)), \
+        K(2.26843463243900e-03f)), K(4.89352518554385e-03f))
 INL V F(vtanh)(V x) {
-    const V c = F(splat)(7.90531110763549805f);
+    const V c = F(splat)(TANH_CLAMP);
     x = F(vmin)(F(vmax)(x, -c), c);
     V x2 = x * x;
-    V p = x2 * -2.76076847742355e-16f + 2.00018790482477e-13f;
-    p = x2 * p + -8.60467152213735e-11f;
-    p = x2 * p + 5.12229709037114e-08f;
-    p = x2 * p + 1.48572235717979e-05f;
-    p = x2 * p + 6.37261928875436e-04f;
-    p = x2 * p + 4.89352455891786e-03f;
-    p = x * p;
-    V q = x2 * 1.19825839466702e-06f + 1.18534705686654e-04f;
-    q = x2 * q + 2.26843463243900e-03f;
-    q = x2 * q + 4.89352518554385e-03f;
-    return p * RECIP(q);
+    V p = TANH_P(x2, F(vfma), F(splat));
+    V q = TANH_Q(x2, F(vfma), F(splat));
+    return (x * p) / q;
 }
+
+/* The same function on one float (the PBs' tanh): the same operations in
+ * the same order, so the same bits as a lane of vtanh. */
+#define KF(a) (a)
+INL float F(stanh)(float x) {
+    x = x < -TANH_CLAMP ? -TANH_CLAMP : x > TANH_CLAMP ? TANH_CLAMP : x;
+    float x2 = x * x;
+    float p = TANH_P(x2, __builtin_fmaf, KF);
+    float q = TANH_Q(x2, __builtin_fmaf, KF);
+    return (x * p) / q;
+}
+#undef KF
+#undef TANH_P
+#undef TANH_Q
+#undef TANH_CLAMP
 
 /* C[i, :NB VW] = epi(init_i + A[i, :K] @ B[:, :NB VW]) for the first
  * M - M % ROWS rows; returns how many rows it did. B, C, E and init point
@@ -116,7 +149,7 @@ INL ptrdiff_t F(gemm_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int ROW
             for (int v = 0; v < NB; v++) bv[v] = LD(b + VW * v);
             for (int q = 0; q < ROWS; q++) {
                 V a = F(splat)(A[(i + q) * lda + k]);
-                for (int v = 0; v < NB; v++) c[q][v] += a * bv[v];
+                for (int v = 0; v < NB; v++) c[q][v] = F(vfma)(a, bv[v], c[q][v]);
             }
         }
         for (int q = 0; q < ROWS; q++)
@@ -125,7 +158,7 @@ INL ptrdiff_t F(gemm_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int ROW
                 if (epi == EPI_TANH) y = F(vtanh)(y);
                 else if (epi == EPI_DTANH) {
                     V e = LD(E + (i + q) * ldn + VW * v);
-                    y = y * (1.0f - e * e);
+                    y = y * F(vfma)(-e, e, F(splat)(1.0f));
                 }
                 ST(C + (i + q) * ldn + VW * v, y);
             }
@@ -176,7 +209,7 @@ INL ptrdiff_t F(gemm_tn_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int 
             const float *a = A + r * lda + i0;
             for (int q = 0; q < IB; q++) {
                 V x = F(splat)(a[q]);
-                for (int v = 0; v < NB; v++) c[q][v] += x * bv[v];
+                for (int v = 0; v < NB; v++) c[q][v] = F(vfma)(x, bv[v], c[q][v]);
             }
         }
         for (int q = 0; q < IB; q++)
@@ -240,28 +273,29 @@ TARGET static void F(colsum)(ptrdiff_t M, int N, const float *src, ptrdiff_t lds
 }
 
 /* out[q] = sum over h < n of x_q[h] y_q[h] for 8 pairs of rows at once, h in
- * ascending order (8 independent sums, so the adds overlap). SFMA(a, b, c)
- * is a b + c as the scalar loop it replaces compiled it: one fused
- * multiply-add where the instruction set has one (spelled out, since GCC
- * would otherwise vectorize the products and add them one by one, unfused). */
+ * ascending order (8 independent sums, so the adds overlap), each step one
+ * fmaf. */
 INL void F(dot8)(int n, const float *const x[8], const float *const y[8], float out[8]) {
     float c0 = 0.0f, c1 = 0.0f, c2 = 0.0f, c3 = 0.0f, c4 = 0.0f, c5 = 0.0f, c6 = 0.0f,
           c7 = 0.0f;
     for (int h = 0; h < n; h++) {
-        c0 = SFMA(x[0][h], y[0][h], c0); c1 = SFMA(x[1][h], y[1][h], c1);
-        c2 = SFMA(x[2][h], y[2][h], c2); c3 = SFMA(x[3][h], y[3][h], c3);
-        c4 = SFMA(x[4][h], y[4][h], c4); c5 = SFMA(x[5][h], y[5][h], c5);
-        c6 = SFMA(x[6][h], y[6][h], c6); c7 = SFMA(x[7][h], y[7][h], c7);
+        c0 = __builtin_fmaf(x[0][h], y[0][h], c0); c1 = __builtin_fmaf(x[1][h], y[1][h], c1);
+        c2 = __builtin_fmaf(x[2][h], y[2][h], c2); c3 = __builtin_fmaf(x[3][h], y[3][h], c3);
+        c4 = __builtin_fmaf(x[4][h], y[4][h], c4); c5 = __builtin_fmaf(x[5][h], y[5][h], c5);
+        c6 = __builtin_fmaf(x[6][h], y[6][h], c6); c7 = __builtin_fmaf(x[7][h], y[7][h], c7);
     }
     out[0] = c0; out[1] = c1; out[2] = c2; out[3] = c3;
     out[4] = c4; out[5] = c5; out[6] = c6; out[7] = c7;
 }
 
-/* Adam on n parameters, the gradient scaled by `scale` (the clipping). */
+/* Adam on n parameters, the gradient scaled by `scale` (the clipping);
+ * b1t, b2t: 0.9^t and 0.999^t (double products, no libm pow). Element-wise,
+ * every operation rounded on its own. */
 TARGET static void F(adam)(float *restrict p, const float *restrict g, float *restrict m,
-                           float *restrict v, size_t n, double lr, int t, float scale) {
+                           float *restrict v, size_t n, double lr, double b1t, double b2t,
+                           float scale) {
     const float b1 = 0.9f, b2 = 0.999f;
-    const float step = (float)(lr * sqrt(1.0 - pow(0.999, t)) / (1.0 - pow(0.9, t)));
+    const float step = (float)(lr * sqrt(1.0 - b2t) / (1.0 - b1t));
     for (size_t i = 0; i < n; i++) {
         float gi = g[i] * scale;
         m[i] = b1 * m[i] + (1.0f - b1) * gi;
@@ -302,15 +336,16 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
     for (int j = 0; j < S; j++) mix[j] = j < D ? alpha : 1.0f;
 
     float loss = 0.0f;
+    double b1t = 1.0, b2t = 1.0;  /* 0.9^t, 0.999^t */
     int t = 1;
     for (; t <= a->epochs; t++) {
         /* PB = bound tanh(u); pre = PB @ Wp + bh: the same every step */
-        for (size_t i = 0; i < nU; i++) pb[i] = bound * tanhf(u[i]);
+        for (size_t i = 0; i < nU; i++) pb[i] = bound * F(stanh)(u[i]);
         for (int r = 0; r < R; r++)
             for (int h = 0; h < Hp; h += VW) {
                 V acc = LD(bh + h);
                 for (int k = 0; k < P; k++)
-                    acc += F(splat)(pb[r * P + k]) * LD(Wp + k * Hp + h);
+                    acc = F(vfma)(F(splat)(pb[r * P + k]), LD(Wp + k * Hp + h), acc);
                 ST(pre + r * Hp + h, acc);
             }
         /* forward: s_0 = [x_0, 0]; s_t = o_{t-1} mix + (1 - alpha) [x_t, 0] */
@@ -382,7 +417,7 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
             for (int h = 0; h < Hp; h += VW) {
                 V acc = F(splat)(0.0f);
                 for (int r = 0; r < R; r++)
-                    acc += F(splat)(pb[r * P + k]) * LD(sdz + (size_t)r * Hp + h);
+                    acc = F(vfma)(F(splat)(pb[r * P + k]), LD(sdz + (size_t)r * Hp + h), acc);
                 ST(gWp + (size_t)k * Hp + h, acc);
             }
         /* dL/du = (sdz Wp^T) bound (1 - tanh(u)^2), 8 of the R P sums at a time */
@@ -396,7 +431,7 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
             }
             F(dot8)(Hp, x, y, dots);
             for (int c = 0; c < 8 && q0 + c < R * P; c++) {
-                float th = tanhf(u[q0 + c]);
+                float th = F(stanh)(u[q0 + c]);
                 gu[q0 + c] = dots[c] * bound * (1.0f - th * th);
             }
         }
@@ -411,8 +446,10 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
         if (scale > 1.0) scale = 1.0;
         double f = schedule_decay(a, t);
         double ramp = a->warmup > 0 ? (t < a->warmup ? (double)t / a->warmup : 1.0) : 1.0;
-        F(adam)(w, g, m, v, nW, a->lr * f * ramp, t, (float)scale);
-        F(adam)(u, gu, mu, vu, nU, a->pb_lr * f, t, 1.0f);
+        b1t *= 0.9;
+        b2t *= 0.999;
+        F(adam)(w, g, m, v, nW, a->lr * f * ramp, b1t, b2t, (float)scale);
+        F(adam)(u, gu, mu, vu, nU, a->pb_lr * f, b1t, b2t, 1.0f);
     }
     a->epochs_run = t - 1;
 
@@ -452,9 +489,9 @@ TARGET static void F(lm_system)(lm_work *w, const float *u, double *e, double *A
     for (int r = 0; r < R; r++) {
         for (int h = 0; h < Hp; h++) w->pre[r * Hp + h] = w->bh[h];
         for (int k = 0; k < P; k++) {
-            float th = tanhf(u[r * P + k]), pb = bound * th, dp = bound * (1.0f - th * th);
-            for (int h = 0; h < Hp; h++) {
-                w->pre[r * Hp + h] += pb * w->Wp[k * Hp + h];
+            float th = F(stanh)(u[r * P + k]), pb = bound * th, dp = bound * (1.0f - th * th);
+            for (int h = 0; h < Hp; h++) {  /* as training's pre: one fma per k */
+                w->pre[r * Hp + h] = __builtin_fmaf(pb, w->Wp[k * Hp + h], w->pre[r * Hp + h]);
                 w->dpre[((size_t)k * R + r) * Hp + h] = dp * w->Wp[k * Hp + h];
             }
         }
@@ -493,6 +530,47 @@ TARGET static void F(lm_system)(lm_work *w, const float *u, double *e, double *A
             }
         }
     }
+}
+
+/* Closed-loop prediction error of every row under its PB, the arithmetic of
+ * training's forward pass: a->u holds the PBs themselves (R, P), a->sw the
+ * mask (T - 1, R); err[r] = sum_t mask[t, r] sum_D (o - x)^2 / D /
+ * max(1, sum_t mask[t, r]), the sums over t in float64. Returns 0, or 1 when
+ * out of memory. */
+TARGET static int F(errors)(iloci_rnnpb_recognize_args *a) {
+    lm_work w;
+    if (lm_work_init(&w, a)) return 1;
+    const int D = a->D, P = a->P, R = a->R, L = a->T - 1, Sp = w.Sp, Hp = w.Hp;
+    const int S = a->D + a->C, H = a->H;
+    const float *pb = a->u;
+    for (int r = 0; r < R; r++)
+        for (int h = 0; h < Hp; h += VW) {
+            V acc = LD(w.bh + h);
+            for (int k = 0; k < P; k++)
+                acc = F(vfma)(F(splat)(pb[r * P + k]), LD(w.Wp + k * Hp + h), acc);
+            ST(w.pre + r * Hp + h, acc);
+        }
+    for (int r = 0; r < R; r++) { w.sys[r] = 0.0; w.sys[R + r] = 0.0; }
+    for (int t = 0; t < L; t++) {
+        float *h = w.Hs + (size_t)t * R * Hp, *o = w.Os + (size_t)t * R * Sp;
+        const float *in = t ? w.Os + (size_t)(t - 1) * R * Sp : w.s0;
+        F(gemm)(R, S, Hp, in, Sp, w.Ws, w.pre, Hp, 0, h, EPI_TANH, NULL);
+        F(gemm)(R, H, Sp, h, Hp, w.Wo, w.bo, 0, 0, o, EPI_TANH, NULL);
+        const float *x = a->X + (size_t)(t + 1) * R * D, *m = a->sw + (size_t)t * R;
+        for (int r = 0; r < R; r++) {
+            float part = 0.0f;
+            for (int j = 0; j < D; j++) {
+                float d = o[r * Sp + j] - x[r * D + j];
+                part += d * d;
+            }
+            w.sys[r] += (double)part * m[r];
+            w.sys[R + r] += m[r];
+        }
+    }
+    for (int r = 0; r < R; r++)
+        a->err[r] = (float)(w.sys[r] / D / (w.sys[R + r] > 1.0 ? w.sys[R + r] : 1.0));
+    lm_work_free(&w);
+    return 0;
 }
 
 /* Levenberg-Marquardt on each row's u, the weights frozen: see
@@ -569,13 +647,12 @@ TARGET static int F(recognize)(iloci_rnnpb_recognize_args *a) {
 #undef VW
 #undef SUFFIX
 #undef TARGET
-#undef RECIP
+#undef VFMA
 #undef WIDE
 #undef VMIN
 #undef VMAX
 #undef SET1
 #undef K_UNROLL
-#undef SFMA
 #undef GEMM_NB_ROWS
 #undef TN_NB_ROWS
 #undef TN_CHUNK

@@ -1,6 +1,6 @@
 /*
- * torch-rnnpb's float32 kernel in C: every epoch of
- * iloci_torch.rnnpb.TorchRNNPB.train (closed-loop forward pass, hand-written
+ * native-rnnpb's float32 kernel in C: every epoch of
+ * iloci_native.rnnpb.NativeRNNPB.train (closed-loop forward pass, hand-written
  * BPTT, gradient clipping, the learning-rate schedule, Adam on the weights
  * and on the PBs) in one call, and every Levenberg-Marquardt step of its
  * recognition (forward-mode derivatives along the PB) in another, for one of
@@ -11,9 +11,9 @@
  * Through torch each costs more to dispatch than to compute; here they are
  * register-blocked vector loops, and the whole training runs without
  * returning to Python. The algorithm and the update order are those of the
- * numpy reference (iloci.rnnpb.reference) and of the torch path in rnnpb.py
- * (same formulas, float32 arithmetic, different rounding); tests compare
- * them step by step.
+ * numpy reference (iloci.rnnpb.reference) and of torch-rnnpb (same formulas,
+ * float32 arithmetic, its own rounding, the same on every CPU: below); tests
+ * compare them step by step.
  *
  * The kernel is written once (_native_kernel.h, over a vector width) and
  * included here once per instruction set. The module is compiled without
@@ -22,6 +22,30 @@
  * so a build never executes an instruction the machine lacks. The portable
  * path uses the platform's baseline vector unit (SSE2 on x86-64, NEON on
  * aarch64) and builds wherever GCC or Clang does.
+ *
+ * The float32 arithmetic, one definition for every instruction set (so one
+ * seed trains bit-identical networks on any CPU; tests/plugins force each
+ * path and compare, and an aarch64 build under qemu-user):
+ *
+ *   - a matrix product's element C[i, j] = init + sum_k A[i, k] B[k, j] is
+ *     acc = init (a bias, the row being added to, or +0), then for k
+ *     ascending acc = fma(A[i, k], B[k, j], acc): one rounding per step;
+ *     a vector holds independent j, so the width never changes a sum;
+ *   - weight gradients sum over steps and rows in ascending order, the same
+ *     way (fma per term); column sums add in ascending order (no products);
+ *   - the dot products of the PB gradient: fmaf per term, ascending;
+ *   - tanh: clamp to +-7.90531, x2 = x x, Horner with fma for the [13/6]
+ *     rational p(x2), q(x2), then (x p) / q, a correctly rounded division
+ *     (vtanh, stanh in _native_kernel.h; no reciprocal estimates);
+ *   - d tanh: y (1 - e^2) as y * fma(-e, e, 1);
+ *   - everything else (the loss, the mixing of inputs, Adam) separately
+ *     rounded IEEE float32 operations in the source's order: compiled with
+ *     -ffp-contract=off (pyproject.toml), so the compiler fuses nothing;
+ *   - in float64: the clipping norm (8 partial sums in a fixed tree), Adam's
+ *     step size (bias corrections as running products 0.9^t, 0.999^t), the
+ *     decay factor decay^((t-1)/epochs) (libm pow: the one library call;
+ *     glibc's is the same code on x86-64 and aarch64) and recognition's
+ *     P x P systems (Cholesky in a fixed order).
  *
  * Layout: weights are padded inside to S_p = roundup16(D + C) state and
  * H_p = roundup16(H) hidden columns (whole vector registers at every width).
@@ -118,7 +142,7 @@ enum { EPI_NONE = 0, EPI_TANH = 1, EPI_DTANH = 2 };
 
 /* The arguments of one recognition (mirrored by RecognizeArgs in native.py):
  * Levenberg-Marquardt on each row's PB, the weights frozen, exactly the
- * steps of TorchRNNPB._recognize_kernel (the torch path): X (T, R, D) padded
+ * steps of torch-rnnpb's (TorchRNNPB._recognize_kernel): X (T, R, D) padded
  * sequences; sw (T - 1, R) the square root of mask times each row's weight;
  * the weights as in iloci_rnnpb_train_args (read only); u (R, P) the starts,
  * PB = bound tanh(u), updated in place; err (R,), when not NULL, receives
@@ -217,48 +241,84 @@ static int solve_spd(int n, double M[LM_P_MAX][LM_P_MAX], const double *b, doubl
  * 8 to 9 % faster than one pass over all rows, 24 to 96 about alike; none
  * for AVX-512, whose larger tiles were 1 to 1.5 % slower with chunks). */
 
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#elif defined(__GNUC__) && !defined(ILOCI_FP_CONTRACT_OFF)
+/* GCC ignores the pragma, and nothing tells whether -ffp-contract=off is in
+ * effect: the build passes -DILOCI_FP_CONTRACT_OFF with it. Without the
+ * flag GCC would fuse products and sums where the instruction set has FMA,
+ * and each path would round differently. */
+#error "compile _native.c with -ffp-contract=off -DILOCI_FP_CONTRACT_OFF"
+#endif
+
+/* Lane by lane fmaf: the portable path where the vector unit has no fused
+ * multiply-add (x86-64 before FMA3; slow, a libm call per lane, but the
+ * same bits). */
+#define VFMA_LANES(SUF, VT, N) \
+    static inline __attribute__((always_inline)) VT vfma_lanes_##SUF(VT a, VT b, VT c) { \
+        VT r; \
+        for (int i = 0; i < (N); i++) r[i] = __builtin_fmaf(a[i], b[i], c[i]); \
+        return r; \
+    }
+typedef float vf4_lanes __attribute__((vector_size(16)));
+VFMA_LANES(portable, vf4_lanes, 4)
+
 /* -- portable: the compiler's baseline vector unit ------------------------- */
 #define VW 4
 #define SUFFIX portable
 #define K_UNROLL
-#define SFMA(a, b, c) ((a) * (b) + (c))
 #define GEMM_NB_ROWS 4, 3
 #define TN_NB_ROWS 4, 2
 #define TN_CHUNK 32
 #define TARGET
-#define RECIP(q) (1.0f / (q))
 #define WIDE 0
 #if defined(__SSE2__)
 #define VMIN _mm_min_ps
 #define VMAX _mm_max_ps
 #define SET1 _mm_set1_ps
-#elif defined(__ARM_NEON)
+#define VFMA(a, b, c) vfma_lanes_portable(a, b, c)
+#elif defined(__ARM_NEON) && defined(__aarch64__)
 #include <arm_neon.h>
 #define VMIN vminq_f32
 #define VMAX vmaxq_f32
 #define SET1 vdupq_n_f32
+#define VFMA(a, b, c) vfmaq_f32(c, a, b)  /* c + a b, one rounding (AArch64) */
+#else
+#define VFMA(a, b, c) vfma_lanes_portable(a, b, c)
 #endif
 #include "_native_kernel.h"  /* undefines the parameters above */
 
 #if ILOCI_X86
+/* -- portable on x86-64 with FMA3: the portable path's source, 4 floats, the
+ * fused multiply-adds in one instruction (what ISA_PORTABLE runs on a CPU
+ * with FMA; the same bits as the lane-by-lane fmaf above) ---------------- */
+#define VW 4
+#define SUFFIX portable_fma
+#define K_UNROLL
+#define GEMM_NB_ROWS 4, 3
+#define TN_NB_ROWS 4, 2
+#define TN_CHUNK 32
+#define TARGET __attribute__((target("fma")))
+#define WIDE 0
+#define VMIN _mm_min_ps
+#define VMAX _mm_max_ps
+#define SET1 _mm_set1_ps
+#define VFMA(a, b, c) _mm_fmadd_ps(a, b, c)
+#include "_native_kernel.h"  /* undefines the parameters above */
+
 /* -- AVX2 + FMA: 8 floats, 16 registers ------------------------------------ */
 #define VW 8
 #define SUFFIX avx2
 #define K_UNROLL
-#define SFMA(a, b, c) __builtin_fmaf(a, b, c)
 #define GEMM_NB_ROWS 4, 3
 #define TN_NB_ROWS 2, 6
 #define TN_CHUNK 32
 #define TARGET __attribute__((target("avx2,fma")))
-TARGET static inline __attribute__((always_inline)) __m256 recip_avx2(__m256 q) {
-    __m256 r = _mm256_rcp_ps(q);                 /* 12 bits, one Newton step: ~23 */
-    return _mm256_mul_ps(r, _mm256_fnmadd_ps(q, r, _mm256_set1_ps(2.0f)));
-}
-#define RECIP(q) recip_avx2(q)
 #define WIDE 0
 #define VMIN _mm256_min_ps
 #define VMAX _mm256_max_ps
 #define SET1 _mm256_set1_ps
+#define VFMA(a, b, c) _mm256_fmadd_ps(a, b, c)
 #include "_native_kernel.h"  /* undefines the parameters above */
 
 /* -- AVX-512: 16 floats, 32 registers -------------------------------------- */
@@ -274,18 +334,20 @@ TARGET static inline __attribute__((always_inline)) __m256 recip_avx2(__m256 q) 
 #define GEMM_NB_ROWS 4, 4
 #define TN_NB_ROWS 4, 4
 #define TN_CHUNK (1 << 30)  /* no chunks: 1 to 1.5 % slower in 32 to 96 rows */
-#define SFMA(a, b, c) __builtin_fmaf(a, b, c)
 #define TARGET __attribute__((target("avx512f,fma")))
-TARGET static inline __attribute__((always_inline)) __m512 recip_avx512(__m512 q) {
-    __m512 r = _mm512_rcp14_ps(q);               /* 14 bits, one Newton step: full */
-    return _mm512_mul_ps(r, _mm512_fnmadd_ps(q, r, _mm512_set1_ps(2.0f)));
-}
-#define RECIP(q) recip_avx512(q)
 #define WIDE 1
 #define VMIN _mm512_min_ps
 #define VMAX _mm512_max_ps
 #define SET1 _mm512_set1_ps
+#define VFMA(a, b, c) _mm512_fmadd_ps(a, b, c)
 #include "_native_kernel.h"  /* undefines the parameters above */
+#endif
+
+#if ILOCI_X86
+static int cpu_has_fma(void) {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("fma");
+}
 #endif
 
 /* Whether this build and this CPU can run `isa` (ISA_AUTO: always). */
@@ -334,6 +396,9 @@ int iloci_rnnpb_train(iloci_rnnpb_train_args *a) {
 #if ILOCI_X86
     case ISA_AVX512: return train_avx512(a);
     case ISA_AVX2: return train_avx2(a);
+    case ISA_PORTABLE:
+        if (cpu_has_fma()) return train_portable_fma(a);
+        return train_portable(a);
 #endif
     default: return train_portable(a);
     }
@@ -360,8 +425,36 @@ int iloci_rnnpb_recognize(iloci_rnnpb_recognize_args *a) {
 #if ILOCI_X86
     case ISA_AVX512: return recognize_avx512(a);
     case ISA_AVX2: return recognize_avx2(a);
+    case ISA_PORTABLE:
+        if (cpu_has_fma()) return recognize_portable_fma(a);
+        return recognize_portable(a);
 #endif
     default: return recognize_portable(a);
+    }
+}
+
+/* Entry point for ctypes: the closed-loop prediction error of every row under
+ * its PB (see errors in _native_kernel.h for the fields it reads: a->u are
+ * PBs, a->sw the mask, a->err receives the errors; steps, damping and the LM
+ * constants are not read). Returns as iloci_rnnpb_recognize. */
+int iloci_rnnpb_errors(iloci_rnnpb_recognize_args *a) {
+    if (a == NULL || a->size != (int32_t)sizeof(*a)) return BAD_ARGS;
+    if (a->T < 2 || a->R < 1 || a->D < 1 || a->C < 0 || a->H < 1 || a->P < 1
+        || a->X == NULL || a->sw == NULL || a->u == NULL || a->err == NULL)
+        return BAD_ARGS;
+    if (round16(a->D + a->C) > WIDTH_MAX || round16(a->H) > WIDTH_MAX) return TOO_WIDE;
+    int isa = a->isa == ISA_AUTO ? iloci_rnnpb_best_isa() : a->isa;
+    if (!iloci_rnnpb_isa_supported(isa)) return ISA_UNSUPPORTED;
+    a->isa_used = isa;
+    switch (isa) {
+#if ILOCI_X86
+    case ISA_AVX512: return errors_avx512(a);
+    case ISA_AVX2: return errors_avx2(a);
+    case ISA_PORTABLE:
+        if (cpu_has_fma()) return errors_portable_fma(a);
+        return errors_portable(a);
+#endif
+    default: return errors_portable(a);
     }
 }
 
@@ -369,7 +462,7 @@ int iloci_rnnpb_recognize(iloci_rnnpb_recognize_args *a) {
 /* A Python module only so that setuptools builds and installs the library;
  * the functions above are called through ctypes. */
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_native",
-                                    "torch-rnnpb's native training kernel (see rnnpb.py).",
+                                    "native-rnnpb's kernel (called through ctypes: iloci_native.native).",
                                     -1, NULL, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__native(void) { return PyModule_Create(&module); }

@@ -1,8 +1,10 @@
-"""torch-rnnpb's native kernel (training, recognition): finding it, choosing its instruction set.
+"""native-rnnpb's C kernel (training, recognition, scoring): loading it, choosing the ISA.
 
-Light: ctypes only, no torch, so ``iloci plugins`` can say which kernel
-will run without importing torch. The kernel itself is ``_native.c`` (an
-optional C extension built at install); :mod:`iloci_torch.rnnpb` calls it.
+ctypes only. The kernel itself is ``_native.c`` (an optional C extension
+built at install); :mod:`iloci_native.rnnpb` calls it. Every instruction
+set computes the same float32 arithmetic ("The float32 arithmetic" in
+``_native.c``): forcing one with ``ILOCI_RNNPB_ISA`` changes the speed,
+never a bit of the result.
 """
 
 from __future__ import annotations
@@ -75,21 +77,24 @@ class RecognizeArgs(ctypes.Structure):
 
 @lru_cache(maxsize=1)
 def native_lib() -> ctypes.CDLL | None:
-    """The native training kernel (``_native.c``), or None where it was not built."""
+    """The native kernel (``_native.c``), or None where it was not built."""
     try:
-        from iloci_torch import _native
+        from iloci_native import _native
     except ImportError:
         return None
     lib = ctypes.CDLL(_native.__file__)
     recognize_size = getattr(lib, "iloci_rnnpb_recognize_args_size", None)
     if (lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(TrainArgs)
-            or recognize_size is None or recognize_size() != ctypes.sizeof(RecognizeArgs)):
+            or recognize_size is None or recognize_size() != ctypes.sizeof(RecognizeArgs)
+            or not hasattr(lib, "iloci_rnnpb_errors")):
         # a stale build of another layout: never pass it a struct it misreads
         return None
     lib.iloci_rnnpb_train.argtypes = [ctypes.POINTER(TrainArgs)]
     lib.iloci_rnnpb_train.restype = ctypes.c_int
     lib.iloci_rnnpb_recognize.argtypes = [ctypes.POINTER(RecognizeArgs)]
     lib.iloci_rnnpb_recognize.restype = ctypes.c_int
+    lib.iloci_rnnpb_errors.argtypes = [ctypes.POINTER(RecognizeArgs)]
+    lib.iloci_rnnpb_errors.restype = ctypes.c_int
     lib.iloci_rnnpb_isa_supported.argtypes = [ctypes.c_int]
     return lib
 
@@ -128,26 +133,27 @@ def requested_isa() -> str:
     return name
 
 
-def kernel_info(kernel: str = "auto", dtype: str = "float32") -> str:
-    """Which training kernel a model with these settings runs here, in words.
+def kernel_info(kernel: str = "auto", dtype: str = "float32", fits: bool = True) -> str:
+    """Which code a native-rnnpb model with these settings trains and recognizes with, in words.
 
-    E.g. ``"native kernel (avx512)"``, ``"native kernel (portable; forced by
-    ILOCI_RNNPB_ISA)"``,
-    ``"torch operations (the native kernel was not built)"``. What ``iloci
-    plugins`` prints. Sizes beyond the native kernel (more than 256 hidden
-    or state units) also train with torch operations.
+    E.g. ``"native kernel (avx512)"``, ``"native kernel (portable; forced
+    by ILOCI_RNNPB_ISA)"``, ``"numpy reference (float64: the native kernel
+    is float32 only)"``. What ``iloci plugins`` prints and what a model
+    says once when it is built on the numpy reference. ``fits``: whether
+    the sizes fit the kernel (at most 256 hidden and state units).
 
     Raises
     ------
     IlociError
         ``ILOCI_RNNPB_ISA`` names an instruction set that cannot run here.
     """
-    if kernel == "torch":
-        return "torch operations (kernel = \"torch\")"
     if dtype != "float32":
-        return f"torch operations ({dtype}: the native kernel is float32 only)"
+        return f"numpy reference ({dtype}: the native kernel is float32 only)"
+    if not fits:
+        return (f"numpy reference (more than {NATIVE_WIDTH_MAX} hidden or state units: "
+                "beyond the native kernel)")
     if not native_kernel_available():
-        return ("torch operations (the native kernel was not built: reinstall iloci-torch "
+        return ("numpy reference (the native kernel was not built: reinstall iloci-native "
                 "where a C compiler is available)")
     isa = requested_isa()
     if isa != "auto":
@@ -158,6 +164,7 @@ def kernel_info(kernel: str = "auto", dtype: str = "float32") -> str:
 def describe() -> str:
     """One line for ``iloci plugins``: what float32 training and recognition run on here."""
     try:
-        return "float32 training and recognition run the " + kernel_info()
+        return ("float32 training and recognition run the " + kernel_info()
+                + "; the same bits on every instruction set")
     except IlociError as exc:
         return str(exc)

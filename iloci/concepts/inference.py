@@ -1,0 +1,309 @@
+"""The inference phase's arithmetic: the answer for a demonstration and how sure it is.
+
+Recognition (:meth:`Learner.recognize <iloci.concepts.learner.Learner.recognize>`)
+takes PB_obs of each demonstration against every PB_rec; the nearest entry's
+concept is the answer (the paper's inference phase), with the margin
+:func:`confidence` and the :func:`familiarity` on the memory's own
+:func:`novelty_scale` (the project's calibration; the paper has none).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from iloci.concepts import rehearsal
+from iloci.concepts.memory import Memory
+from iloci.interfaces import PerceptualModel
+
+__all__ = ["Recognition", "TILT_MARGIN", "confidence", "familiarity", "novelty_scale",
+           "pattern_distances", "regenerated_patterns", "regeneration_scale"]
+
+#: A turned reading of the tilt search (``[learner] tilts``) is recognized
+#: only when its entry prediction error is below this fraction of the
+#: upright reading's, so the drawing as drawn wins near ties (measured on
+#: LASA's folds: docs/guide.md, "How a drawing is read").
+TILT_MARGIN = 0.9
+
+
+@dataclass(frozen=True)
+class Recognition:
+    """The inference-phase answer for one demonstration.
+
+    Attributes
+    ----------
+    demo : str
+        Key of the demonstration.
+    concept : str
+        The robot's concept label of the nearest entry.
+    confidence : float
+        In [0, 1]: ``1 - d_best / d_other``, where ``d_best`` is the PB
+        distance from PB_obs to the nearest PB_rec and ``d_other`` the
+        distance to the nearest PB_rec of any *other* concept. 0 means the
+        demonstration lies as close to another concept as to the answer;
+        values near 1 mean it lies much closer to the answer. 1 when the
+        memory holds a single concept. (The paper reports a confidence per
+        answer without defining it; this margin is the project's
+        definition.) With ``[learner] decision = "reproduction"`` the same
+        margin is taken on the entries' prediction errors
+        (:meth:`Learner.entry_errors`) instead of PB distances.
+    distance : float
+        PB distance from PB_obs to the answering entry's PB_rec.
+    entry : int
+        Index of the answering entry in ``Memory.entries`` at recognition
+        time (the nearest one, or the best reproducing one).
+    source : str
+        Key of the demonstration the nearest entry holds.
+    sources : tuple of str
+        Every demonstration the nearest entry stands for.
+    pb_obs : ndarray, shape (P,)
+    error : float
+        Closed-loop prediction error (mean squared, encoded units) of the
+        sequence from PB_obs: how well the network can reproduce it at all.
+    reproduction_error : float
+        The lowest closed-loop prediction error of the sequence generated
+        from any memory entry's PB (:meth:`Learner.entry_errors`): how well
+        the nearest thing the robot *knows* reproduces it. Computed when
+        ``[learner] decision = "reproduction"`` or ``unknown_below > 0``,
+        else NaN.
+    """
+
+    demo: str
+    concept: str
+    confidence: float
+    distance: float
+    entry: int
+    source: str
+    sources: tuple[str, ...]
+    pb_obs: np.ndarray = field(repr=False)
+    error: float = float("nan")
+    #: How well what the memory knows reproduces the demonstration against
+    #: the memory's own error scale (:func:`familiarity` of
+    #: ``reproduction_error`` when computed and ``[learner] familiarity`` is
+    #: ``"reproduction"``, else of ``error``); NaN when the
+    #: memory cannot calibrate it (fewer than two concepts).
+    familiarity: float = float("nan")
+    #: True when ``familiarity`` is below ``[learner] unknown_below``: the
+    #: robot answers "I don't know" (``concept`` is still the nearest one).
+    unknown: bool = False
+    reproduction_error: float = float("nan")
+    #: Degrees the drawing was turned (counter-clockwise as the teacher
+    #: sees it) in the reading recognized: 0 for the drawing as drawn, else
+    #: the angle of ``[learner] tilts`` whose reading the memory reproduced
+    #: best (:meth:`Learner.recognize`).
+    tilt: float = 0.0
+
+
+def novelty_scale(model: PerceptualModel, memory: Memory) -> float:
+    """The memory's own prediction-error scale for "unlike everything it knows".
+
+    Each entry's pattern is regenerated from its PB (what the network
+    knows) and its closed-loop prediction error is measured under the PB
+    of the nearest entry (by PB_rec) of *another* concept: how badly one
+    known concept reproduces its neighbour. The median over entries is the
+    scale. This is the project's calibration; the paper has none.
+
+    Parameters
+    ----------
+    model : PerceptualModel
+    memory : Memory
+
+    Returns
+    -------
+    float
+        Mean squared error, encoded units; NaN when the memory holds fewer
+        than two concepts (nothing to calibrate on).
+    """
+    entries = memory.entries
+    labels = np.asarray(memory.concept_labels)
+    if len(set(labels.tolist())) < 2:
+        return float("nan")
+    rec = memory.pbs_rec
+    d = np.linalg.norm(rec[:, None, :] - rec[None, :, :], axis=2)
+    other = np.where(labels[:, None] != labels[None, :], d, np.inf).argmin(axis=1)
+    patterns = rehearsal.regenerate(model, entries)
+    errors = np.asarray(model.prediction_error(patterns, memory.pbs[other]), dtype=np.float64)
+    errors = errors[np.isfinite(errors)]
+    return float(np.median(errors)) if errors.size else float("nan")
+
+
+def regenerated_patterns(model: PerceptualModel, memory: Memory) -> list[np.ndarray]:
+    """Every entry's pattern as the network regenerates it: closed-loop from its PB and initialInfo.
+
+    Unlike :func:`iloci.concepts.rehearsal.regenerate`, never the entry's
+    kept demonstration: this is what the robot's network itself makes of
+    each entry (what it would perform), the ground of ``[learner] decision
+    = "regeneration"``.
+
+    Returns
+    -------
+    list of ndarray, each (numSteps_i, D)
+        Encoded units, one per entry of ``memory`` (empty for an empty memory).
+    """
+    entries = memory.entries
+    if not entries:
+        return []
+    made = model.generate(memory.pbs, _stack_rows([e.initial_input for e in entries]),
+                          [e.num_steps for e in entries])
+    return [np.asarray(g, dtype=np.float64) for g in made]
+
+
+def _stack_rows(rows: Sequence[np.ndarray]) -> np.ndarray:
+    return np.asarray(np.stack([np.asarray(r, dtype=np.float64) for r in rows]),
+                      dtype=np.float64)
+
+
+def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
+    """``pattern`` (T, D) linearly resampled in time to ``steps`` rows (itself when T = steps)."""
+    if len(pattern) == steps:
+        return pattern
+    t = np.linspace(0.0, 1.0, len(pattern))
+    u = np.linspace(0.0, 1.0, steps)
+    return np.stack([np.interp(u, t, pattern[:, j]) for j in range(pattern.shape[1])], axis=1)
+
+
+def pattern_distances(sequences: Sequence[np.ndarray],
+                      patterns: Sequence[np.ndarray], warp: int = 0) -> np.ndarray:
+    """Mean squared difference of each encoded sequence to each regenerated pattern, (B, M).
+
+    Over the sequence's rows and every feature (encoded units; pen
+    displacement and joint displacements alike); a pattern of another
+    length is first resampled linearly in time to the sequence's. Both
+    sides come from the same preprocessing (arc-length resampling to
+    ``[sensorimotor] steps`` points), so step ``t`` is the same fraction of
+    the path's length in both. With ``warp = 0`` step ``t`` is compared
+    with step ``t``; with ``warp > 0`` the steps are aligned by dynamic
+    time warping (Sakoe and Chiba 1978, symmetric steps, a band of
+    ``warp`` steps around the diagonal) and the squared differences along
+    the alignment are summed and divided by the sequence's length times
+    ``D``: a corner drawn a little earlier or later along the path then
+    costs its shape difference, not a shift of every later step.
+
+    Parameters
+    ----------
+    sequences : sequence of ndarray, each (T_b, D)
+    patterns : sequence of ndarray, each (T_m, D)
+    warp : int
+        Band half-width of the alignment, in steps; 0 aligns step by step.
+
+    Returns
+    -------
+    ndarray, shape (B, M)
+    """
+    seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
+    pats = [np.asarray(p, dtype=np.float64) for p in patterns]
+    out = np.zeros((len(seqs), len(pats)), dtype=np.float64)
+    if not pats:
+        return out
+    by_len: dict[int, list[int]] = {}
+    for b, s in enumerate(seqs):
+        by_len.setdefault(len(s), []).append(b)
+    for n, rows in by_len.items():
+        S = np.stack([seqs[b] for b in rows])                        # (b, T, D)
+        P = np.stack([_on_steps(p, n) for p in pats])                # (M, T, D)
+        if warp <= 0:
+            out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
+        else:
+            out[rows] = _warped(S, P, int(warp)) / (n * S.shape[2])
+    return out
+
+
+def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:
+    """DTW cost (summed squared differences) of every (sequence, pattern) pair, (B, M).
+
+    ``S`` (B, T, D), ``P`` (M, T, D); cells further than ``band`` steps from
+    the diagonal are not visited. Vectorised over the pairs, one cell at a time.
+    """
+    b, t = S.shape[0], S.shape[1]
+    m = P.shape[0]
+    # squared distance of step i of S[b] to step j of P[m], laid out (i, j, pair)
+    cost = ((S * S).sum(-1).T[:, None, :, None] + (P * P).sum(-1).T[None, :, None, :]
+            - 2.0 * np.einsum("bid,mjd->ijbm", S, P)).reshape(t, t, b * m)
+    np.maximum(cost, 0.0, out=cost)
+    acc = np.full((t + 1, t + 1, b * m), np.inf)
+    acc[0, 0] = 0.0
+    for i in range(1, t + 1):
+        for j in range(max(1, i - band), min(t, i + band) + 1):
+            acc[i, j] = cost[i - 1, j - 1] + np.minimum(np.minimum(acc[i - 1, j], acc[i, j - 1]),
+                                                        acc[i - 1, j - 1])
+    return acc[t, t].reshape(b, m)
+
+
+def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],
+                       warp: int = 0) -> float:
+    """The memory's own scale for "unlike everything it knows", on regenerated patterns.
+
+    For each entry, :func:`pattern_distances` (with ``warp``) from its regenerated pattern to
+    the nearest regenerated pattern of an entry of *another* concept (how
+    far apart two known concepts lie); the median over entries. The
+    project's calibration (the paper has none), the counterpart of
+    :func:`novelty_scale` for ``[learner] familiarity = "regeneration"``.
+
+    Returns
+    -------
+    float
+        Mean squared difference, encoded units; NaN with fewer than two concepts.
+    """
+    lab = np.asarray(list(labels))
+    if len(set(lab.tolist())) < 2:
+        return float("nan")
+    pats = list(patterns)
+    d = np.stack([pattern_distances([p], pats, warp)[0] for p in pats])
+    other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
+    other = other[np.isfinite(other)]
+    return float(np.median(other)) if other.size else float("nan")
+
+
+def familiarity(error: np.ndarray | float, scale: float) -> np.ndarray:
+    """``scale / (scale + error)``: near 1 for what the network reproduces, 0.5 at the scale.
+
+    Parameters
+    ----------
+    error : float or ndarray
+        Closed-loop prediction error of a demonstration (mean squared,
+        encoded units): by default (``[learner] familiarity =
+        "reproduction"``) the lowest over memory entries of the error with
+        which the entry's PB reproduces it (:meth:`Learner.entry_errors`),
+        else the error from its PB_obs.
+    scale : float
+        :func:`novelty_scale` of the memory.
+
+    Returns
+    -------
+    ndarray (or 0-d)
+        In (0, 1]; NaN where ``scale`` is NaN or not positive.
+    """
+    e = np.asarray(error, dtype=np.float64)
+    if not np.isfinite(scale) or scale <= 0:
+        return np.full(e.shape, np.nan)
+    return scale / (scale + np.maximum(e, 0.0))
+
+
+def confidence(distances: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest entry and the margin confidence of each row of a distance matrix.
+
+    Parameters
+    ----------
+    distances : ndarray, shape (B, M)
+        PB distance of each observation to each entry's PB_rec.
+    labels : sequence of str, length M
+        Concept of each entry.
+
+    Returns
+    -------
+    nearest : ndarray of int, shape (B,)
+    confidence : ndarray, shape (B,)
+        ``1 - d_best / d_other`` clipped to [0, 1] (see :class:`Recognition`).
+    """
+    d = np.asarray(distances, dtype=np.float64)
+    lab = np.asarray(labels)
+    nearest = np.argmin(d, axis=1)
+    d_best = d[np.arange(len(d)), nearest]
+    other = np.where(lab[None, :] != lab[nearest][:, None], d, np.inf)
+    d_other = other.min(axis=1) if d.shape[1] else np.full(len(d), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        conf = np.where(np.isinf(d_other), 1.0,
+                        np.where(d_other > 0, 1.0 - d_best / d_other, 0.0))
+    return nearest, np.clip(conf, 0.0, 1.0)
