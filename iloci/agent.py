@@ -30,7 +30,7 @@ from iloci.config import Config, load_config
 from iloci.data.files import TrajectoryFile, trajectory_files
 from iloci.errors import (ConfigError, InvalidDemonstrationError, InvalidInputError,
                           MemoryFileError, NotFittedError, NotLoadedError, ObserverError,
-                          UnreachableTargetError)
+                          UnknownComponentError, UnreachableTargetError)
 from iloci.interfaces import COMPONENT_KINDS, Demonstration, Response, unmet_members
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.progress import saving
@@ -92,7 +92,8 @@ class TeachReport:
     Attributes
     ----------
     outcomes : tuple of LearnOutcome
-        One per demonstration learned, in stream order.
+        One per demonstration shown, in stream order (action
+        ``"already_learned"`` for one the memory had learned before).
     skipped : tuple of (str, str)
         ``(demonstration, reason)`` for each one that failed validation,
         preprocessing or IK; the memory was left untouched by it.
@@ -113,6 +114,11 @@ class TeachReport:
     def first_guess_correct(self) -> list[bool | None]:
         """Per learned demonstration: was the first guess rewarded (None: no guess)."""
         return [o.first_guess_correct for o in self.outcomes]
+
+    @property
+    def already_learned(self) -> list[str]:
+        """Keys of the demonstrations the memory had learned already (not learned again)."""
+        return [o.demo for o in self.outcomes if o.action == "already_learned"]
 
     @property
     def rehearsals(self) -> list[Any]:
@@ -444,7 +450,7 @@ class Agent:
                     on_change(exc.outcome)
                 raise
             outcomes.append(outcome)
-            if on_change is not None:
+            if on_change is not None and outcome.action != "already_learned":
                 on_change(outcome)
         return TeachReport(tuple(outcomes), tuple(skipped), time.perf_counter() - t0)
 
@@ -693,6 +699,7 @@ class Agent:
                                     f"got {purpose!r}.")
         memory, net_state, header = load_memory(path)
         saved = header.get("config")
+        own_config = config is None
         if config is None:
             config = saved
             if not isinstance(config, dict):
@@ -708,7 +715,18 @@ class Agent:
                     # recognition executes nothing: no simulator (respond() is not executed)
                     overrides[sec] = (None if sec == "simulator"
                                       else NotLoaded(sec, purpose, str(path)))
-        agent = build(config, plugin_manager=plugin_manager, **overrides)
+        try:
+            agent = build(config, plugin_manager=plugin_manager, **overrides)
+        except (ConfigError, UnknownComponentError) as exc:
+            from iloci._version import __version__, is_newer
+            written = header.get("iloci")
+            if own_config and is_newer(written):
+                raise MemoryFileError(
+                    f"{path} was written by iloci {written}, this is iloci {__version__}: "
+                    f"upgrade iloci (and its plugins) to {written} or later to load it; its "
+                    f"saved config holds what this version does not know ({exc}). The file "
+                    "is unchanged.") from None
+            raise
         saved_robot = header.get("robot") or {
             "name": "nao-v32-right-arm",
             "joints": list(agent.robot.joint_names) if agent.robot.name == "nao-v32-right-arm"

@@ -577,6 +577,11 @@ class ComponentKind:
     hook: str
     optional: bool = False
 
+    @property
+    def label_article(self) -> str:
+        """The label with its article: ``"an IK solver"``, ``"a teacher"``."""
+        return ("an " if self.label[0].lower() in "aeiou" else "a ") + self.label
+
 
 #: Every component kind, in config order: the one table the registry, the
 #: config, the plugin manager and :func:`iloci.build` read.

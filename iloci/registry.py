@@ -21,6 +21,7 @@ import types
 import typing
 from typing import Any, Union
 
+from iloci.constraints import violations
 from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
                           PluginNotLoadedError, UnknownComponentError)
 from iloci.interfaces import COMPONENT_KINDS, KINDS
@@ -287,7 +288,44 @@ class Registry:
             except (TypeError, ValueError):
                 takes_all, accepted = True, set()
             kwargs.update({k: v for k, v in extra.items() if takes_all or k in accepted})
-        return factory(**kwargs)
+        return check_built(spec, factory(**kwargs))
+
+
+def check_built(spec: ComponentSpec, obj: Any) -> Any:
+    """``obj``, what ``spec``'s factory returned, if it is a component of ``spec.kind``.
+
+    Raises
+    ------
+    PluginError
+        It lacks a member of the kind's protocol (or is None, a class, ...):
+        naming the plugin, its distribution, the registration hook and the
+        factory, not an AttributeError when the member is first used.
+    """
+    from iloci.errors import PluginError
+    from iloci.interfaces import COMPONENT_KINDS, unmet_members
+    kind = COMPONENT_KINDS[spec.kind]
+    unmet = ["(it is a class, not an instance)"] if isinstance(obj, type) else \
+        unmet_members(obj, kind.protocol)
+    if unmet:
+        raise PluginError(
+            f"{kind.label} {spec.name!r} of plugin {spec.plugin or '?'!r} (distribution "
+            f"{spec.distribution or 'none'}), registered through {kind.hook}: its factory "
+            f"{_factory_name(spec.factory)} returned {type(obj).__name__} {_short(obj)}, which "
+            f"is not {kind.label_article}: it lacks {', '.join(unmet)} (see "
+            f"iloci.interfaces.{kind.protocol.__name__}). Fix the plugin, or block it with "
+            f"ILOCI_BLOCK_PLUGINS={spec.plugin}.")
+    return obj
+
+
+def _factory_name(factory: Any) -> str:
+    if isinstance(factory, str):
+        return factory
+    return getattr(factory, "__qualname__", None) or repr(factory)
+
+
+def _short(obj: Any) -> str:
+    text = repr(obj)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 class KindRegistry:
@@ -448,7 +486,12 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
         kwargs[key] = coerced
     try:
         obj = cls(**kwargs)
-        check = getattr(obj, "validate", None)
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
+    for name, message in violations(obj)[:1]:  # the declared constraints: one validator
+        raise ConfigError(f"[{section}]: {message}", source=source, key=f"{section}.{name}")
+    try:
+        check = getattr(obj, "validate", None)  # rules that tie fields together
         if callable(check):
             check()
     except (ValueError, TypeError, OverflowError) as exc:

@@ -92,6 +92,7 @@ def test_block_named_plugin(monkeypatch):
 def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
     from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
     monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
+    monkeypatch.delenv("ILOCI_BLOCK_PLUGINS", raising=False)
     pm = get_plugin_manager()
     loaded = set(dict(pm.list_name_plugin()))
     info = pm.iloci_plugin_info
@@ -111,6 +112,7 @@ def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
 def test_disable_autoload_env_keeps_installed_back_ends(monkeypatch):
     pytest.importorskip("iloci_scipy")
     monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
+    monkeypatch.delenv("ILOCI_BLOCK_PLUGINS", raising=False)
     assert "scipy" in get_registry(get_plugin_manager()).names("clusterer")
 
 

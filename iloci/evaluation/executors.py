@@ -165,13 +165,27 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     ------
     MissingBackendError
         ``ray`` without the ``iloci-ray`` plugin.
+    PluginError
+        A plugin's ``iloci_make_executor`` returned something that is not an
+        executor (naming the plugin and its distribution).
     InvalidInputError
         An unknown name, or ``address`` for ``local``.
     """
+    from iloci.errors import PluginError
+    from iloci.interfaces import FoldExecutor, unmet_members
+    from iloci.plugins import hook_results
     pm = plugin_manager or get_plugin_manager()
-    made = pm.hook.iloci_make_executor(name=name, jobs=jobs, address=address)
-    if made is not None:
-        return made
+    for made, plugin, distribution in hook_results(pm, "iloci_make_executor", name=name,
+                                                   jobs=jobs, address=address):
+        unmet = unmet_members(made, FoldExecutor)
+        if unmet or isinstance(made, type):
+            raise PluginError(
+                f"plugin {plugin!r} (distribution {distribution or 'none'}): its "
+                f"iloci_make_executor returned {type(made).__name__} {made!r:.60} for executor "
+                f"{name!r}, which is not a fold executor: it lacks "
+                f"{', '.join(unmet) or 'an instance'} (see iloci.interfaces.FoldExecutor). Fix "
+                f"the plugin, or block it with ILOCI_BLOCK_PLUGINS={plugin}.")
+        return made  # the first result, as pluggy's firstresult hook gives it
     if name == "local":
         if address is not None:
             raise InvalidInputError("the local executor runs on this machine: --address "

@@ -461,8 +461,5 @@ def summary_lines(info: dict[str, Any], records: list[dict[str, Any]], command: 
 
 def check_out(out: str | Path) -> Path:
     """``out`` as a directory to write to (created), or an InvalidInputError."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InvalidInputError(f"--out {out} is a file; give a directory.")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    from iloci.data.files import writable_dir
+    return writable_dir(out, "--out")
