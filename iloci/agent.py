@@ -92,7 +92,8 @@ class TeachReport:
     Attributes
     ----------
     outcomes : tuple of LearnOutcome
-        One per demonstration learned, in stream order.
+        One per demonstration shown, in stream order (action
+        ``"already_learned"`` for one the memory had learned before).
     skipped : tuple of (str, str)
         ``(demonstration, reason)`` for each one that failed validation,
         preprocessing or IK; the memory was left untouched by it.
@@ -113,6 +114,11 @@ class TeachReport:
     def first_guess_correct(self) -> list[bool | None]:
         """Per learned demonstration: was the first guess rewarded (None: no guess)."""
         return [o.first_guess_correct for o in self.outcomes]
+
+    @property
+    def already_learned(self) -> list[str]:
+        """Keys of the demonstrations the memory had learned already (not learned again)."""
+        return [o.demo for o in self.outcomes if o.action == "already_learned"]
 
     @property
     def rehearsals(self) -> list[Any]:
@@ -444,7 +450,7 @@ class Agent:
                     on_change(exc.outcome)
                 raise
             outcomes.append(outcome)
-            if on_change is not None:
+            if on_change is not None and outcome.action != "already_learned":
                 on_change(outcome)
         return TeachReport(tuple(outcomes), tuple(skipped), time.perf_counter() - t0)
 

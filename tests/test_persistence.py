@@ -12,6 +12,7 @@ import pytest
 
 import iloci
 from iloci.concepts import memory as memory_module
+from iloci.concepts import storage
 from iloci.concepts.memory import (FORMAT_VERSION, Entry, Memory, entries_equal, load_memory,
                                    save_memory)
 from iloci.errors import MemoryFileError
@@ -154,7 +155,7 @@ def test_newer_version_is_refused_with_upgrade_advice(tmp_path):
         header = json.loads(arrays["__header__"].tobytes())
         header["version"] = FORMAT_VERSION + 1
         rest = {k: v for k, v in arrays.items() if k != "__header__"}
-        header["checksum"] = memory_module._checksum(header, rest)
+        header["checksum"] = storage._checksum(header, rest)
         arrays["__header__"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
 
     _rewrite(path, edit)
@@ -276,6 +277,12 @@ def test_cli_teach_then_recognize(taught, tmp_path, cli):
     out = cli("teach", "--memory", str(memory), "GShape/1")
     assert out.returncode == 0, out.stderr
     assert "continuing from" in out.stdout and load_memory(memory)[0].demonstrations_seen == 3
+    # the same strokes in another stream: recognized as learned, not learned again
+    before = memory.read_bytes()
+    out = cli("teach", "--memory", str(memory), "GShape/0", "GShape/1")
+    assert out.returncode == 0, out.stderr
+    assert "already learned, not learned again" in out.stdout and "GShape/0, GShape/1" in out.stdout
+    assert "memory unchanged" in out.stdout and memory.read_bytes() == before
 
 
 def _needs_default_back_ends():
