@@ -452,7 +452,7 @@ class Config:
         Values are validated like a config file's, with the registry and
         the supplied sections this config was loaded with (see
         :func:`load_config`); a section given as a mapping updates that
-        section.
+        section. The copy keeps :attr:`source`.
         """
         data = self.to_dict()
         for sec, value in changes.items():
@@ -464,7 +464,9 @@ class Config:
                     data[sec].update(value)
             else:
                 data[sec] = value
-        return load_config(data, registry=self._registry, supplied=self._supplied)
+        named = ConfigData(data)  # errors and the copy still name the file it came from
+        named.source = self.source
+        return load_config(named, registry=self._registry, supplied=self._supplied)
 
 
 _LINE_RE = re.compile(r"line (\d+)")
