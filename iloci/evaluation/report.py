@@ -74,6 +74,14 @@ def _pct_or_none(x: float) -> str:
     return "none" if x != x else f"{_pct(x)} %"
 
 
+def _versus(ccr: float, other: float) -> tuple[str, str]:
+    """How ``ccr`` compares with ``other`` (fractions): ("trails", " by 0.27 points of CCR")."""
+    gap = round(100 * (ccr - other), 2)
+    if gap == 0:
+        return "equals", ""
+    return ("beats" if gap > 0 else "trails"), f" by {abs(gap):.2f} points of CCR"
+
+
 def headline(metrics: dict[str, Any]) -> str:
     """The headline table (Markdown), also printed by ``iloci evaluate``."""
     rows = [
@@ -92,10 +100,9 @@ def headline(metrics: dict[str, Any]) -> str:
     m = metrics
     best = metrics.get("best_baseline")
     if best:
-        gap = m["ccr_mean"] - bases[best]["ccr_mean"]
-        rows += ["", f"iloci {'reaches' if gap >= 0 else 'trails'} the best baseline "
-                 f"({BASELINE_LABELS.get(best, best)}) by {100 * abs(gap):.2f} points of CCR "
-                 "on the same folds."]
+        verb, by = _versus(m["ccr_mean"], bases[best]["ccr_mean"])
+        rows += ["", f"best baseline: {BASELINE_LABELS.get(best, best)}; iloci {verb} it"
+                 f"{by} on the same folds."]
     d = metrics.get("dataset")
     if d:
         writers = f", {d['writers']} writers" if d.get("writers") else ""

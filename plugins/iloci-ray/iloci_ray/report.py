@@ -122,13 +122,15 @@ def _baseline_lines(top: dict[str, Any]) -> list[str]:
     if not bases:
         return ["Baselines: not run (they need dtaidistance, the `report` extra).", ""]
     name = max(bases, key=lambda n: bases[n]["mean"])
-    gap = top["ccr_mean"] - bases[name]["mean"]
+    gap = round(100 * (top["ccr_mean"] - bases[name]["mean"]), 2)
     return ["Baselines on the same folds (iloci.evaluation.baselines; each stores every "
             "learning demonstration with its true concept, no feedback): "
             + ", ".join(f"{n} {100 * b['mean']:.2f} ± {100 * b['std']:.2f} %"
                         for n, b in bases.items())
-            + f". The best setting {'reaches' if gap >= 0 else 'trails'} the best baseline "
-            f"({name}) by {100 * abs(gap):.2f} points.", ""]
+            + ". The best setting "
+            + (f"equals the best baseline ({name})." if gap == 0 else
+               f"{'beats' if gap > 0 else 'trails'} the best baseline ({name}) by "
+               f"{abs(gap):.2f} points."), ""]
 
 
 def write_report(out: str | Path, spec: SweepSpec, records: Sequence[dict[str, Any]],
