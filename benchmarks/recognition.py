@@ -33,7 +33,7 @@ baseline. The robustness suite of each rule is measured by
 ``benchmarks/robustness.py`` (``--set learner.decision="..."``).
 
 Run: ``python benchmarks/recognition.py [--unipen PATH] [--seeds 0 1 2]
-[--datasets lasa unipen unipen-writers] [--jobs 2]``.
+[--unipen-seeds 0] [--datasets lasa unipen unipen-writers] [--rows a,b] [--jobs 2]``.
 """
 
 from __future__ import annotations
@@ -56,10 +56,13 @@ DATASETS = ("lasa", "unipen", "unipen-writers")
 #: row -> ``[learner]`` changes recognized with (on the same memories).
 DECISIONS: dict[str, dict[str, Any]] = {
     "pb_distance": {"decision": "pb_distance"},          # the paper
-    "reproduction": {"decision": "reproduction"},
     "regeneration": {"decision": "regeneration"},        # the default
+    "regeneration-warp-8": {"decision": "regeneration", "warp": 8},
     "regeneration-no-tilt": {"decision": "regeneration", "tilts": []},
+    "reproduction": {"decision": "reproduction"},
 }
+#: Rows run unless ``--rows`` says otherwise (the others cost more time).
+DEFAULT_ROWS = ("pb_distance", "regeneration")
 #: ``[learner] familiarity`` settings compared (``unknown_below`` is set
 #: just above 0 so that the reproduction errors are computed; its answers
 #: are not scored here).
@@ -114,7 +117,7 @@ def _auroc(known: list[float], outside: list[float]) -> float:
 
 
 def run_one(dataset: str, seed: int, jobs: int, data_dir: Path | None, root: Path,
-            letters: list | None) -> dict[str, Any]:
+            letters: list | None, rows_run: tuple[str, ...] = DEFAULT_ROWS) -> dict[str, Any]:
     from iloci.data.concepts import GroundTruth
     from iloci.evaluation.evaluate import evaluate
 
@@ -130,16 +133,16 @@ def run_one(dataset: str, seed: int, jobs: int, data_dir: Path | None, root: Pat
         from iloci.data import load_lasa
         demos = load_lasa()
     by_key = {d.key: d for d in demos}
-    rows: dict[str, dict[str, Any]] = {r: {"ccr_folds": [], "seconds": 0.0} for r in DECISIONS}
+    rows: dict[str, dict[str, Any]] = {r: {"ccr_folds": [], "seconds": 0.0} for r in rows_run}
     familiarity: dict[str, Any] = {}
     for res in results:
         learn = [by_key[k] for k in res.learn]
         test = [by_key[k] for k in res.test]
         truth = GroundTruth(learn + test)
         path = memories / f"fold-{res.fold}.npz"
-        for row, changes in DECISIONS.items():
+        for row in rows_run:
             t1 = time.perf_counter()
-            ccr, _ = _ccr(_agent(path, changes), test, truth)
+            ccr, _ = _ccr(_agent(path, DECISIONS[row]), test, truth)
             rows[row]["ccr_folds"].append(ccr)
             rows[row]["seconds"] += time.perf_counter() - t1
         if res.fold == 0 and dataset in ("lasa", "unipen"):
@@ -202,7 +205,7 @@ def ablation(runs: list[dict]) -> dict[str, Any]:
         table = {row: {"ccr_mean": float(np.mean([r["decisions"][row]["ccr_mean"] for r in rs])),
                        "ccr_min_fold": float(min(r["decisions"][row]["ccr_min"] for r in rs)),
                        "seeds": {str(r["seed"]): r["decisions"][row]["ccr_mean"] for r in rs}}
-                 for row in DECISIONS}
+                 for row in rs[0]["decisions"]}
         base = {b: {"ccr_mean": float(np.mean([r["baselines"][b]["ccr_mean"] for r in rs])),
                     "seeds": {str(r["seed"]): r["baselines"][b]["ccr_mean"] for r in rs}}
                 for b in rs[0]["baselines"]}
@@ -223,11 +226,17 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--unipen-seeds", type=int, nargs="+", default=None,
                     help="seeds for the UNIPEN data sets (default: --seeds)")
     ap.add_argument("--jobs", "-j", type=int, default=2)
+    ap.add_argument("--rows", default=",".join(DEFAULT_ROWS),
+                    help=f"comma-separated decision rows of {', '.join(DECISIONS)}")
     ap.add_argument("--runs", default="runs/recognition", help="where fold memories go")
     ap.add_argument("--out", default=str(RESULTS))
     ap.add_argument("--note", help="free text recorded in the output")
     args = ap.parse_args(argv)
 
+    rows_run = tuple(r.strip() for r in args.rows.split(",") if r.strip())
+    if set(rows_run) - set(DECISIONS):
+        ap.error(f"unknown rows {sorted(set(rows_run) - set(DECISIONS))}; known: "
+                 f"{', '.join(DECISIONS)}")
     sys.path.insert(0, str(HERE))
     data_dir = None
     letters = None
@@ -247,7 +256,7 @@ def main(argv: list[str] | None = None) -> dict:
         seeds = (args.unipen_seeds or args.seeds) if ds.startswith("unipen") else args.seeds
         for seed in seeds:
             print(f"[recognition] {ds} seed {seed} ...", file=sys.stderr, flush=True)
-            r = run_one(ds, seed, args.jobs, data_dir, Path(args.runs), letters)
+            r = run_one(ds, seed, args.jobs, data_dir, Path(args.runs), letters, rows_run)
             runs.append(r)
             print(f"[recognition] {ds} seed {seed}: " + ", ".join(
                 f"{row} {100 * v['ccr_mean']:.2f}" for row, v in r["decisions"].items())
@@ -256,7 +265,7 @@ def main(argv: list[str] | None = None) -> dict:
                 file=sys.stderr, flush=True)
     out = {
         "command": "python benchmarks/recognition.py " + " ".join(argv or sys.argv[1:]),
-        "decisions": DECISIONS, "familiarities": list(FAMILIARITIES),
+        "decisions": {r: DECISIONS[r] for r in rows_run}, "familiarities": list(FAMILIARITIES),
         "redrawn_multi_models": sorted(REDRAWN), "digit_like_letters": sorted(DIGIT_LIKE),
         "runs": runs, "ablation": ablation(runs),
         "wall_seconds": time.perf_counter() - t0,
