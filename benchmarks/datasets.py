@@ -22,8 +22,9 @@ CCR (mean, std, per fold) and each baseline's on the same folds, the best
 baseline and whether iloci reaches it; the data set's size and checksum;
 the wall time. Each (data set, seed) is cached in
 ``benchmarks/results/datasets/`` as soon as it finishes, so an interrupted
-run resumes (``--fresh`` recomputes; the cache is keyed by the config and
-the data set's checksum, so a changed default or data reruns).
+run resumes (``--fresh`` recomputes; the cache is keyed by the config, the
+data set's checksum and the Python sources of ``iloci/`` and ``plugins/``,
+so changed code, defaults or data rerun).
 
 UNIPEN is not shipped: clone it and give its folder::
 
@@ -38,6 +39,7 @@ Run: ``python benchmarks/datasets.py --unipen PATH [--seeds 0 1 2] [--quick]
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import os
@@ -85,8 +87,19 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     return info
 
 
+@functools.cache
+def _code_hash() -> str:
+    """SHA-256 of the kernel's and the plugins' Python sources: a cached result of other code
+    is not reused. Taken once, when the run starts (the code it imported)."""
+    h = hashlib.sha256()
+    for top in ("iloci", "plugins"):
+        for f in sorted((HERE.parent / top).rglob("*.py")):
+            h.update(f.relative_to(HERE.parent).as_posix().encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
+
+
 def _key(config_dict: dict, extra: str) -> str:
-    blob = json.dumps(config_dict, sort_keys=True) + extra
+    blob = json.dumps(config_dict, sort_keys=True) + extra + _code_hash()
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -166,6 +179,7 @@ def main(argv: list[str] | None = None) -> dict:
     from iloci.config import load_config
 
     config = load_config(args.config)
+    _code_hash()
     seeds = [0] if args.quick else args.seeds
     wanted = list(args.datasets)
     unipen_dir = None
@@ -178,8 +192,10 @@ def main(argv: list[str] | None = None) -> dict:
         unipen_dir = Path(args.export or Path(cache_root) / "unipen-digits")
         unipen_info = export_unipen(args.unipen, unipen_dir)
     load_before = os.getloadavg()
-    rows = [run_one(d, s, config, args.jobs, unipen_dir, args.fresh)
-            for d in wanted for s in seeds]
+    # seed by seed, so an interrupted run has every data set at the first seeds
+    done = {(d, s): run_one(d, s, config, args.jobs, unipen_dir, args.fresh)
+            for s in seeds for d in wanted}
+    rows = [done[(d, s)] for d in wanted for s in seeds]
     out = {
         "command": "python benchmarks/datasets.py " + " ".join(argv or sys.argv[1:]),
         "back_ends": {k: getattr(config, k).name for k in

@@ -7,7 +7,11 @@ and writes ``benchmarks/results/quality.json``::
     ccr                 the k-fold CCR with the chosen settings: mean, std over
                         every (seed, fold), per fold ``folds`` (seed -> 5
                         values), per seed; the robot's own labels are scored
-    dtw_ccr             DTW 1-NN with true labels on the same folds
+    dtw_ccr             the evaluation's ``baseline`` on the same folds: DTW 1-NN on
+                        normalised paths (runs made before the baselines module:
+                        raw positions; ``baselines_method`` says which)
+    baselines           every baseline of iloci.evaluation.baselines on the same
+                        folds (seed -> name -> CCR mean over folds), best_baseline
     feedbacks_per_demo  teacher feedbacks per learning demonstration
     stream              test-then-learn: first guess right over
                         demonstrations 46-182, feedbacks per demonstration
@@ -358,6 +362,16 @@ def main(argv: list[str] | None = None) -> dict:
             out["dtw_ccr"] = _ms(_folds(base_runs, "baseline_ccr")) | {
                 "folds": {str(r["seed"]): [f["baseline_ccr"] for f in r["folds"]]
                           for r in base_runs}}
+            out["baselines_method"] = {
+                str(r["seed"]): (r["metrics"].get("baseline") or {}).get("method")
+                for r in base_runs}
+        with_all = [r for r in runs["best"] if r["metrics"].get("baselines")]
+        if with_all:
+            out["baselines"] = {str(r["seed"]): {n: b["ccr_mean"] for n, b in
+                                                 r["metrics"]["baselines"].items()}
+                                for r in with_all}
+            out["best_baseline"] = {str(r["seed"]): r["metrics"].get("best_baseline")
+                                    for r in with_all}
     noisy = {}
     for row in rows:
         if row.startswith("noisy-") or row == "best":

@@ -71,9 +71,12 @@ def ray_sessions(pid: int) -> set[str]:
 
 def start(folder: Path, extra: tuple[str, ...] = ()) -> subprocess.Popen:
     iloci = Path(sys.executable).with_name("iloci")
+    # SIGINT as a terminal gives it, even when this drill runs as a background job (whose
+    # children inherit SIGINT ignored, and Python then never turns it into Ctrl-C)
     return subprocess.Popen(["setsid", "nice", "-n", "10", str(iloci), "sweep", "spec.toml",
                              "--out", "out", "--jobs", "2", "-q", *extra], cwd=folder,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def worker(sid: int, timeout: float = 180) -> int | None:
@@ -142,9 +145,11 @@ def main() -> None:
         worker(d.pid)
         time.sleep(3)
         os.kill(d.pid, signal.SIGINT)
-        d.communicate(timeout=300)
+        log3 = d.communicate(timeout=300)[0]
         time.sleep(2)
-        res["ctrl_c"] = {"exit": d.returncode, "left_after": left(d.pid, ray_sessions(d.pid))}
+        res["ctrl_c"] = {"exit": d.returncode, "runs_stored": stored(f),
+                         "last_line": (log3.strip().splitlines() or [""])[-1][:200],
+                         "left_after": left(d.pid, ray_sessions(d.pid))}
     res["python"] = sys.version.split()[0]
     OUT.write_text(json.dumps(res, indent=1) + "\n")
     print(json.dumps(res, indent=1))

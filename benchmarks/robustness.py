@@ -7,7 +7,8 @@ jitter, rotation, stretch, uniform scale), iloci beside DTW 1-NN; then the
 same folds taught in *blocked* order (concept by concept) instead of
 shuffled. Writes ``benchmarks/results/robustness.json``::
 
-    robustness        per perturbation: iloci and DTW 1-NN CCR over the folds
+    robustness        per perturbation: iloci and each baseline's CCR over the folds
+    baselines         the baselines on the clean folds (best_baseline: the strongest)
     order             shuffled and blocked CCR, per fold and mean
     targets           the issue's targets and whether this run met them
     wall_seconds      both runs; machine: CPU count and load average
@@ -74,6 +75,8 @@ def build_results(metrics: dict, blocked: dict | None, config, *, command: str,
         "ccr_std": metrics["ccr_std"],
         "ccr_folds": metrics["ccr_folds"],
         "baseline": metrics.get("baseline"),
+        "baselines": metrics.get("baselines"),
+        "best_baseline": metrics.get("best_baseline"),
         "robustness": rob,
         "order": order,
         "wall_seconds": wall,

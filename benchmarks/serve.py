@@ -31,9 +31,28 @@ Targets (issue 14): median answer <= 300 ms with 30 entries; p99 lateness
     scheduling): separates what the library does to the loop (the GIL)
     from a machine shared with other work delaying every wake-up.
 
+``teaching`` (``--teaching``; issue 26)
+    A person teaching 8 new concepts on the page, scripted: LASA drawings
+    sent as mouse strokes to a real ``iloci serve`` (default config), each
+    answered as a person would (yes to a guess of the drawing's concept or,
+    for a shape not taught yet, to the novelty answer; no to a wrong guess;
+    for a shape not taught yet, "Something new" when the page offers it).
+    Round 1 founds the 8 concepts (``shape/0``), rounds 2 to 4 show
+    ``shape/1..3`` in a seeded order: ``clicks_per_new_concept`` over round 1,
+    ``first_guess`` over rounds 2 to 4. Then Recognize: 16 taught drawings
+    (``shape/4``, ``shape/5``) named, and one drawing of each of 4
+    never-taught shapes answered "unknown". Run three times in one run, on
+    the same drawings: ``page`` (``iloci serve``'s default: "unknown" and the
+    Something-new button), ``page_with_novelty_and_confirmations`` (the same
+    with ``iloci teach``'s interactive protocol) and ``paper`` (``--protocol
+    paper``, a person who can only say yes or no: what the page did before).
+
 Options: ``--entries N`` (30), ``--strokes N`` (20), ``--loop-epochs N``
 (rehearsal epochs while the loop runs; default the config's),
-``--skip-http``, ``--skip-loop``.
+``--skip-http``, ``--skip-loop``, ``--teaching``.
+
+The server needs its token on every write (``X-Iloci-Token``); a script
+reads it from the page (``<meta name="iloci-token">``), as here.
 """
 
 from __future__ import annotations
@@ -43,6 +62,7 @@ import asyncio
 import json
 import os
 import platform
+import re
 import socket
 import subprocess
 import sys
@@ -111,9 +131,39 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
+def page_token(client) -> str:
+    """The server's token, as the page gets it."""
+    page = client.get("/").text
+    found = re.search(r'name="iloci-token" content="([^"]+)"', page)
+    if found is None:
+        raise RuntimeError("the page carries no token")
+    return found.group(1)
+
+
+def start_server(memory: Path, *args: str):
+    """A real ``iloci serve`` process and an httpx client with the page's token."""
     import httpx
 
+    port = free_port()
+    server = subprocess.Popen([sys.executable, "-m", "iloci", "serve", "--memory", str(memory),
+                               "--port", str(port), *args],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    client = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=600)
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            client.get("/api/progress")
+            break
+        except httpx.TransportError:
+            if time.monotonic() > deadline or server.poll() is not None:
+                raise RuntimeError("iloci serve did not start: " + (
+                    server.stdout.read() if server.stdout else "")) from None
+            time.sleep(0.2)
+    client.headers["X-Iloci-Token"] = page_token(client)
+    return server, client
+
+
+def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
     from iloci.data import load_lasa
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -121,53 +171,138 @@ def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
         built = teach_memory(memory, entries, teach_epochs)
         served = Path(tmp) / "served.toml"
         served.write_text("[learner]\nsimilarity_threshold = 0.0\nnum_threshold = 1000\n")
-        port = free_port()
-        server = subprocess.Popen([sys.executable, "-m", "iloci", "serve", "--memory",
-                                   str(memory), "--config", str(served), "--port", str(port)],
-                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        url = f"http://127.0.0.1:{port}"
+        server, client = start_server(memory, "--config", str(served))
         try:
-            with httpx.Client(base_url=url, timeout=600) as client:
-                deadline = time.monotonic() + 120
-                while True:
-                    try:
-                        client.get("/api/progress")
-                        break
-                    except httpx.TransportError:
-                        if time.monotonic() > deadline or server.poll() is not None:
-                            raise RuntimeError("iloci serve did not start: " + (
-                                server.stdout.read() if server.stdout else "")) from None
-                        time.sleep(0.2)
-                tests = [load_lasa([SHAPES[i % len(SHAPES)]])[6 - (i // len(SHAPES)) % 2]
-                         for i in range(strokes + 2)]
-                # warm-up: first calls compile the network's kernels for these sizes
-                for demo in tests[:2]:
-                    client.post("/api/observe", json={"points": stroke(demo)}).raise_for_status()
-                answer_ms = []
-                for demo in tests[2:]:
-                    body = {"points": stroke(demo)}
-                    t0 = time.perf_counter()
-                    r = client.post("/api/observe", json=body)
-                    answer_ms.append((time.perf_counter() - t0) * 1000)
-                    r.raise_for_status()
-                    assert "answer" in r.json(), r.json()
-                feedback = []
-                for demo in tests[2:5]:
-                    answer = client.post("/api/observe", json={"points": stroke(demo)}
-                                         ).json()["answer"]
-                    t0 = time.perf_counter()
-                    out = judge(client, answer, 1).json()
-                    seconds = time.perf_counter() - t0
-                    if "outcome" in out:
-                        feedback.append({"request_seconds": round(seconds, 2),
-                                         "rehearsal_seconds": out["outcome"]["rehearsal_seconds"],
-                                         "action": out["outcome"]["action"]})
-                final = client.get("/api/state").json()["memory"]["entries"]
+            tests = [load_lasa([SHAPES[i % len(SHAPES)]])[6 - (i // len(SHAPES)) % 2]
+                     for i in range(strokes + 2)]
+            # warm-up: first calls compile the network's kernels for these sizes
+            for demo in tests[:2]:
+                client.post("/api/observe", json={"points": stroke(demo)}).raise_for_status()
+            answer_ms = []
+            for demo in tests[2:]:
+                body = {"points": stroke(demo)}
+                t0 = time.perf_counter()
+                r = client.post("/api/observe", json=body)
+                answer_ms.append((time.perf_counter() - t0) * 1000)
+                r.raise_for_status()
+                assert "answer" in r.json(), r.json()
+            feedback = []
+            for demo in tests[2:5]:
+                answer = client.post("/api/observe", json={"points": stroke(demo)}
+                                     ).json()["answer"]
+                t0 = time.perf_counter()
+                out = judge(client, answer, 1).json()
+                while "answer" in out:      # a confirmation (confirm_rewards): yes again
+                    out = judge(client, out["answer"], 1).json()
+                seconds = time.perf_counter() - t0
+                if "outcome" in out:
+                    feedback.append({"request_seconds": round(seconds, 2),
+                                     "rehearsal_seconds": out["outcome"]["rehearsal_seconds"],
+                                     "action": out["outcome"]["action"]})
+            final = client.get("/api/state").json()["memory"]["entries"]
         finally:
+            client.close()
             server.terminate()
             server.wait(30)
     return {"memory": built, "answer_ms": stats(answer_ms), "answer_ms_all":
             [round(v, 1) for v in answer_ms], "feedback": feedback, "entries_after": final}
+
+
+#: The person's 8 new concepts and 4 shapes never taught (issue 26).
+TAUGHT, UNTAUGHT = SHAPES[:8], SHAPES[8:12]
+
+
+def _teach_as_a_person(client, protocol: str, seed: int) -> dict:
+    """Round 1 founds the concepts, rounds 2-4 show more drawings; then Recognize."""
+    from iloci.data import load_lasa
+
+    lasa = {s: load_lasa([s]) for s in TAUGHT + UNTAUGHT}
+    order = [(s, 0) for s in TAUGHT]
+    later = [(s, i) for i in (1, 2, 3) for s in TAUGHT]
+    np.random.default_rng(seed).shuffle(later)
+    concepts: dict[str, set] = {s: set() for s in TAUGHT}
+    turns = []
+    for shape, i in order + later:
+        known = bool(concepts[shape])
+        r = client.post("/api/observe", json={"points": stroke(lasa[shape][i])}).json()
+        clicks, first = 0, None
+        while "answer" in r:
+            a = r["answer"]
+            right = not a["novel"] and a["concept"] in concepts[shape]
+            if first is None:
+                first = right
+            if a["novel"]:
+                value = -1 if known else 1
+            elif right:
+                value = 1
+            elif not known and protocol == "page":
+                value = "new"                       # the Something-new button
+            else:
+                value = -1
+            clicks += 1
+            r = judge(client, a, value).json()
+        if "outcome" not in r:
+            raise RuntimeError(f"{shape}/{i}: {r}")
+        out = r["outcome"]
+        if out["action"] == "new_concept" or not known:
+            concepts[shape].add(out["concept"])
+        turns.append({"drawing": f"{shape}/{i}", "new": not known, "clicks": clicks,
+                      "first_guess_right": first, "action": out["action"],
+                      "concept": out["concept"]})
+    founding = [t for t in turns[1:len(TAUGHT)]]     # the very first drawing asks nothing
+    after = turns[len(TAUGHT):]
+    named, unknown, recognized = [], [], []
+    for shape, i in [(s, i) for s in TAUGHT for i in (4, 5)] + [(s, 0) for s in UNTAUGHT]:
+        g = client.post("/api/recognize", json={"points": stroke(lasa[shape][i])}).json()
+        if shape in TAUGHT:
+            named.append(not g["unknown"] and g["concept"] in concepts[shape])
+        else:
+            unknown.append(bool(g["unknown"]))
+        recognized.append({"drawing": f"{shape}/{i}", "taught": shape in TAUGHT,
+                           "concept": g["concept"], "unknown": g["unknown"],
+                           "familiarity": g["familiarity"], "confidence": g["confidence"]})
+    return {
+        "clicks_per_new_concept": round(sum(t["clicks"] for t in turns[:len(TAUGHT)])
+                                        / len(TAUGHT), 3),
+        "clicks_per_new_concept_max": max(t["clicks"] for t in founding),
+        "clicks_founding": [t["clicks"] for t in turns[:len(TAUGHT)]],
+        "clicks_total": sum(t["clicks"] for t in turns),
+        "first_guess_after_round_1": f"{sum(bool(t['first_guess_right']) for t in after)}"
+                                     f"/{len(after)}",
+        "concepts": len({c for cs in concepts.values() for c in cs}),
+        "recognize_taught_named": f"{sum(named)}/{len(named)}",
+        "recognize_untaught_unknown": f"{sum(unknown)}/{len(unknown)}",
+        "turns": turns, "recognized": recognized}
+
+
+def teaching_benchmark(seed: int = 0) -> dict:
+    out: dict = {"taught": TAUGHT, "untaught": UNTAUGHT, "seed": seed,
+                 "targets": {"clicks_per_new_concept": 2, "first_guess": "same as paper",
+                             "untaught_unknown": "3/4", "taught_named": "15/16"}}
+    # the page with iloci teach's interactive protocol too: the novelty
+    # answer and the confirmations (iloci.commands.teach.INTERACTIVE)
+    from iloci.commands.teach import INTERACTIVE
+    full = "[learner]\n" + "".join(f"{k} = {str(v).lower()}\n" for k, v in INTERACTIVE.items())
+    for protocol, args in (("page", ()), ("page_with_novelty_and_confirmations",
+                                          ("--config", "full.toml")),
+                           ("paper", ("--protocol", "paper"))):
+        with tempfile.TemporaryDirectory() as tmp:
+            if "--config" in args:
+                (Path(tmp) / "full.toml").write_text(full)
+                args = ("--config", str(Path(tmp) / "full.toml"))
+            server, client = start_server(Path(tmp) / "memory.npz", *args)
+            t0 = time.perf_counter()
+            try:
+                person = "paper" if protocol == "paper" else "page"
+                out[protocol] = _teach_as_a_person(client, person, seed)
+            finally:
+                client.close()
+                server.terminate()
+                server.wait(30)
+            out[protocol]["seconds"] = round(time.perf_counter() - t0, 1)
+        print(protocol, {k: v for k, v in out[protocol].items()
+                         if k not in ("turns", "recognized")}, flush=True)
+    return out
 
 
 async def _ticker(stop: asyncio.Event, late: list[float]) -> None:
@@ -248,6 +383,8 @@ def main(argv=None) -> int:
                     help="rehearsal epochs while building the 30-entry memory (100)")
     ap.add_argument("--skip-http", action="store_true")
     ap.add_argument("--skip-loop", action="store_true")
+    ap.add_argument("--teaching", action="store_true",
+                    help="also run the teaching benchmark (clicks, first guess, unknown)")
     ap.add_argument("--realtime", action="store_true",
                     help="run the 100 Hz loop's thread at SCHED_FIFO priority 10 (root), as a "
                          "robot's control loop runs; the learning threads keep normal priority")
@@ -258,11 +395,13 @@ def main(argv=None) -> int:
                     "targets": {"answer_median_ms": 300, "loop_p99_lateness_ms": 5}}
     if RESULTS.exists():
         previous = json.loads(RESULTS.read_text())
-        result.update({k: previous[k] for k in ("http", "loop", "loop_realtime")
+        result.update({k: previous[k] for k in ("http", "loop", "loop_realtime", "teaching")
                        if k in previous})
     if not args.skip_http:
         result["http"] = http_benchmark(args.entries, args.strokes, args.teach_epochs)
         print(json.dumps(result["http"]["answer_ms"]), result["http"]["feedback"], flush=True)
+    if args.teaching:
+        result["teaching"] = teaching_benchmark()
     if not args.skip_loop:
         key = "loop_realtime" if args.realtime else "loop"
         result[key] = loop_benchmark(args.loop_epochs or None, args.realtime)

@@ -11,28 +11,38 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 import dataclasses
 from dataclasses import dataclass
 import os
 from pathlib import Path
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, overload
 import warnings
 
 import numpy as np
 import pluggy
 
+from iloci.concepts.memory import Memory, load_memory, save_memory
 from iloci.concepts.rehearsal import regenerate
 from iloci.config import Config, load_config
+from iloci.data.files import TrajectoryFile, trajectory_files
 from iloci.errors import (ConfigError, InvalidDemonstrationError, InvalidInputError,
-                          MemoryFileError, NotFittedError, ObserverError)
-from iloci.interfaces import Demonstration
+                          MemoryFileError, NotFittedError, NotLoadedError, ObserverError,
+                          UnknownComponentError, UnreachableTargetError)
+from iloci.interfaces import COMPONENT_KINDS, Demonstration, Response, unmet_members
 from iloci.plugins import get_plugin_manager, get_registry
+from iloci.progress import saving
 from iloci.registry import Registry
-from iloci.sensorimotor.encoding import feature_names
-from iloci.sensorimotor.robots import robot_and_ik
+from iloci.sensorimotor.encoding import SensorimotorEncoder, feature_names
+from iloci.sensorimotor.frames import TeacherFrame
+from iloci.sensorimotor.pipeline import Motion, tilted, to_motion
+from iloci.sensorimotor.robots import get_robot, robot_and_ik
+from iloci.worker import WorkerModel
+
+if TYPE_CHECKING:  # the learner imports scipy: loaded when first used
+    from iloci.concepts.learner import Answer, Learner, LearnOutcome, Recognition, Turn
 
 __all__ = ["Agent", "build", "preload", "NotLoaded", "PURPOSES", "TeachReport",
            "SkippedDemonstrationWarning", "learn_and_recognize"]
@@ -65,7 +75,6 @@ class NotLoaded:
     def __getattr__(self, name: str) -> Any:
         if name.startswith("__"):
             raise AttributeError(name)
-        from iloci.errors import NotLoadedError
         raise NotLoadedError(
             f"the {self._section} was not loaded: the memory {self._path} was loaded for "
             f"{self._purpose!r}, which does not need it. Load it with "
@@ -83,7 +92,8 @@ class TeachReport:
     Attributes
     ----------
     outcomes : tuple of LearnOutcome
-        One per demonstration learned, in stream order.
+        One per demonstration shown, in stream order (action
+        ``"already_learned"`` for one the memory had learned before).
     skipped : tuple of (str, str)
         ``(demonstration, reason)`` for each one that failed validation,
         preprocessing or IK; the memory was left untouched by it.
@@ -104,6 +114,11 @@ class TeachReport:
     def first_guess_correct(self) -> list[bool | None]:
         """Per learned demonstration: was the first guess rewarded (None: no guess)."""
         return [o.first_guess_correct for o in self.outcomes]
+
+    @property
+    def already_learned(self) -> list[str]:
+        """Keys of the demonstrations the memory had learned already (not learned again)."""
+        return [o.demo for o in self.outcomes if o.action == "already_learned"]
 
     @property
     def rehearsals(self) -> list[Any]:
@@ -142,11 +157,9 @@ class Agent:
         self.teacher = components["teacher"]
         self.ik_solver = components["ik"]
         self.simulator = components.get("simulator")
-        from iloci.sensorimotor.robots import get_robot
         #: The arm (:class:`~iloci.sensorimotor.robots.Robot`): joints, frames, plane.
         self.robot = components.get("robot") or getattr(self.ik_solver, "robot", None) \
             or get_robot()
-        from iloci.concepts.memory import Memory
         self.memory = Memory()
         #: A :class:`~iloci.sensorimotor.pipeline.MotionCache` :meth:`motion`
         #: looks demonstrations up in (None: convert each time). Set it only
@@ -163,7 +176,6 @@ class Agent:
         self._lock = threading.RLock()
 
     def __repr__(self) -> str:
-        from iloci.interfaces import COMPONENT_KINDS
 
         attribute = {"ik": "ik_solver"}
         parts = []
@@ -178,7 +190,7 @@ class Agent:
 
     # -- plumbing ------------------------------------------------------------------
     @property
-    def learner(self):
+    def learner(self) -> Learner:
         """A :class:`~iloci.concepts.learner.Learner` over this agent's memory and components.
 
         Built on each access, so it always sees the current ``teacher``,
@@ -197,19 +209,18 @@ class Agent:
         if callback is not None:
             callback(progress)
 
-    def motion(self, demo: Demonstration):
+    def motion(self, demo: Demonstration) -> Motion:
         """The demonstration as the robot performs it (preprocessing + IK).
 
         Returns
         -------
         Motion
         """
-        from iloci.sensorimotor.pipeline import to_motion
         if not isinstance(demo, Demonstration):
             raise InvalidInputError(f"expected a Demonstration, got {type(demo).__name__}; "
                                     "wrap an (N, 2) array with iloci.Demonstration(positions).")
 
-        def convert(d: Demonstration):
+        def convert(d: Demonstration) -> Motion:
             return to_motion(d, self.config.sensorimotor, self.ik_solver, robot=self.robot)
 
         return convert(demo) if self.motion_cache is None else \
@@ -223,20 +234,19 @@ class Agent:
         scales are then kept for good (they are part of the memory), since
         every stored pattern is expressed in them.
         """
-        from iloci.sensorimotor.encoding import SensorimotorEncoder
         if self.memory.encoder is not None:
             raise InvalidInputError("the memory's encoder is already fitted; its scales are "
                                     "fixed once learning has started.")
         self.memory.encoder = SensorimotorEncoder().fit(list(motions))
 
-    def _encode(self, motion) -> tuple[np.ndarray, np.ndarray]:
+    def _encode(self, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
         if self.memory.encoder is None:
             raise NotFittedError("the robot has learned nothing yet: teach it at least one "
                                  "demonstration (Agent.learn / `iloci teach`) first.")
         return self.memory.encoder.encode(motion)
 
     # -- learning phase ------------------------------------------------------------
-    def observe(self, demo: Demonstration, motion: Any = None):
+    def observe(self, demo: Demonstration, motion: Any = None) -> Turn:
         """Show the robot one demonstration: its first guess, step by step.
 
         The step-wise learning phase, for callers that get feedback when a
@@ -266,7 +276,6 @@ class Agent:
             The demonstration cannot be preprocessed or reached; the memory
             is untouched.
         """
-        from iloci.sensorimotor.frames import TeacherFrame
         if motion is None:
             motion = self.motion(demo)
         with self._lock:
@@ -279,7 +288,7 @@ class Agent:
         return turn
 
     @property
-    def pending(self):
+    def pending(self) -> Answer | None:
         """The answer of the last :meth:`observe` waiting for a feedback, or ``None``.
 
         Returns
@@ -291,7 +300,7 @@ class Agent:
         turn = self._turn
         return None if turn is None else turn.answer
 
-    def feedback(self, value: int, answer_id: Any):
+    def feedback(self, value: int, answer_id: Any) -> Answer | LearnOutcome:
         """Judge the answer ``answer_id`` of the last :meth:`observe`: +1 or -1.
 
         For event-driven stacks (buttons, ROS topics, web hooks) that keep
@@ -332,7 +341,7 @@ class Agent:
                 answer_id=str(shown), pending=None)
         return turn.feedback(value, answer_id)
 
-    async def aobserve(self, demo: Demonstration):
+    async def aobserve(self, demo: Demonstration) -> Turn:
         """:meth:`observe` from asyncio code: runs in a thread, the event loop stays free.
 
         With :meth:`start_worker` the network's work runs in the worker
@@ -341,7 +350,7 @@ class Agent:
         import asyncio
         return await asyncio.to_thread(self.observe, demo)
 
-    def learn(self, demo: Demonstration, motion: Any = None):
+    def learn(self, demo: Demonstration, motion: Any = None) -> LearnOutcome:
         """Learn from one demonstration with the teacher's feedback.
 
         :meth:`observe`, then the configured teacher's feedback on each
@@ -409,10 +418,9 @@ class Agent:
         t0 = time.perf_counter()
         skipped: list[tuple[str, str]] = []
 
-        from iloci.data.files import TrajectoryFile, trajectory_files
         numbered: dict[str, dict[str, int]] = {}  # files of one stem: distinct keys
 
-        def prepared(items: Iterable[Any]):
+        def prepared(items: Iterable[Any]) -> Iterator[tuple[Demonstration, Motion]]:
             for i, item in enumerate(items):
                 if isinstance(item, (str, os.PathLike)) and not isinstance(item,
                                                                           TrajectoryFile):
@@ -442,12 +450,19 @@ class Agent:
                     on_change(exc.outcome)
                 raise
             outcomes.append(outcome)
-            if on_change is not None:
+            if on_change is not None and outcome.action != "already_learned":
                 on_change(outcome)
         return TeachReport(tuple(outcomes), tuple(skipped), time.perf_counter() - t0)
 
     # -- inference phase -------------------------------------------------------------
-    def recognize(self, demos: Demonstration | Sequence[Demonstration]):
+    @overload
+    def recognize(self, demos: Demonstration) -> Recognition: ...
+
+    @overload
+    def recognize(self, demos: Sequence[Demonstration]) -> list[Recognition]: ...
+
+    def recognize(self, demos: Demonstration | Sequence[Demonstration]
+                  ) -> Recognition | list[Recognition]:
         """Recognize demonstrations without feedback (batched; memory unchanged).
 
         Parameters
@@ -495,8 +510,6 @@ class Agent:
             again) and encoded. A turned path the arm cannot reach is left
             out.
         """
-        from iloci.errors import UnreachableTargetError
-        from iloci.sensorimotor.pipeline import tilted
 
         angles = [s * float(a) for a in self.config.learner.tilts for s in (1.0, -1.0)]
 
@@ -533,7 +546,7 @@ class Agent:
         seqs = regenerate(self.perceptual_model, entries)
         return [mem.encoder.decode(s, e.start)[0] for s, e in zip(seqs, entries)]
 
-    def respond(self, concept: str):
+    def respond(self, concept: str) -> Response:
         """Perform ``concept``: its entry of lowest generation error, as a Response.
 
         See :func:`~iloci.concepts.learner.perform`; executed on the
@@ -568,7 +581,6 @@ class Agent:
         Stop it with :meth:`close` (or use the agent as a context manager);
         the worker's network is copied back first.
         """
-        from iloci.worker import WorkerModel
         with self._lock:
             if self._worker is None:
                 self._worker = WorkerModel(self.perceptual_model)
@@ -614,8 +626,6 @@ class Agent:
             The file cannot be written (disk full, permissions); the file
             on disk is the previous one, untouched.
         """
-        from iloci.concepts.memory import save_memory
-        from iloci.progress import saving
         with self._lock, saving(path):
             return save_memory(path, self.memory, self.perceptual_model.state(),
                                extra={**dict(extra or {}), "config": self.config.to_dict(),
@@ -684,12 +694,12 @@ class Agent:
             (see :func:`~iloci.config.memory_conflicts`), such as
             ``[sensorimotor] steps`` or the network's sizes.
         """
-        from iloci.concepts.memory import load_memory
         if purpose not in PURPOSES:
             raise InvalidInputError(f"purpose must be one of {', '.join(map(repr, PURPOSES))}, "
                                     f"got {purpose!r}.")
         memory, net_state, header = load_memory(path)
         saved = header.get("config")
+        own_config = config is None
         if config is None:
             config = saved
             if not isinstance(config, dict):
@@ -705,7 +715,18 @@ class Agent:
                     # recognition executes nothing: no simulator (respond() is not executed)
                     overrides[sec] = (None if sec == "simulator"
                                       else NotLoaded(sec, purpose, str(path)))
-        agent = build(config, plugin_manager=plugin_manager, **overrides)
+        try:
+            agent = build(config, plugin_manager=plugin_manager, **overrides)
+        except (ConfigError, UnknownComponentError) as exc:
+            from iloci._version import __version__, is_newer
+            written = header.get("iloci")
+            if own_config and is_newer(written):
+                raise MemoryFileError(
+                    f"{path} was written by iloci {written}, this is iloci {__version__}: "
+                    f"upgrade iloci (and its plugins) to {written} or later to load it; its "
+                    f"saved config holds what this version does not know ({exc}). The file "
+                    "is unchanged.") from None
+            raise
         saved_robot = header.get("robot") or {
             "name": "nao-v32-right-arm",
             "joints": list(agent.robot.joint_names) if agent.robot.name == "nao-v32-right-arm"
@@ -754,7 +775,6 @@ def preload(config: Any = None, *, plugin_manager: pluggy.PluginManager | None =
     ConfigError, UnknownComponentError, MissingBackendError
         As :func:`build`.
     """
-    from iloci.interfaces import COMPONENT_KINDS
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config, registry=registry)
@@ -803,7 +823,6 @@ def build(config: Any = None, *, plugin_manager: pluggy.PluginManager | None = N
         A configured back end, of a component not given as an object, is
         not installed (names the pip command).
     """
-    from iloci.interfaces import COMPONENT_KINDS
     unknown = set(overrides) - set(COMPONENT_KINDS)
     if unknown:
         raise ConfigError(f"build() got unknown component override(s) {sorted(unknown)}; "
@@ -925,7 +944,6 @@ def _check_same_robot(path: Any, saved: dict[str, Any], robot: Any, memory: Any)
 
 def _check_overrides(overrides: dict[str, Any]) -> None:
     """Raise one InvalidInputError for every override that is not a component."""
-    from iloci.interfaces import COMPONENT_KINDS, unmet_members
     problems = []
     for sec, obj in overrides.items():
         kind = COMPONENT_KINDS[sec]
@@ -964,7 +982,6 @@ def _as_demonstration(item: Any, i: int) -> Demonstration:
     """A stream item as a Demonstration (validation errors propagate)."""
     if isinstance(item, Demonstration):
         return item
-    from iloci.data.files import TrajectoryFile
     if isinstance(item, TrajectoryFile):
         return item.load()
     if isinstance(item, (str, os.PathLike)):

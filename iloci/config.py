@@ -27,6 +27,8 @@ import re
 import tomllib
 from typing import Any
 
+from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
+from iloci.constraints import Interval, Options, constrained
 from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError
 from iloci.interfaces import COMPONENT_KINDS
 from iloci.registry import Registry, params_to_dict, validate_dataclass, validate_params
@@ -86,44 +88,39 @@ class LearnerConfig:
     """The ILoCI learning phase (section ``[learner]``)."""
 
     #: K_cutoff in D_cutoff = mu - K_cutoff * sigma (paper: 0.5).
-    k_cutoff: float = 0.5
+    k_cutoff: float = constrained(0.5, Interval(0))
     #: Num_threshold: a concept is clustered once its numSamples exceed it,
     #: and a cluster is valid when its numSamples sum exceeds it (paper: 3).
-    num_threshold: int = 3
+    num_threshold: int = constrained(3, Interval(1))
     #: Similarity_threshold: PB distance below which a rewarded
     #: demonstration only strengthens the nearest entry (paper: 0.1).
-    similarity_threshold: float = 0.1
+    similarity_threshold: float = constrained(0.1, Interval(0))
     #: Epochs of each memory rehearsal; 0 uses the perceptual model's
     #: ``epochs`` (the paper is silent on the number). Fewer run faster but
-    #: let regenerated patterns drift further from what was demonstrated:
-    #: on LASA fold 0, 500 epochs gave 90 % CCR where 1500 gave 99 %; over
-    #: the 5 folds of seeds 0 and 1 (``benchmarks/rehearsal.py``), 1000
-    #: epochs with a 200-epoch warm-up took 23 % less CPU time per fold
-    #: (median 14.6 s against 19.0 s) and scored 96.4 % CCR against 97.7 %.
-    rehearsal_epochs: int = 0
+    #: let regenerated patterns drift further from what was demonstrated
+    #: (measured in docs/method.md, "Where the paper is silent").
+    rehearsal_epochs: int = constrained(0, Interval(0))
     #: Recognition answers "unknown" when its familiarity (see
     #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration that
     #: some memory entry's PB reproduces well, 0.5 when the best entry
     #: reproduces it as badly as one known concept reproduces its neighbour)
     #: is below this; 0 never does (the paper always names a concept).
-    unknown_below: float = 0.0
+    unknown_below: float = constrained(0.0, Interval(0, 1))
     #: Novelty answer: when a demonstration's familiarity (``familiarity``
     #: below) is below this, the robot first imitates it back as something
     #: new; "yes" founds the new concept in one interaction, "no" sends it
     #: back to guessing. 0 never does (the paper tries every known concept
     #: before founding one).
-    novelty_below: float = 0.0
+    novelty_below: float = constrained(0.0, Interval(0, 1))
     #: Which prediction error the novelty answer's and "unknown"'s
     #: familiarity is taken of: ``"reproduction"`` (the lowest over memory
     #: entries of the error with which the entry's PB reproduces the
     #: demonstration: is it like something the robot knows?) or
     #: ``"prediction"`` (the error from PB_obs, a PB fitted freely to the
     #: demonstration: can the network reproduce it at all? It generalises
-    #: to shapes never taught). With the novelty answer at 0.8, LASA's 5
-    #: folds, seeds 0 / 1 / 2: 1.98 / 2.19 / 2.21 feedbacks per learning
-    #: demonstration with ``"reproduction"`` against 2.58 / 3.51 / 3.30
-    #: (benchmarks/quality.py, docs/method.md).
-    familiarity: str = "reproduction"
+    #: to shapes never taught). ``"reproduction"`` asks fewer feedbacks
+    #: (measured in docs/method.md, "Beyond the paper").
+    familiarity: str = constrained("reproduction", Options("reproduction", "prediction"))
     #: A reward that comes after a "no" for the same demonstration goes
     #: against the robot's own ranking of its concepts; with this on, the
     #: robot asks once more and keeps the reward only when the teacher
@@ -135,12 +132,9 @@ class LearnerConfig:
     #: of the guessed concept's entry), even on the first guess: a
     #: teacher's slip there would file a demonstration of a concept not yet
     #: taught under another one. A reward that only strengthens an entry is
-    #: kept as given. Off: the paper's protocol. With the noisy teacher at
-    #: p = 0.1, the novelty answer and ``confirm_rewards`` (5 folds,
-    #: ``benchmarks/quality.py`` rows ``pb-confirm-exemplars-noisy-0.1``
-    #: against ``pb-noisy-0.1``): CCR 96.57 / 95.60 / 99.17 % for seeds
-    #: 0 / 1 / 2 against 96.43 / 95.60 / 96.85 % without it; with the oracle
-    #: it costs 0.11 to 0.14 feedbacks per learning demonstration and no CCR.
+    #: kept as given. Off: the paper's protocol. What it gains with a
+    #: teacher who errs and costs with an oracle: docs/method.md, "Beyond
+    #: the paper".
     confirm_new_exemplars: bool = False
     #: After this many refused guesses in a row, the robot offers the
     #: novelty answer (again, when it was refused before them) instead of
@@ -151,7 +145,7 @@ class LearnerConfig:
     #: confirmation in a row (p^2 per wrong guess) rarely merge two concepts.
     #: The teacher must understand the novelty answer. 0: never (the
     #: paper's protocol). See docs/method.md for the measured effect.
-    novelty_after: int = 0
+    novelty_after: int = constrained(0, Interval(0))
     #: With ``novelty_after``: a reward for a guess that comes after the
     #: novelty answer asked (again) after refused guesses was refused too is
     #: kept only when the teacher confirms it twice. The teacher has then
@@ -167,69 +161,38 @@ class LearnerConfig:
     #: concept of the entry whose PB, generated closed-loop from the
     #: demonstration's first step, reproduces it with the lowest prediction
     #: error; the confidence margin is then taken on those errors).
-    decision: str = "pb_distance"
+    decision: str = constrained("pb_distance", Options("pb_distance", "reproduction"))
     #: What each rehearsal trains the network on for the entries it already
     #: holds: ``"regenerated"`` (the paper: each entry's pattern generated
     #: closed-loop from its PB; the robot keeps no demonstration) or
     #: ``"demonstrations"`` (each entry keeps the encoded demonstration it
     #: was learned from, a prototype its medoid's). Regenerated patterns
     #: carry each training's residual error into the next rehearsal and
-    #: drift away from what was shown; on LASA (5 folds) keeping the
-    #: demonstrations gave CCR 98.77 / 99.31 / 98.63 % for seeds 0 / 1 / 2
-    #: against 97.38 / 97.95 / 99.04 % (docs/method.md, "Memory rehearsal"):
-    #: mean 98.90 against 98.12, worst fold 94.5 against 90.3, hence the
+    #: drift away from what was shown; keeping the demonstrations scores
+    #: higher on LASA (docs/method.md, "Memory rehearsal"), hence the
     #: default; ``"regenerated"`` reproduces the paper.
-    rehearse_from: str = "demonstrations"
+    rehearse_from: str = constrained("demonstrations",
+                                     Options("regenerated", "demonstrations"))
     #: Tilt search at recognition: a drawing whose PB_obs lies further than
     #: ``tilt_beyond`` from every PB_rec is also read turned by each of these
     #: angles (degrees, each both ways) in the drawing plane, and the reading
     #: that the memory reproduces best (the lowest entry prediction error,
     #: :meth:`~iloci.concepts.learner.Learner.entry_errors`; a turned reading
     #: must beat the upright one by 10 %) is recognized. A person's drawing
-    #: is rarely level: on LASA's 5 folds (seed 0) a drawing rotated by 15
-    #: degrees is recognized at 94.6 % without the search (docs/guide.md,
-    #: "How a drawing is read", for the figures with it). ``()`` reads every
-    #: drawing only as drawn (the paper).
-    tilts: tuple[float, ...] = (8.0, 16.0)
+    #: is rarely level (what the search gains: docs/guide.md, "How a
+    #: drawing is read"). ``()`` reads every drawing only as drawn (the paper).
+    tilts: tuple[float, ...] = constrained((8.0, 16.0), Interval(
+        0, 90, closed="right", each=True, note="angles in degrees, each tried both ways"))
     #: PB distance from PB_obs to the nearest PB_rec beyond which the tilt
     #: search runs (``tilts``); drawings nearer to a known entry are read
     #: only as drawn, so familiar drawings cost nothing more. 0 searches
     #: every drawing.
-    tilt_beyond: float = 0.3
+    tilt_beyond: float = constrained(0.3, Interval(0, note="a PB distance"))
 
     def validate(self) -> None:
-        for t in self.tilts:
-            if not (isinstance(t, (int, float)) and 0 < t <= 90):
-                raise ValueError(f"tilts must be angles in degrees in (0, 90], each tried "
-                                 f"both ways; got {t!r} in {list(self.tilts)}")
-        if self.tilt_beyond < 0:
-            raise ValueError(f"tilt_beyond must be a PB distance >= 0, got {self.tilt_beyond}")
-        if self.rehearse_from not in ("regenerated", "demonstrations"):
-            raise ValueError("rehearse_from must be 'regenerated' or 'demonstrations', got "
-                             f"{self.rehearse_from!r}")
-        if self.familiarity not in ("reproduction", "prediction"):
-            raise ValueError("familiarity must be 'reproduction' or 'prediction', got "
-                             f"{self.familiarity!r}")
-        if self.decision not in ("pb_distance", "reproduction"):
-            raise ValueError("decision must be 'pb_distance' or 'reproduction', got "
-                             f"{self.decision!r}")
-        for name in ("unknown_below", "novelty_below"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
-        if self.novelty_after < 0:
-            raise ValueError(f"novelty_after must be >= 0, got {self.novelty_after}")
         if self.confirm_twice_after_novelty and self.novelty_after == 0:
             raise ValueError("confirm_twice_after_novelty needs novelty_after > 0 (the "
                              "novelty answer asked again after refused guesses)")
-        if self.k_cutoff < 0:
-            raise ValueError(f"k_cutoff must be >= 0, got {self.k_cutoff}")
-        if self.num_threshold < 1:
-            raise ValueError(f"num_threshold must be >= 1, got {self.num_threshold}")
-        if self.similarity_threshold < 0:
-            raise ValueError("similarity_threshold must be >= 0, got "
-                             f"{self.similarity_threshold}")
-        if self.rehearsal_epochs < 0:
-            raise ValueError(f"rehearsal_epochs must be >= 0, got {self.rehearsal_epochs}")
 
 
 @dataclass(frozen=True)
@@ -237,53 +200,41 @@ class SensorimotorConfig:
     """From pen trajectory to network input (section ``[sensorimotor]``)."""
 
     #: Points each demonstration is resampled to before IK (sequence length).
-    steps: int = 50
+    steps: int = constrained(50, Interval(3))
     #: Resampling parameter: ``"arc_length"`` (evenly along the drawn path,
     #: smoothed along it: independent of the teacher's pace, the sampling
     #: rate and pauses of the pen) or ``"time"`` (evenly in the
     #: demonstration's time stamps, the paper's reading). See the guide,
     #: "How a drawing is read", for the figures behind the default.
-    resample: str = "arc_length"
+    resample: str = constrained("arc_length", Options("time", "arc_length"))
     #: Smoothing bandwidth as a fraction of the path's length (``resample =
     #: "arc_length"``: Gaussian local linear regression along the path);
     #: 0 interpolates the samples without smoothing. 4 %: over LASA's 5
     #: folds and seeds 0, 1, 2, CCR 100.00 / 99.18 / 99.59 % against
     #: 98.77 / 99.31 / 98.63 % at 2 %, and 5 % jitter costs 1.0 point
     #: instead of 6.6 (seed 0; docs/guide.md, "How a drawing is read").
-    smoothing: float = 0.04
+    smoothing: float = constrained(0.04, Interval(0, 0.5, closed="left",
+                                                  note="a fraction of the path"))
     #: Smoothing window in points of the raw trajectory for ``resample =
     #: "time"`` (Savitzky-Golay, cubic); 0 or 1 disables smoothing.
     smoothing_window: int = 31
     #: The pen rests at the start (end) while it stays within this fraction
     #: of the drawing's size of its first (last) point; those samples are
     #: dropped before resampling. 0 keeps every sample (the paper's reading).
-    rest_tolerance: float = 0.01
+    rest_tolerance: float = constrained(0.01, Interval(
+        0, 0.5, closed="left", note="a fraction of the drawing's size"))
     #: Direction of the teacher's y axis: ``"up"`` (a plot, LASA) or
     #: ``"down"`` (screen and image coordinates: a browser, a tablet).
-    y_axis: str = "up"
+    y_axis: str = constrained("up", Options("up", "down"))
     #: Fewest samples a stroke may have once the pen's rests are trimmed;
     #: fewer is an error (a tap or a click, not a drawing).
-    min_points: int = 5
+    min_points: int = constrained(5, Interval(3))
 
     def validate(self) -> None:
-        if self.steps < 3:
-            raise ValueError(f"steps must be >= 3, got {self.steps}")
-        if self.resample not in ("time", "arc_length"):
-            raise ValueError(f"resample must be 'time' or 'arc_length', got {self.resample!r}")
-        if not 0 <= self.smoothing < 0.5:
-            raise ValueError(f"smoothing must be a fraction of the path in [0, 0.5), got "
-                             f"{self.smoothing}")
         if self.smoothing_window < 0 or (self.smoothing_window > 1
                                          and self.smoothing_window % 2 == 0):
             raise ValueError("smoothing_window must be 0, 1 or an odd number of points, "
                              f"got {self.smoothing_window}")
-        if not 0 <= self.rest_tolerance < 0.5:
-            raise ValueError(f"rest_tolerance must be a fraction of the drawing's size in "
-                             f"[0, 0.5), got {self.rest_tolerance}")
-        if self.y_axis not in ("up", "down"):
-            raise ValueError(f"y_axis must be 'up' or 'down', got {self.y_axis!r}")
-        if self.min_points < 3:
-            raise ValueError(f"min_points must be >= 3, got {self.min_points}")
 
 
 @dataclass(frozen=True)
@@ -335,15 +286,15 @@ class RobotConfig:
     #: ... and ``up`` is the rectangle's height direction.
     plane_up: tuple[float, ...] = (0.0, 0.0, 1.0)
     #: Automatic plane: width / height.
-    plane_aspect: float = 1.0
+    plane_aspect: float = constrained(1.0, Interval(0, closed="right"))
     #: Automatic plane: every joint at least this far inside its limits (deg).
-    plane_joint_margin: float = 10.0
+    plane_joint_margin: float = constrained(10.0, Interval(0))
     #: Automatic plane: smallest singular value of the position Jacobian, at
     #: least this fraction of its best over the workspace.
-    plane_min_singular: float = 0.1
+    plane_min_singular: float = constrained(0.1, Interval(0))
     #: Automatic plane: largest height sought (m); bigger drawings only make
     #: the arm move faster.
-    plane_max_height: float = 0.3
+    plane_max_height: float = constrained(0.3, Interval(0, closed="right"))
     #: Automatic plane: its lowest edge (with the checked margin) at least
     #: this high above the base origin along ``plane_up`` (m): not under
     #: the table an arm stands on.
@@ -366,10 +317,6 @@ class RobotConfig:
             raise ValueError("urdf needs tip_frame: the URDF link whose origin is the pen tip")
         if not self.urdf and not self.name:
             raise ValueError("name a preset (`iloci robots` lists them) or give a urdf")
-        if self.plane_aspect <= 0 or self.plane_joint_margin < 0 or self.plane_min_singular < 0:
-            raise ValueError("plane_aspect must be > 0 and the plane margins >= 0")
-        if not self.plane_max_height > 0:
-            raise ValueError(f"plane_max_height must be > 0, got {self.plane_max_height}")
 
 
 @dataclass(frozen=True)
@@ -394,7 +341,6 @@ class DataConfig:
         if self.path and self.shapes:
             raise ValueError("shapes picks LASA shapes; it cannot be combined with path "
                              "(your own data set)")
-        from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
         known = LASA_SHAPES + MULTI_MODEL_SHAPES
         for shape in self.shapes:
             if shape not in known:
@@ -411,31 +357,32 @@ class EvaluationConfig:
     """The cross-validation protocol (section ``[evaluation]``)."""
 
     #: Number of folds (paper: 5).
-    folds: int = 5
+    folds: int = constrained(5, Interval(2, 7, integer=True,
+                                         note="LASA has 7 demonstrations of each shape"))
     #: Fraction of each ``[data]`` shape's demonstrations in the default
     #: learning stream of ``iloci teach`` (paper: 20 %). ``iloci evaluate``
     #: does not read it: each fold learns from one of ``folds`` partitions.
-    train_fraction: float = 0.2
+    train_fraction: float = constrained(0.2, Interval(0, 1, closed="neither"))
     #: Seed of everything: fold split, presentation order, network
     #: initialisation, noisy teacher.
-    seed: int = 0
+    seed: int = constrained(0, Interval(0))
     #: Folds run in parallel processes; 0 (the default): one per CPU core
     #: this process may use (:func:`iloci.evaluation.evaluate.default_jobs`).
     jobs: int = 0
     #: ``"folds"`` (the paper's: learn one partition, then recognize the
     #: rest without feedback) or ``"stream"`` (test-then-learn: every
     #: demonstration is first recognized and scored, then taught).
-    protocol: str = "folds"
+    protocol: str = constrained("folds", Options("folds", "stream"))
     #: Concepts left out of each fold's learning set (their learning
     #: demonstrations join the test set), to measure whether recognition
     #: says "unknown" for what it was never taught; 0 leaves none out.
     #: Which ones rotates from fold to fold (seeded).
-    untaught: int = 0
+    untaught: int = constrained(0, Interval(0))
     #: Order of each fold's learning set: ``"shuffled"`` (seeded random) or
     #: ``"blocked"`` (concept by concept, as a person teaching "circle,
     #: circle, then square, square" would; concepts and demonstrations in
     #: seeded random order).
-    order: str = "shuffled"
+    order: str = constrained("shuffled", Options("shuffled", "blocked"))
     #: Also recognize every fold's test set under the perturbations of
     #: :mod:`iloci.evaluation.perturb` (pace, sampling, rests, jitter,
     #: rotation, stretch, scale), iloci beside the baselines.
@@ -445,27 +392,11 @@ class EvaluationConfig:
     #: ``"writers"`` (the writers of ``[data] path`` dealt into ``folds``
     #: groups, fold ``k`` learns from group ``k``'s samples and recognizes
     #: the other writers', never seen).
-    split: str = "concepts"
+    split: str = constrained("concepts", Options("concepts", "writers"))
 
     def validate(self) -> None:
-        if self.protocol not in ("folds", "stream"):
-            raise ValueError(f"protocol must be 'folds' or 'stream', got {self.protocol!r}")
-        if self.untaught < 0:
-            raise ValueError(f"untaught must be >= 0, got {self.untaught}")
-        if not 2 <= self.folds <= 7:
-            # each LASA shape has 7 demonstrations, dealt into the folds
-            raise ValueError(f"folds must be in 2..7 (LASA has 7 demonstrations of each "
-                             f"shape), got {self.folds}")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
-        if not 0 < self.train_fraction < 1:
-            raise ValueError(f"train_fraction must be in (0, 1), got {self.train_fraction}")
         if self.jobs < 0:
             raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
-        if self.order not in ("shuffled", "blocked"):
-            raise ValueError(f"order must be 'shuffled' or 'blocked', got {self.order!r}")
-        if self.split not in ("concepts", "writers"):
-            raise ValueError(f"split must be 'concepts' or 'writers', got {self.split!r}")
 
 
 _PLAIN_SECTIONS: dict[str, type] = {
@@ -521,7 +452,7 @@ class Config:
         Values are validated like a config file's, with the registry and
         the supplied sections this config was loaded with (see
         :func:`load_config`); a section given as a mapping updates that
-        section.
+        section. The copy keeps :attr:`source`.
         """
         data = self.to_dict()
         for sec, value in changes.items():
@@ -533,21 +464,16 @@ class Config:
                     data[sec].update(value)
             else:
                 data[sec] = value
-        return load_config(data, registry=self._registry, supplied=self._supplied)
+        named = ConfigData(data)  # errors and the copy still name the file it came from
+        named.source = self.source
+        return load_config(named, registry=self._registry, supplied=self._supplied)
 
 
 _LINE_RE = re.compile(r"line (\d+)")
 
 
-def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
-    """The tables of a TOML file, read the one way every iloci file is read.
-
-    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
-    file, a directory and malformed TOML are each one :class:`ConfigError`
-    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
-    the kind of file.
-    """
-    path = Path(path)
+def _read_text(path: Path, what: str) -> str:
+    """The text of a TOML file (see :func:`read_toml`)."""
     try:
         raw = path.read_bytes()
         if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
@@ -570,6 +496,22 @@ def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, A
                           source=str(path)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read {what}: {exc.strerror}.", source=str(path)) from None
+    return text
+
+
+def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, Any]:
+    """The tables of a TOML file, read the one way every iloci file is read.
+
+    A UTF-8 byte-order mark is skipped; UTF-16, other encodings, a missing
+    file, a directory and malformed TOML are each one :class:`ConfigError`
+    naming the file (and line), with ``what`` (e.g. ``"sweep spec"``) for
+    the kind of file.
+    """
+    path = Path(path)
+    return _parse_toml(_read_text(path, what), path)
+
+
+def _parse_toml(text: str, path: Path) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -585,6 +527,12 @@ class ConfigData(dict[str, Any]):
     """
 
     source: str = "<dict>"
+    #: The iloci version that wrote the file (its ``# ... written by iloci X``
+    #: first line, as ``iloci config show`` writes it), "" when it says none.
+    written_by: str = ""
+
+
+_WRITTEN_BY_RE = re.compile(r"^#.*\bwritten by iloci ([0-9][^\s,;)]*)", re.MULTILINE)
 
 
 def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
@@ -598,8 +546,11 @@ def read_config_file(path: str | os.PathLike[str]) -> ConfigData:
     sweep`` does with its base config).
     """
     path = Path(path)
-    data = ConfigData(read_toml(path))
+    text = _read_text(path, "config")
+    data = ConfigData(_parse_toml(text, path))
     data.source = str(path)
+    m = _WRITTEN_BY_RE.search(text[:2000])
+    data.written_by = m.group(1) if m else ""
     robot = data.get("robot")
     if isinstance(robot, dict):
         robot = data["robot"] = dict(robot)
@@ -661,6 +612,15 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     elif isinstance(source, (str, os.PathLike)):
         data = read_config_file(source)
         origin = data.source
+        from iloci._version import __version__, is_newer
+        if is_newer(data.written_by):
+            try:
+                return load_config(data, registry=registry, supplied=supplied)
+            except (ConfigError, UnknownComponentError) as exc:
+                raise ConfigError(
+                    f"written by iloci {data.written_by}, this is iloci {__version__}: upgrade "
+                    f"iloci (and its plugins) to read it, or remove what this version does not "
+                    f"know ({exc})", source=origin) from None
     else:
         raise ConfigError(f"load_config takes a path, a mapping or None, got "
                           f"{type(source).__name__}.")
@@ -832,4 +792,6 @@ def to_toml(config: Config) -> str:
     except TypeError as exc:
         raise ConfigError(f"cannot write the config as TOML: {exc}", source=config.source) \
             from None
-    return f"# iloci configuration (resolved from {config.source})\n\n{body}"
+    from iloci._version import __version__
+    return (f"# iloci configuration (resolved from {config.source}), written by iloci "
+            f"{__version__}\n\n{body}")

@@ -24,10 +24,17 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from iloci.agent import _upgrade_config
+from iloci.concepts.learner import ik_joint_limits, perform
+from iloci.concepts.memory import load_memory
+from iloci.config import DEFAULT_NAMES, EvaluationConfig, RobotConfig, SensorimotorConfig
+from iloci.data.concepts import concept_of_key, majority_names
 from iloci.data.files import write_atomic
 from iloci.errors import (ConfigError, InvalidInputError, MemoryFileError, MissingBackendError,
                           UnknownComponentError, did_you_mean)
 from iloci.interfaces import Execution, IKSolver, PerceptualModel, Response, Simulator
+from iloci.registry import validate_dataclass, validate_params
+from iloci.sensorimotor.robots import get_robot, robot_and_ik
 
 __all__ = ["DrawResult", "DrawingParts", "draw", "gif_frames", "load_drawing_parts",
            "resolve_concept", "write_gif", "write_png"]
@@ -65,7 +72,6 @@ def resolve_concept(memory: Any, name: str) -> str:
                                 "(`iloci teach`).")
     if name in labels:
         return name
-    from iloci.data.concepts import concept_of_key, majority_names
 
     named = majority_names(memory.concept_members(concept_of_key))
     matches = [label for label, true in named.items() if true == name]
@@ -145,8 +151,6 @@ def draw(memory: Any, perceptual_model: PerceptualModel, ik_solver: IKSolver,
     InvalidInputError
         No such concept in the memory.
     """
-    from iloci.concepts.learner import ik_joint_limits, perform
-    from iloci.sensorimotor.robots import get_robot
 
     label = resolve_concept(memory, concept)
     response = perform(memory, perceptual_model, memory.performer_of(label),
@@ -274,8 +278,6 @@ def saved_section(saved: dict, section: str, registry: Any, source: str) -> tupl
     UnknownComponentError, MissingBackendError
         Its component is not installed.
     """
-    from iloci.config import DEFAULT_NAMES
-    from iloci.registry import validate_params
 
     values = saved.get(section) or {}
     if not isinstance(values, dict):
@@ -291,7 +293,6 @@ def saved_section(saved: dict, section: str, registry: Any, source: str) -> tupl
 
 
 def _saved_name(saved: dict, section: str) -> object:
-    from iloci.config import DEFAULT_NAMES
 
     values = saved.get(section)
     return (values if isinstance(values, dict) else {}).get("name", DEFAULT_NAMES[section])
@@ -325,11 +326,6 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     MemoryFileError
         The file holds no config, or its network does not fit the model.
     """
-    from iloci.agent import _upgrade_config
-    from iloci.concepts.memory import load_memory
-    from iloci.config import EvaluationConfig, RobotConfig, SensorimotorConfig
-    from iloci.registry import validate_dataclass
-    from iloci.sensorimotor.robots import robot_and_ik
 
     source = str(memory_path)
     if registry is None:

@@ -17,19 +17,20 @@ Environment variables
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 import importlib
 import importlib.metadata as md
 import os
 import warnings
+from typing import Any
 
 import pluggy
 
 from iloci import hookspecs
 from iloci.errors import PluginError
-from iloci.interfaces import COMPONENT_KINDS
-from iloci.registry import Registry
+from iloci.interfaces import ALL_KINDS
+from iloci.registry import FIRST_PARTY, Registry
 
 __all__ = [
     "DEFAULT_PLUGINS",
@@ -40,11 +41,12 @@ __all__ = [
     "STATUSES",
     "get_plugin_manager",
     "get_registry",
+    "hook_results",
     "plugin_infos",
 ]
 
 #: iloci's own plugins, registered through the same hooks as third-party ones.
-DEFAULT_PLUGINS = ("iloci.teachers",)
+DEFAULT_PLUGINS = ("iloci.teachers", "iloci.evaluation.executors")
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
@@ -53,8 +55,8 @@ ENTRY_POINT_GROUP = "iloci"
 #: when autoloading is off by ``ILOCI_DISABLE_PLUGIN_AUTOLOAD`` (or
 #: ``autoload="first-party"``). Recognized by distribution name.
 FIRST_PARTY_DISTRIBUTIONS = frozenset({
-    "iloci-torch", "iloci-jax", "iloci-scipy", "iloci-sklearn", "iloci-pinocchio",
-    "iloci-pybullet", "iloci-mujoco", "iloci-ray", "iloci-robots", "iloci-ros",
+    # the back ends' (iloci.registry.FIRST_PARTY), and those adding commands or robots
+    *FIRST_PARTY.values(), "iloci-ray", "iloci-robots", "iloci-ros",
 })
 
 class PluginLoadWarning(UserWarning):
@@ -273,6 +275,23 @@ def plugin_infos(pm: pluggy.PluginManager) -> dict[str, PluginInfo]:
     return dict(getattr(pm, "iloci_plugin_info", {}))
 
 
+def hook_results(pm: pluggy.PluginManager, hook: str, **kwargs: Any
+                 ) -> Iterator[tuple[Any, str, str | None]]:
+    """Call hook ``hook`` one implementation at a time, in pluggy's order (the last
+    registered first); yield ``(result, plugin, distribution)`` for each non-None result.
+
+    For hooks whose result iloci uses (``iloci_make_executor``): a result of the wrong
+    type can then be refused naming the plugin and its distribution.
+    """
+    info = getattr(pm, "iloci_plugin_info", {}) or {}
+    caller = getattr(pm.hook, hook)
+    for impl in reversed(caller.get_hookimpls()):
+        result = impl.function(**{arg: kwargs[arg] for arg in impl.argnames})
+        if result is not None:
+            pinfo = info.get(impl.plugin_name)
+            yield result, impl.plugin_name, getattr(pinfo, "distribution", None)
+
+
 def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
     """Call every registration hook and return the filled registry.
 
@@ -287,7 +306,7 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
         info = pm.iloci_plugin_info = {}  # type: ignore[attr-defined]
     registry = Registry()
     failed: set[str] = set()
-    for kind in COMPONENT_KINDS.values():
+    for kind in ALL_KINDS.values():
         caller = getattr(pm.hook, kind.hook)
         # registration order: built-ins first, then installed plugins, then the
         # caller's, so a name registered twice is blamed on the later plugin
@@ -298,7 +317,14 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
             view = registry.view(kind.name, plugin=impl.plugin_name,
                                  distribution=pinfo.distribution, version=pinfo.version)
             try:
-                impl.function(**{arg: view for arg in impl.argnames})
+                returned = impl.function(**{arg: view for arg in impl.argnames})
+                if returned is not None:
+                    raise PluginError(
+                        f"plugin {impl.plugin_name!r} (distribution "
+                        f"{pinfo.distribution or 'none'}): its {caller.name} returned "
+                        f"{type(returned).__name__} {returned!r:.60}, but a registration hook "
+                        "returns nothing: it registers each component with "
+                        "registry.add(name, factory, ...) (see docs/writing-a-plugin.md)")
             except Exception as exc:
                 error = exc if isinstance(exc, PluginError) else PluginError(
                     f"plugin {impl.plugin_name!r} failed in {caller.name}: "

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import IlociError
+from iloci.interfaces import Demonstration
 
 __all__ = [
     "PROGRESS_KEY",
@@ -63,7 +64,6 @@ def item_digest(item: Any) -> str:
 
     Two items get one digest exactly when they would teach the same thing.
     """
-    from iloci.interfaces import Demonstration
     h = hashlib.sha256()
     if isinstance(item, Demonstration):
         h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.true_concept).encode())

@@ -95,7 +95,9 @@ def test_stream_headline_says_when_the_stream_is_too_short_to_score(n):
 
     steps = [{"correct": i % 2 == 0, "feedbacks": [1] * (i % 3), "seen_before": i > 3}
              for i in range(n)]
-    metrics = summarize_stream(steps, load_config(None), 1.0)
+    from iloci.interfaces import COMPONENT_KINDS
+    # every component named, none looked up: runs in the bare kernel's env too
+    metrics = summarize_stream(steps, load_config(None, supplied=COMPONENT_KINDS), 1.0)
     metrics.update(purity=1.0, concepts=3)
     text = stream_headline(metrics)
     assert "nan" not in text

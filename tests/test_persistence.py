@@ -10,8 +10,11 @@ import zipfile
 import numpy as np
 import pytest
 
+from conftest import needs_default_back_ends
+
 import iloci
 from iloci.concepts import memory as memory_module
+from iloci.concepts import storage
 from iloci.concepts.memory import (FORMAT_VERSION, Entry, Memory, entries_equal, load_memory,
                                    save_memory)
 from iloci.errors import MemoryFileError
@@ -154,7 +157,7 @@ def test_newer_version_is_refused_with_upgrade_advice(tmp_path):
         header = json.loads(arrays["__header__"].tobytes())
         header["version"] = FORMAT_VERSION + 1
         rest = {k: v for k, v in arrays.items() if k != "__header__"}
-        header["checksum"] = memory_module._checksum(header, rest)
+        header["checksum"] = storage._checksum(header, rest)
         arrays["__header__"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
 
     _rewrite(path, edit)
@@ -276,22 +279,16 @@ def test_cli_teach_then_recognize(taught, tmp_path, cli):
     out = cli("teach", "--memory", str(memory), "GShape/1")
     assert out.returncode == 0, out.stderr
     assert "continuing from" in out.stdout and load_memory(memory)[0].demonstrations_seen == 3
-
-
-def _needs_default_back_ends():
-    """The CLI below builds an agent from the default config (no --config)."""
-    from iloci.config import DEFAULT_NAMES
-    modules = {"jax-rnnpb": "iloci_jax", "torch-rnnpb": "iloci_torch",
-               "native-rnnpb": "iloci_native", "pinocchio": "iloci_pinocchio",
-               "scipy": "iloci_scipy"}
-    for kind in ("perceptual_model", "ik", "clusterer"):
-        name = DEFAULT_NAMES[kind]
-        if name in modules:
-            pytest.importorskip(modules[name], reason=f"default {kind} {name!r} not installed")
+    # the same strokes in another stream: recognized as learned, not learned again
+    before = memory.read_bytes()
+    out = cli("teach", "--memory", str(memory), "GShape/0", "GShape/1")
+    assert out.returncode == 0, out.stderr
+    assert "already learned, not learned again" in out.stdout and "GShape/0, GShape/1" in out.stdout
+    assert "memory unchanged" in out.stdout and memory.read_bytes() == before
 
 
 def test_cli_errors(tmp_path, cli):
-    _needs_default_back_ends()
+    needs_default_back_ends()
     out = cli("recognize", "--memory", str(tmp_path / "none.npz"), "GShape/0")
     assert out.returncode == 2 and "memory file not found" in out.stderr
     out = cli("teach", "--memory", str(tmp_path / "m.npz"), "GShap/1")
@@ -302,7 +299,7 @@ def test_cli_errors(tmp_path, cli):
 
 
 def test_default_teaching_stream_is_seeded():
-    _needs_default_back_ends()
+    needs_default_back_ends()
     from iloci.data import default_stream
     from iloci.config import load_config
     cfg = load_config({"data": {"shapes": ["GShape", "Angle", "Sine"]},

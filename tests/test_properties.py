@@ -293,7 +293,7 @@ JSON = st.recursive(st.one_of(st.none(), st.booleans(), st.integers(-10, 10**12)
 def test_a_memory_header_edited_consistently_still_loads_or_gives_an_iloci_error(
         tmp_path_factory, memory_bytes, data):
     """A header rewritten with a valid checksum (the file was edited on purpose)."""
-    from iloci.concepts.memory import _checksum
+    from iloci.concepts.storage import _checksum
     with np.load(io.BytesIO(memory_bytes), allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     header = json.loads(arrays.pop("__header__").tobytes())

@@ -312,3 +312,39 @@ def test_arm_executor_starts_from_the_current_posture(arm_agent):
     agent = iloci.build(arm_config(robot.urdf_path), simulator=make())
     assert agent.simulator is not None
     check_component(make, "simulator")
+
+
+class _ArmPlugin:
+    """Registers robot ``name`` (a copy of the Nao preset under that name)."""
+
+    def __init__(self, name: str) -> None:
+        self.robot_name = name
+
+    from iloci import hookimpl
+
+    @hookimpl
+    def iloci_register_robots(self, robots):
+        from iloci.sensorimotor.robots import ROBOTS
+        import dataclasses
+        robots[self.robot_name] = dataclasses.replace(ROBOTS["nao-v32-right-arm"],
+                                                      name=self.robot_name)
+
+
+def test_a_robot_registered_twice_names_both_plugins_and_each_robot_its_plugin():
+    from iloci.errors import PluginError
+    from iloci.plugins import get_plugin_manager
+    from iloci.sensorimotor.robots import available_robots
+
+    one, two = _ArmPlugin("house-arm"), _ArmPlugin("house-arm")
+    pm = get_plugin_manager(autoload=False, plugins=[one])
+    found = available_robots(pm)
+    assert found["house-arm"].plugin == pm.get_name(one)
+    assert found["nao-v32-right-arm"].plugin == "iloci"
+    pm = get_plugin_manager(autoload=False, plugins=[one, two])
+    with pytest.raises(PluginError, match=r"robot 'house-arm' is registered twice: by plugin "
+                       rf"'{pm.get_name(one)}' .* and by plugin '{pm.get_name(two)}'"):
+        available_robots(pm)
+    pm = get_plugin_manager(autoload=False, plugins=[_ArmPlugin("nao-v32-right-arm")])
+    with pytest.raises(PluginError, match=r"robot 'nao-v32-right-arm' is registered twice: "
+                       r"by plugin 'iloci'"):
+        available_robots(pm)

@@ -180,6 +180,32 @@ def test_a_feedback_must_name_the_pending_answer(lasa):
         newer.feedback(-1, first.id.replace(turn.token, newer.token))
 
 
+def test_a_demonstration_taught_twice_is_learned_once(lasa, tmp_path):
+    """Issue 30: the same stroke (same key, same samples) shown again is recognized as
+    learned and not learned again: one entry, every count unchanged, nothing asked."""
+    agent = make_agent()
+    first = agent.teach([lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1")])
+    before, counts, net = agent.memory.copy(), counters(agent), state(agent)
+    again = agent.teach([lasa["GShape/1"], lasa["GShape/0"]])
+    assert [o.action for o in again.outcomes] == ["already_learned"] * 2
+    assert again.already_learned == ["GShape/1", "GShape/0"] and again.feedbacks == []
+    assert [o.concept for o in again.outcomes] == [first.outcomes[2].concept, "c1"]
+    turn = agent.observe(lasa["Angle/0"])
+    assert turn.done and turn.answer is None and turn.outcome.action == "already_learned"
+    assert entries_equal(agent.memory.entries, before.entries)
+    assert counters(agent) == counts and same_state(state(agent), net)
+    assert sum(e.sources.count("GShape/1") for e in agent.memory.entries) == 1
+    # the record is saved with the memory
+    back = iloci.Agent.load(agent.save(tmp_path / "m.npz"))
+    assert back.learn(lasa["GShape/0"]).action == "already_learned"
+    # the same key with other samples is another demonstration
+    g = lasa["GShape/1"]
+    other = iloci.Demonstration(g.positions * 1.01, times=g.times, shape="GShape", index=1,
+                                true_concept="GShape")
+    assert agent.learn(other).action != "already_learned"
+    assert agent.memory.demonstrations_seen == counts[1] + 1
+
+
 def test_the_first_demonstration_ends_its_turn_at_once(lasa):
     agent = make_agent()
     phases = []
@@ -222,7 +248,7 @@ def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(la
             agent.learn(d)
         assert same_state(state(agent), state(local))   # state() read from the worker
         recognized = agent.recognize(lasa["GShape/2"])
-    assert pid is not None and type(agent.perceptual_model).__name__ == "TorchRNNPB"
+    assert pid is not None and type(agent.perceptual_model) is type(local.perceptual_model)
     assert entries_equal(agent.memory.entries, local.memory.entries)
     assert same_state(state(agent), state(local))
     assert recognized.concept == local.recognize(lasa["GShape/2"]).concept

@@ -109,7 +109,8 @@ def test_tilt_settings_are_validated():
     assert load_config(None).learner.tilts == (8.0, 16.0)
     assert load_config({"learner": {"tilts": []}}).learner.tilts == ()
     for bad in ([0.0], [-8.0], [95.0]):
-        with pytest.raises(ConfigError, match="tilts must be angles in degrees"):
+        with pytest.raises(ConfigError,
+                           match=r"tilts must be numbers each in \(0, 90\] \(angles in degrees"):
             load_config({"learner": {"tilts": bad}})
-    with pytest.raises(ConfigError, match="tilt_beyond must be a PB distance"):
+    with pytest.raises(ConfigError, match="tilt_beyond must be >= 0 \\(a PB distance\\)"):
         load_config({"learner": {"tilt_beyond": -0.1}})

@@ -62,6 +62,7 @@ def _toml(path: Path, urdf: str, simulator: str = "none") -> Path:
     ({"j3_kind": "continuous"}, "none", ["'s3' are continuous", 'type="revolute"']),
     ({"mass": ""}, "mujoco", ["'a', 'b', 'c'", "<inertial>", "pybullet"]),
 ], ids=["mimic", "xacro", "no-limits", "zero-range", "continuous", "no-inertials"])
+@pytest.mark.usefixtures("default_back_ends")
 def test_urdf_faults_are_named_by_config_check_and_robots(tmp_path, capsys, spoil, simulator,
                                                          names):
     urdf = _arm(tmp_path / "arm.urdf", **spoil)
@@ -107,6 +108,7 @@ def test_mimic_joint_off_the_pen_chain_is_accepted(tmp_path):
     assert robot.joint_names == ("s1", "s2", "s3")
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_relative_urdf_is_read_beside_the_config_from_any_folder(tmp_path, monkeypatch):
     (tmp_path / "robots").mkdir()
     _arm(tmp_path / "robots" / "arm.urdf")
@@ -211,3 +213,173 @@ def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
     assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 3
     pp.preprocess(demo, plane=NAO_PLANE)  # nobody listening: nothing shown, nothing kept
     assert len(seen) == len(fractions)
+
+
+# -- files from elsewhere -----------------------------------------------------------------
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
+    import iloci._version
+    from iloci import Agent
+    from iloci.concepts.memory import Memory, save_memory
+    from iloci.errors import MemoryFileError
+
+    saved = load_config(None).to_dict()
+    saved["learner"]["forgetting_rate"] = 0.1  # a setting of a later version
+    import iloci.concepts.memory as memory_module
+    monkeypatch.setattr(iloci._version, "__version__", "99.1.0")
+    monkeypatch.setattr(memory_module, "__version__", "99.1.0", raising=False)
+    save_memory(tmp_path / "m.npz", Memory(), {}, extra={"config": saved})
+    monkeypatch.undo()
+    with pytest.raises(MemoryFileError, match=r"written by iloci 99.1.0, this is iloci "
+                       rf"{iloci._version.__version__}: upgrade iloci.*forgetting_rate"):
+        Agent.load(tmp_path / "m.npz")
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_config_from_a_newer_iloci_names_both_versions(tmp_path, capsys):
+    from iloci._version import __version__
+    from iloci.config import to_toml
+
+    text = to_toml(load_config(None))
+    assert f"written by iloci {__version__}" in text.splitlines()[0]
+    f = tmp_path / "new.toml"
+    f.write_text(text.replace(f"iloci {__version__}", "iloci 99.0")
+                 + "\n[recognition]\nnovelty = 2.0\n")
+    assert main(["config", "check", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert f"written by iloci 99.0, this is iloci {__version__}: upgrade iloci" in err
+    assert "recognition" in err
+    # the same unknown key in a config that says no version: the usual message only
+    f.write_text(text.replace(f"written by iloci {__version__}", "") + "\n[recognition]\n")
+    assert main(["config", "check", str(f)]) == 2
+    assert "upgrade" not in capsys.readouterr().err
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
+    from iloci.data.files import writable_dir
+    from iloci.evaluation.evaluate import evaluate
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    # a folder that cannot be made (its parent is a file): refused before any fold is learned
+    learned = []
+    monkeypatch.setattr("iloci.evaluation.evaluate.run_fold",
+                        lambda *a, **k: learned.append(1), raising=False)
+    with pytest.raises(InvalidInputError, match=r"memory_dir .*a-file/m.*nothing can be "
+                       "written there.*Nothing was done"):
+        evaluate(load_config(None).replace(data={"shapes": ["GShape", "Sine"]}),
+                 baseline=False, memory_dir=str(blocker / "m"))
+    assert learned == []
+    with pytest.raises(InvalidInputError, match="is a file, not a directory"):
+        writable_dir(blocker, "--out")
+    argv = [["evaluate", "--out", str(tmp_path / "o"), "--memories", str(blocker / "m"),
+             "--no-baseline"],
+            ["teach", "--memory", str(blocker / "m.npz"), "GShape/0"],
+            ["show", "GShape/0", "--out", str(blocker / "x.png")]]
+    for args in argv:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert "Nothing was done" in err and "Traceback" not in err, (args, err)
+    assert not (blocker.parent / "m.npz").exists()
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fsencode") or
+                    __import__("sys").getfilesystemencoding() != "utf-8",
+                    reason="a UTF-8 file system encoding")
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_file_name_that_is_not_utf8_is_accepted_by_teach_and_show(tmp_path, capsys):
+    import os
+
+    from iloci.data.files import shape_name
+
+    name = os.fsdecode(b"caf\xe9.csv")  # a Latin-1 name on a UTF-8 system
+    f = tmp_path / name
+    t = np.linspace(0.0, 1.0, 80)
+    np.savetxt(f, np.column_stack([t, np.cos(3 * t), np.sin(3 * t)]), delimiter=",",
+               header="t,x,y", comments="")
+    assert shape_name(f) == "caf\\xe9"
+    assert main(["show", str(f), "--out", str(tmp_path / "s.png")]) == 0
+    assert "caf\\xe9/0: 80 pen points" in capsys.readouterr().out
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[perceptual_model]\nepochs = 20\n[learner]\nrehearsal_epochs = 20\n'
+                   '[teacher]\nconcepts = ["caf\\\\xe9=cup"]\n')
+    memory = tmp_path / os.fsdecode(b"m\xff.npz")
+    assert main(["teach", "--config", str(cfg), "--memory", str(memory), str(f)]) == 0
+    out = capsys.readouterr().out
+    assert "caf\\xe9/0" in out and "memory saved to" in out
+    assert main(["show", str(memory)]) == 0
+    assert "m\\xff.npz" in capsys.readouterr().out  # the name printed, its byte as \xff
+
+
+# -- plugins: a hook result of the wrong type ----------------------------------------------
+
+class _SloppyPlugin:
+    """Hooks that return what iloci cannot use."""
+
+    from iloci import hookimpl
+
+    @hookimpl
+    def iloci_register_teachers(self, registry):
+        registry.add("sloppy", lambda **kw: {"feedback": 1}, summary="returns a dict")
+
+    @hookimpl
+    def iloci_make_executor(self, name, jobs, address):
+        return "an executor" if name == "sloppy" else None
+
+    @hookimpl
+    def iloci_register_robots(self, robots):
+        robots["sloppy-arm"] = "panda"
+
+
+class _ReturningPlugin:
+    from iloci import hookimpl
+
+    @hookimpl
+    def iloci_register_clusterers(self, registry):
+        return {"mine": object}  # instead of registry.add(...)
+
+
+def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
+    from iloci.errors import PluginError
+    from iloci.evaluation.executors import make_executor
+    from iloci.plugins import get_plugin_manager, get_registry
+    from iloci.sensorimotor.robots import available_robots
+
+    pm = get_plugin_manager(autoload=False, plugins=[_SloppyPlugin()])
+    registry = get_registry(pm)
+    with pytest.raises(PluginError, match=r"teacher 'sloppy' of plugin '.*' \(distribution "
+                       r"none\), registered through iloci_register_teachers: its factory .* "
+                       r"returned dict .* lacks feedback"):
+        registry.build("teacher", "sloppy")
+    with pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
+                       "for executor 'sloppy', which is not a fold executor: it lacks name, run"):
+        make_executor("sloppy", 1, plugin_manager=pm)
+    with pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
+        available_robots(pm)
+    with pytest.raises(PluginError, match=r"iloci_register_clusterers returned dict .* "
+                       r"returns nothing: it registers each component with registry.add"):
+        get_registry(get_plugin_manager(autoload=False, plugins=[_ReturningPlugin()]))
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_an_installed_plugin_with_a_wrong_factory_result_is_named_with_its_distribution(
+        tmp_path, cli):
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sloppy_teacher.py").write_text(
+        "from iloci import hookimpl\n\n"
+        "@hookimpl\n"
+        "def iloci_register_teachers(registry):\n"
+        "    registry.add('sloppy', lambda **kw: 'yes', summary='says yes')\n")
+    info = site / "iloci_sloppy-0.3.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: iloci-sloppy\nVersion: 0.3\n")
+    (info / "entry_points.txt").write_text("[iloci]\nsloppy = sloppy_teacher\n")
+    out = cli("teach", "--teacher", "sloppy", "--memory", str(tmp_path / "m.npz"), "GShape/0",
+              env={"PYTHONPATH": str(site)})
+    assert out.returncode == 2, out.stderr
+    assert "teacher 'sloppy' of plugin 'sloppy' (distribution iloci-sloppy)" in out.stderr
+    assert "iloci_register_teachers" in out.stderr and "returned str 'yes'" in out.stderr
+    assert "Traceback" not in out.stderr and not (tmp_path / "m.npz").exists()

@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.gif and suffix != ".png":
         raise InvalidInputError(f"--out must be a .png file (or use --gif with a .gif), got "
                                 f"{out}.")
+    from iloci.data.files import writable_file
+    writable_file(out, "--out")
     loaded = load_memory(args.memory)
     header = loaded[2]
     config = header.get("config")

@@ -60,26 +60,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _check_out_dir(out: str) -> None:
-    """Raise InvalidInputError unless the report can be written under ``out``."""
-    import os
-    import tempfile
-    from pathlib import Path
-
-    from iloci.errors import InvalidInputError
-    path = Path(out)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path):
-            pass
-    except OSError as exc:
-        raise InvalidInputError(f"--out {out}: the report cannot be written there "
-                                f"({exc.strerror or exc}); choose another directory."
-                                ) from None
-    if not os.access(path, os.W_OK):
-        raise InvalidInputError(f"--out {out}: directory is not writable.")
-
-
 def run(args: argparse.Namespace) -> int:
     from iloci.config import load_config
     from iloci.evaluation.evaluate import evaluate
@@ -103,7 +83,10 @@ def run(args: argparse.Namespace) -> int:
     # fail now, not after the first fold: the report's libraries, a writable --out
     check_report_extras(baseline=not args.no_baseline
                         and config.evaluation.protocol != "stream")
-    _check_out_dir(args.out)
+    from iloci.data.files import writable_dir
+    writable_dir(args.out, "--out")
+    if args.memories:
+        writable_dir(args.memories, "--memories")
     if config.evaluation.protocol == "stream":
         return _run_stream(args, config)
     if config.data.path and config.evaluation.protocol == "folds":
@@ -112,8 +95,11 @@ def run(args: argparse.Namespace) -> int:
         dataset = load_dataset(config.data.path)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
+        names = list(dataset.concepts)
+        shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
         what = (f"data set {dataset.name} ({len(dataset.samples)} samples, "
-                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} writers)")
+                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} writers; "
+                f"concepts: {shown})")
     else:
         what = "LASA"
     split = ", writer-disjoint" if config.evaluation.split == "writers" else ""

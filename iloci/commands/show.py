@@ -82,10 +82,12 @@ def run(args: argparse.Namespace) -> int:
     if Path(args.shape).suffix.lower() == ".npz":
         return _show_memory(args)
 
+    from iloci.data.files import writable_file
+
     demo = _load_demo(args.shape, args.demo)
+    out = writable_file(args.out if args.out else f"{demo.shape}-{demo.index}.png", "--out")
     ik, sm, robot = _components(args.config)
     motion = to_motion(demo, sm, ik, robot)
-    out = Path(args.out) if args.out else Path(f"{demo.shape}-{demo.index}.png")
     reached = np.asarray(ik.forward(motion.joint_path))
     err = np.linalg.norm(reached - motion.targets, axis=1)
     plot_motion(demo, motion, reached, robot, out)

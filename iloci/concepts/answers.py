@@ -36,7 +36,10 @@ class LearnOutcome:
         The robot's concept it was assigned to.
     action : str
         The final action: ``"strengthen"``, ``"new_exemplar"`` or
-        ``"new_concept"``.
+        ``"new_concept"``; ``"already_learned"`` when this very
+        demonstration (the same key and samples,
+        :func:`~iloci.concepts.memory.demonstration_digest`) was learned
+        before: nothing was asked and the memory is unchanged.
     feedbacks : tuple of int
         Every feedback the teacher gave for it, in order (empty for the
         very first demonstration).

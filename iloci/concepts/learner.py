@@ -315,7 +315,8 @@ class Learner:
         InvalidInputError
             ``sequence`` is not a finite (T, D) array with T >= 2.
         """
-        return Turn(self, demo, sequence, start, dt, frame)
+        return Turn(self, demo, sequence, start, dt, frame,
+                    learned=self.memory.learned_concept(demo))
 
     def learn(self, demo: Demonstration, sequence: np.ndarray, start: np.ndarray,
               dt: float, frame: TeacherFrame | None = None) -> LearnOutcome:

@@ -6,135 +6,29 @@ numSteps, initialInfo, conceptLabel and generationError. The network itself
 (the paper's TrajectoryNet) is the agent's perceptual model; its weights are
 saved beside the memory.
 
-Exemplars and prototypes
-------------------------
-An *exemplar* is an entry learned from one demonstration; strengthening it
-(a rewarded, highly similar demonstration) raises its numSamples but it
-stays an exemplar, since its PB still encodes that one pattern. A
-*prototype* is the medoid that replaced a valid cluster (numSamples summed);
-:attr:`Entry.prototype` says which, and it is the only definition iloci
-uses: :attr:`Memory.n_exemplars` and :attr:`Memory.n_prototypes` count by it,
-and every output (``iloci teach``, ``iloci show MEMORY.npz``, ``metrics.json``)
-reads those. The paper's nPrototypes counts every entry; iloci calls that
-:attr:`Memory.n_entries` (docs/method.md, "Words").
+Exemplars and prototypes: see :mod:`iloci.concepts.entry`.
 
-File format
------------
-One ``.npz`` file (``np.load(allow_pickle=False)``) holding numeric arrays
-only:
-
-* ``__header__`` - UTF-8 JSON as ``uint8``: format name, format version,
-  iloci version, the agent's config, the per-entry strings (concept labels,
-  source demonstration keys) and a SHA-256 checksum of everything else;
-* ``mem/*`` - per-entry arrays (PB, PB_rec, numSamples, ...);
-* ``enc/*`` - the sensorimotor encoder's state (its scales);
-* ``net/*`` - the perceptual model's :meth:`state`.
-
-It is written with :func:`iloci.data.files.write_atomic`: to a temporary
-file in the target directory, flushed to disk and renamed over the target
-(:func:`os.replace`), so a crash leaves either the old or the new memory,
-never a mixture. Replacing a memory file keeps its permission bits.
+The file format: :mod:`iloci.concepts.storage`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-import hashlib
-import json
 import os
 from pathlib import Path
-import struct
 from typing import Any
-import zipfile
-import zlib
 
 import numpy as np
 
-from iloci.data.files import write_atomic
+from iloci.concepts.entry import Entry, _pattern, _stack, demonstration_digest, entries_equal
+from iloci.concepts.storage import FORMAT, FORMAT_VERSION, read_memory_file, write_memory_file
 from iloci.errors import InvalidInputError, MemoryFileError
 from iloci.sensorimotor.encoding import SensorimotorEncoder
 
-__all__ = ["Entry", "Memory", "FORMAT", "FORMAT_VERSION", "save_memory", "load_memory",
-           "entries_equal"]
+__all__ = ["Entry", "Memory", "demonstration_digest", "FORMAT", "FORMAT_VERSION", "save_memory",
+           "load_memory", "entries_equal"]
 
-#: Name written in every memory file's header.
-FORMAT = "iloci-memory"
-#: Version of the file layout this iloci writes and the newest it reads.
-FORMAT_VERSION = 1
-
-
-@dataclass(eq=False)
-class Entry:
-    """One consolidated exemplar or prototype of Mem.
-
-    Attributes
-    ----------
-    pb : ndarray, shape (P,)
-        PB vector learned for the entry's pattern by the last rehearsal.
-    pb_rec : ndarray, shape (P,)
-        PB vector recognized from the entry's pattern with the weights
-        frozen (what a new demonstration's PB_obs is compared with).
-    num_samples : int
-        Demonstrations this entry stands for (numSamples).
-    num_steps : int
-        Rows of the entry's encoded sequence (numSteps, ``T - 1``).
-    initial_input : ndarray, shape (D,)
-        First row of the encoded sequence: the network's initial input when
-        the pattern is regenerated (initialInfo, part 1).
-    start : ndarray, shape (D,)
-        Absolute first sample ``[y, z, q1..qJ]`` (m, rad) that decoding a
-        regenerated sequence starts from (initialInfo, part 2).
-    dt : float
-        Time step (s) of the motion when it is performed.
-    concept : str
-        The robot's concept label (conceptLabel), e.g. ``"c3"``.
-    generation_error : float
-        Mean squared closed-loop error of regenerating the pattern from
-        ``pb`` and ``initial_input`` (generationError).
-    source : str
-        Key of the demonstration whose pattern the entry holds (a
-        prototype's medoid).
-    sources : tuple of str
-        Keys of every demonstration the entry stands for.
-    prototype : bool
-        True for a medoid that replaced a cluster, False for an exemplar.
-    pattern : ndarray, shape (num_steps, D), optional
-        The encoded demonstration the entry was learned from, kept only with
-        ``[learner] rehearse_from = "demonstrations"``: rehearsal then trains
-        on it instead of regenerating it (see :mod:`iloci.concepts.rehearsal`).
-        ``None`` (the paper): the robot keeps no demonstration.
-    """
-
-    pb: np.ndarray
-    pb_rec: np.ndarray
-    num_samples: int
-    num_steps: int
-    initial_input: np.ndarray
-    start: np.ndarray
-    dt: float
-    concept: str
-    generation_error: float
-    source: str
-    sources: tuple[str, ...] = ()
-    prototype: bool = False
-    pattern: np.ndarray | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def exemplar(self) -> bool:
-        """True for an entry learned from one demonstration (not a medoid)."""
-        return not self.prototype
-
-    def copy(self) -> Entry:
-        return Entry(self.pb.copy(), self.pb_rec.copy(), self.num_samples, self.num_steps,
-                     self.initial_input.copy(), self.start.copy(), self.dt, self.concept,
-                     self.generation_error, self.source, tuple(self.sources), self.prototype,
-                     None if self.pattern is None else self.pattern.copy())
-
-    def __repr__(self) -> str:
-        kind = "prototype" if self.prototype else "exemplar"
-        return (f"Entry({kind} of {self.concept!r}, source={self.source!r}, "
-                f"numSamples={self.num_samples}, generationError={self.generation_error:.3g})")
 
 
 @dataclass(eq=False)
@@ -152,6 +46,11 @@ class Memory:
     demonstrations_seen : int
         Demonstrations learned from so far (the index of the next one in the
         learning stream).
+    learned : set of str
+        :func:`demonstration_digest` of every demonstration learned from:
+        one shown again (the same key and the same samples) is recognized
+        and not learned twice (:meth:`learned_concept`). Saved with the
+        memory; a file written before it was kept has none.
     revision : int
         Bumped by every change the learner or :meth:`rename` makes (not
         saved): a :class:`~iloci.concepts.learner.Turn` refuses feedback
@@ -163,6 +62,7 @@ class Memory:
     concept_count: int = 0
     demonstrations_seen: int = 0
     revision: int = field(default=0, repr=False)
+    learned: set[str] = field(default_factory=set, repr=False)
 
     # -- views ------------------------------------------------------------------
     def __len__(self) -> int:
@@ -309,9 +209,27 @@ class Memory:
             drop.update(idx[j] for j in members if j != med)
         return [e for i, e in enumerate(entries) if i not in drop], len(plan.valid), plan.d_cutoff
 
-    def placed(self) -> None:
-        """One demonstration more was learned from (strengthened, exemplar or concept)."""
+    def placed(self, digest: str | None = None) -> None:
+        """One demonstration more was learned from (strengthened, exemplar or concept).
+
+        ``digest``: its :func:`demonstration_digest`, kept in :attr:`learned`.
+        """
         self.demonstrations_seen += 1
+        if digest is not None:
+            self.learned.add(digest)
+
+    def learned_concept(self, demo: Any) -> str | None:
+        """The concept ``demo`` was learned into, if this very demonstration was learned.
+
+        "This very demonstration": the same key and the same samples
+        (:func:`demonstration_digest`); one with the same key but other
+        samples is another demonstration. ``None`` when it was not learned
+        (or the entry that stood for it is gone).
+        """
+        if demonstration_digest(demo) not in self.learned:
+            return None
+        key = demo.key
+        return next((e.concept for e in self.entries if key in e.sources), None)
 
     def rename(self, concept: str, name: str) -> None:
         """Name a concept: every entry of ``concept`` is relabelled ``name``.
@@ -376,7 +294,7 @@ class Memory:
         elif self.encoder is not None:
             enc = SensorimotorEncoder(self.encoder.limit)
         return Memory([e.copy() for e in self.entries], enc, self.concept_count,
-                      self.demonstrations_seen)
+                      self.demonstrations_seen, learned=set(self.learned))
 
     def summary(self) -> str:
         """A header (entries, exemplars, prototypes, concepts) and one line per concept."""
@@ -429,6 +347,7 @@ class Memory:
             "sources": [list(e.sources) for e in self.entries],
             "concept_count": self.concept_count,
             "demonstrations_seen": self.demonstrations_seen,
+            "learned": sorted(self.learned),
         }
         return arrays, meta
 
@@ -460,8 +379,9 @@ class Memory:
                 for i in range(m)]
             enc_state = {k[4:]: v for k, v in arrays.items() if k.startswith("enc/")}
             encoder = SensorimotorEncoder.from_state(enc_state) if enc_state else None
+            learned = {str(d) for d in meta.get("learned", ())}
             return cls(entries, encoder, int(meta["concept_count"]),
-                       int(meta["demonstrations_seen"]))
+                       int(meta["demonstrations_seen"]), learned=learned)
         except (KeyError, TypeError, ValueError, IndexError, InvalidInputError) as exc:
             raise MemoryFileError(f"memory file content is inconsistent ({exc}); it was not "
                                   "written by this version of iloci or was edited.") from None
@@ -471,39 +391,7 @@ class Memory:
 MAX_NAME = 40
 
 
-def _pattern(arrays: Mapping[str, np.ndarray], i: int, steps: int,
-             width: int) -> np.ndarray | None:
-    """Entry ``i``'s kept pattern (``None`` when it has none), checked against its size."""
-    a = arrays.get(f"mem/pattern/{i}")
-    if a is None:
-        return None
-    a = np.asarray(a, dtype=np.float64)
-    if a.shape != (steps, width) or not np.all(np.isfinite(a)):
-        raise ValueError(f"entry {i}'s pattern has shape {a.shape}, expected "
-                         f"({steps}, {width}) finite values")
-    return a
-
-
-def _stack(rows: list[np.ndarray], width: int | None = None) -> np.ndarray:
-    if rows:
-        return np.array(rows, dtype=np.float64)
-    return np.zeros((0, width or 0), dtype=np.float64)
-
-
 # -- files -------------------------------------------------------------------------
-
-def _checksum(header: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> str:
-    h = hashlib.sha256()
-    h.update(json.dumps({k: v for k, v in header.items() if k != "checksum"},
-                        sort_keys=True).encode())
-    for name in sorted(arrays):
-        a = np.ascontiguousarray(arrays[name])
-        h.update(name.encode())
-        h.update(str(a.dtype.str).encode())
-        h.update(repr(a.shape).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
 
 def save_memory(path: str | os.PathLike[str], memory: Memory,
                 network_state: Mapping[str, np.ndarray],
@@ -523,10 +411,8 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
     Returns
     -------
     pathlib.Path
-        The written file.
+        The written file (see :mod:`iloci.concepts.storage` for its format).
     """
-    # a symlinked memory is written through to its target (the link stays)
-    path = Path(os.path.realpath(os.fspath(path)))
     arrays, meta = memory.to_arrays()
     for k, v in network_state.items():
         a = np.asarray(v)
@@ -534,12 +420,7 @@ def save_memory(path: str | os.PathLike[str], memory: Memory,
             raise InvalidInputError(f"network state {k!r} is an object array; states must "
                                     "be numeric (no pickle).")
         arrays[f"net/{k}"] = a
-    from iloci._version import __version__
-    header: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
-                              "iloci": __version__, "memory": meta, **dict(extra or {})}
-    header["checksum"] = _checksum(header, arrays)
-    arrays["__header__"] = np.frombuffer(json.dumps(header, sort_keys=True).encode(), np.uint8)
-    return write_atomic(path, lambda fh: np.savez(fh, allow_pickle=False, **arrays), mkdir=True)
+    return write_memory_file(path, arrays, {"memory": meta, **dict(extra or {})})
 
 
 def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndarray],
@@ -559,63 +440,7 @@ def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndar
         Missing, truncated, tampered with (checksum mismatch), not an iloci
         memory, or written by a newer iloci.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise MemoryFileError(f"memory file not found: {path}. Teach the robot first "
-                              "(`iloci teach --memory FILE`), or check the path.")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, zlib.error,
-            struct.error, OverflowError,
-            # a damaged zip directory can claim a compression method zipfile lacks
-            # (NotImplementedError) or an encrypted member (RuntimeError)
-            NotImplementedError, RuntimeError) as exc:
-        raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
-                              f"or not an iloci memory ({type(exc).__name__}: {exc}).") from None
-    raw = arrays.pop("__header__", None)
-    try:
-        if raw is None:
-            raise ValueError("no header")
-        header = json.loads(raw.tobytes().decode("utf-8"))
-        if not isinstance(header, dict):
-            raise ValueError("header is not an object")
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise MemoryFileError(f"{path} is not an iloci memory file ({exc}).") from None
-    if header.get("format") != FORMAT:
-        raise MemoryFileError(f"{path} is not an iloci memory file (format "
-                              f"{header.get('format')!r}).")
-    version = header.get("version")
-    if not isinstance(version, int) or version < 1:
-        raise MemoryFileError(f"{path}: invalid memory format version {version!r}.")
-    if version > FORMAT_VERSION:
-        raise MemoryFileError(
-            f"{path} was written by a newer iloci ({header.get('iloci')}, memory format "
-            f"version {version}); this iloci reads format version {FORMAT_VERSION} and "
-            "older. Upgrade iloci to load it.")
-    if header.get("checksum") != _checksum(header, arrays):
-        raise MemoryFileError(f"{path} is corrupted or was modified: its checksum does not "
-                              "match its content. Restore it from a backup or teach again.")
+    arrays, header = read_memory_file(path)
     memory = Memory.from_arrays(arrays, header.get("memory", {}))
     network_state = {k[4:]: v for k, v in arrays.items() if k.startswith("net/")}
     return memory, network_state, header
-
-
-def entries_equal(a: Iterable[Entry], b: Iterable[Entry]) -> bool:
-    """True when two entry lists hold the same values (arrays compared exactly)."""
-    a, b = list(a), list(b)
-    if len(a) != len(b):
-        return False
-    for x, y in zip(a, b):
-        for name in ("pb", "pb_rec", "initial_input", "start"):
-            if not np.array_equal(getattr(x, name), getattr(y, name)):
-                return False
-        for name in ("num_samples", "num_steps", "dt", "concept", "generation_error",
-                     "source", "sources", "prototype"):
-            if getattr(x, name) != getattr(y, name):
-                return False
-        px, py = x.pattern, y.pattern
-        if (px is None) != (py is None) or (
-                px is not None and py is not None and not np.array_equal(px, py)):
-            return False
-    return True

@@ -172,7 +172,7 @@ def perform_novel(memory: Memory, sequence: np.ndarray, start: np.ndarray, dt: f
                     dt=float(dt), teacher_drawing=a.teacher_drawing)
 
 
-def ik_joint_limits(ik_solver) -> tuple[np.ndarray, np.ndarray] | None:
+def ik_joint_limits(ik_solver: Any) -> tuple[np.ndarray, np.ndarray] | None:
     """``(lower, upper)`` joint limits (rad, shape (J,) each) of an IK solver, if it has them.
 
     The learner clips regenerated joint paths to them before execution.

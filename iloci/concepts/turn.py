@@ -72,7 +72,7 @@ import numpy as np
 from iloci.concepts.answers import Answer, LearnOutcome, check_answer_id
 from iloci.concepts.face import LearnerFace
 from iloci.concepts.inference import familiarity, novelty_scale
-from iloci.concepts.memory import Entry
+from iloci.concepts.memory import Entry, demonstration_digest
 from iloci.errors import InvalidInputError
 from iloci.events import InteractionEvent, RehearsalEvent
 from iloci.interfaces import Demonstration, check_feedback
@@ -139,7 +139,8 @@ class Turn:
     """
 
     def __init__(self, learner: LearnerFace, demo: Demonstration, sequence: np.ndarray,
-                 start: np.ndarray, dt: float, frame: TeacherFrame | None = None) -> None:
+                 start: np.ndarray, dt: float, frame: TeacherFrame | None = None, *,
+                 learned: str | None = None) -> None:
         seq = np.asarray(sequence, dtype=np.float64)
         if seq.ndim != 2 or len(seq) < 2 or not np.all(np.isfinite(seq)):
             raise InvalidInputError(f"sequence of {demo.key!r} must be a finite (T, D) array "
@@ -168,6 +169,10 @@ class Turn:
         self.revision = mem.revision
         learner.discard_events()
         self.labels: list[str] = []
+        if learned is not None:   # this very demonstration was learned (into `learned`)
+            self.pb_obs, self.distances = np.zeros(0), np.zeros(0)
+            self._finish(learned, "already_learned")
+            return
         if not mem.entries:
             # the very first demonstration: nothing to guess, a new concept
             self.pb_obs = np.zeros(learner.model.pb_size)
@@ -381,7 +386,7 @@ class Turn:
                     rehearsed.append(learner.rehearse("clustering", entries))
             self.rehearsals.extend(rehearsed)
         self.feedbacks.append(1)
-        mem.placed()
+        mem.placed(demonstration_digest(self.demo))
         self._record(self._event(answer, 1, action, d_cutoff=extra.get("d_cutoff"),
                                  concept=guess, entries=len(mem), clustered=clustered))
         return self._finish(guess, action, clustered)
@@ -432,7 +437,7 @@ class Turn:
         except BaseException:
             undo()   # the label was not used
             raise
-        mem.placed()
+        mem.placed(demonstration_digest(self.demo))
         extra: dict[str, Any] = {"concept": label, "entries": len(mem)}
         if novel is not None:
             extra["novel"] = novel
@@ -491,9 +496,5 @@ class Turn:
         return f"{self.token}-{attempt}"
 
     def _new_entry(self, label: str) -> Entry:
-        seq, key, pb = self.sequence, self.key, self.pb_obs
-        keep = self.learner.policies.rehearsal.keep_patterns
-        return Entry(pb=pb.copy(), pb_rec=pb.copy(), num_samples=1, num_steps=len(seq),
-                     initial_input=seq[0].copy(), start=self.start.copy(), dt=self.dt,
-                     concept=label, generation_error=float("nan"), source=key,
-                     sources=(key,), pattern=seq.copy() if keep else None)
+        return Entry.learned_from(self.sequence, self.start, self.dt, self.pb_obs, label,
+                                  self.key, self.learner.policies.rehearsal.keep_patterns)

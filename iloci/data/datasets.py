@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci.data.files import load_trajectory
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
@@ -314,7 +315,6 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
     if problems:
         raise _fail(f"data set {p} has problems; nothing was learned:", problems,
                     "Fix them (or leave the files out) and run again.")
-    from iloci.data.files import load_trajectory
 
     demos: list[Demonstration] = []
     counter: Counter[str] = Counter()
@@ -354,9 +354,15 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                     [f"{u}: {len(fs)} file(s), e.g. {root / fs[0]}" for u, fs in units.items()],
                     "Convert the files to one unit.")
     if len(counter) < 2:
+        hint = ""
+        if layout == "folders" and len(counter) == 1:
+            inner = root / next(iter(counter))
+            if any(d.is_dir() for d in inner.iterdir()):
+                hint = (f" If {inner} holds the concept folders, give that path "
+                        f"(--data {inner}).")
         raise InvalidInputError(f"data set {p} has {len(counter)} concept(s) "
                                 f"({', '.join(counter) or 'none'}); recognition needs at "
-                                "least 2.")
+                                f"least 2.{hint}")
     return DataSet(name=name, root=str(root.resolve()), source=str(p.resolve()), layout=layout,
                    samples=samples, demos=demos, checksum=h.hexdigest())
 

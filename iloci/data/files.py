@@ -21,8 +21,20 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["TrajectoryFile", "load_trajectory", "trajectory_files", "write_atomic",
-           "write_text_atomic"]
+__all__ = ["TrajectoryFile", "load_trajectory", "shape_name", "trajectory_files", "writable_dir",
+           "writable_file", "write_atomic", "write_text_atomic"]
+
+def shape_name(path: str | os.PathLike[str]) -> str:
+    """The shape name a trajectory file gives its demonstration: the file's stem, as text.
+
+    A file name the OS gives as bytes that are not UTF-8 (a Latin-1 name on a
+    UTF-8 system, say: Python holds such bytes as lone surrogates, which cannot
+    be printed, drawn, hashed or saved as text) is accepted: each such byte is
+    written ``\\xNN`` in the name (``caf\\xe9`` for ``café`` in Latin-1); the
+    file itself is read by its own name.
+    """
+    return os.fsencode(Path(path).stem).decode("utf-8", "backslashreplace")
+
 
 def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
                     true_concept: str | None = None, index: int = 0) -> Demonstration:
@@ -78,7 +90,7 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
     if not p.is_file():
         raise InvalidInputError(f"trajectory file {str(p)!r} does not exist.")
     suffix = p.suffix.lower()
-    name = shape if shape is not None else p.stem
+    name = shape if shape is not None else shape_name(p)
     if suffix == ".npy":
         positions, times = _read_npy(p)
     elif suffix == ".csv":
@@ -171,10 +183,10 @@ def trajectory_files(paths: Iterable[str | os.PathLike[str]],
     out = []
     for path in paths:
         p = Path(path)
-        same_stem = seen.setdefault(p.stem, {})
+        same_stem = seen.setdefault(shape_name(p), {})
         ident = os.path.normcase(os.path.abspath(p))
         index = same_stem.setdefault(ident, len(same_stem))
-        out.append(TrajectoryFile(str(path), p.stem, index))
+        out.append(TrajectoryFile(str(path), shape_name(p), index))
     return out
 
 
@@ -470,6 +482,55 @@ def _check_times(times: np.ndarray, rows: list[str], name: str) -> None:
         raise InvalidDemonstrationError(
             f"{name}: {rows[i]}: time {times[i]:g} is not after the previous row's "
             f"{times[i - 1]:g}; times must be strictly increasing.")
+
+
+def writable_dir(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a directory files can be written to, created if missing; checked by
+    writing (and removing) a temporary file in it, before any work that would end there.
+
+    Parameters
+    ----------
+    path : path-like
+    what : str
+        How the error names it, e.g. ``"--memories"``.
+
+    Raises
+    ------
+    InvalidInputError
+        It is a file, cannot be created, or nothing can be written in it (read-only,
+        no permission, no space): naming the reason, and that nothing was done.
+    """
+    import tempfile
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InvalidInputError(f"{what} {str(p)!r} is a file, not a directory; give a "
+                                "directory. Nothing was done.")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=p):
+            pass
+    except OSError as exc:
+        raise InvalidInputError(
+            f"{what} {str(p)!r}: nothing can be written there ({exc.strerror or exc}); choose "
+            "another directory or make it writable. Nothing was done.") from None
+    return p
+
+
+def writable_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a file that can be (re)written atomically (:func:`write_atomic`): its
+    directory (created if missing) takes new files, and it is not a directory.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`writable_dir`, naming ``what`` (e.g. ``"--memory"``).
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise InvalidInputError(f"{what} {str(p)!r} is a directory; give a file name. "
+                                "Nothing was done.")
+    writable_dir(p.parent, f"{what} {str(p)!r}: its folder")
+    return p
 
 
 def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any], *,

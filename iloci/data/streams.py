@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from iloci.data.concepts import LASA_SHAPES
-from iloci.data.files import TrajectoryFile, shared_stems, trajectory_files
+from iloci.data.files import TrajectoryFile, load_trajectory, shared_stems, trajectory_files
 from iloci.data.lasa import DEMOS_PER_SHAPE, load_lasa
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
@@ -94,7 +94,6 @@ def resolve_demo(token: str) -> Demonstration:
     InvalidInputError
         As :func:`resolve_demos`, or the file cannot be read as a trajectory.
     """
-    from iloci.data.files import load_trajectory
 
     if _is_file_name(token):
         return load_trajectory(token)

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.evaluation.metrics import correct_classification_rate
 from iloci.interfaces import Demonstration
 
 __all__ = ["Baseline", "BASELINES", "BASELINE_NAMES", "normalise_path", "dtw_normalised_1nn",
@@ -337,7 +338,6 @@ def run_baselines(learn: Sequence[Demonstration], test: Sequence[Demonstration],
     """
     import time
 
-    from iloci.evaluation.metrics import correct_classification_rate
 
     unknown = [n for n in names if n not in BASELINES]
     if unknown:

@@ -203,6 +203,9 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         emit({"kind": "fold_done", "fold": res.fold, "ccr": res.ccr,
               "seconds": res.wall_seconds})
 
+    if memory_dir:  # before any fold is learned, not when the first one is saved
+        from iloci.data.files import writable_dir
+        writable_dir(memory_dir, "memory_dir")
     tasks = [FoldTask(k, *plan[k], memory_dir=memory_dir) for k in wanted]
     run_folds(config.to_dict(), tasks, shapes, runner, baseline=baseline, specs=context,
               emit=emit, on_result=finished)

@@ -85,23 +85,23 @@ class ResolvedComponents:
                              install=s.install, summary=s.summary)
 
     @hookimpl
-    def iloci_register_perceptual_models(self, registry) -> None:
+    def iloci_register_perceptual_models(self, registry: Any) -> None:
         self._add(registry)
 
     @hookimpl
-    def iloci_register_clusterers(self, registry) -> None:
+    def iloci_register_clusterers(self, registry: Any) -> None:
         self._add(registry)
 
     @hookimpl
-    def iloci_register_teachers(self, registry) -> None:
+    def iloci_register_teachers(self, registry: Any) -> None:
         self._add(registry)
 
     @hookimpl
-    def iloci_register_ik_solvers(self, registry) -> None:
+    def iloci_register_ik_solvers(self, registry: Any) -> None:
         self._add(registry)
 
     @hookimpl
-    def iloci_register_simulators(self, registry) -> None:
+    def iloci_register_simulators(self, registry: Any) -> None:
         self._add(registry)
 
 

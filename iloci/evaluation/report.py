@@ -11,8 +11,9 @@ import numpy as np
 
 from iloci.data.files import write_text_atomic
 from iloci.errors import MissingBackendError
-from iloci.evaluation.results import FoldResult
+from iloci.evaluation import figures
 from iloci.evaluation.metrics import confidence_matrix, confusion_matrix
+from iloci.evaluation.results import FoldResult
 
 __all__ = ["write_outputs", "write_stream_outputs", "write_json_atomic", "headline",
            "robustness_table", "stream_headline"]
@@ -73,6 +74,14 @@ def _pct_or_none(x: float) -> str:
     return "none" if x != x else f"{_pct(x)} %"
 
 
+def _versus(ccr: float, other: float) -> tuple[str, str]:
+    """How ``ccr`` compares with ``other`` (fractions): ("trails", " by 0.27 points of CCR")."""
+    gap = round(100 * (ccr - other), 2)
+    if gap == 0:
+        return "equals", ""
+    return ("beats" if gap > 0 else "trails"), f" by {abs(gap):.2f} points of CCR"
+
+
 def headline(metrics: dict[str, Any]) -> str:
     """The headline table (Markdown), also printed by ``iloci evaluate``."""
     rows = [
@@ -91,10 +100,9 @@ def headline(metrics: dict[str, Any]) -> str:
     m = metrics
     best = metrics.get("best_baseline")
     if best:
-        gap = m["ccr_mean"] - bases[best]["ccr_mean"]
-        rows += ["", f"iloci {'reaches' if gap >= 0 else 'trails'} the best baseline "
-                 f"({BASELINE_LABELS.get(best, best)}) by {100 * abs(gap):.2f} points of CCR "
-                 "on the same folds."]
+        verb, by = _versus(m["ccr_mean"], bases[best]["ccr_mean"])
+        rows += ["", f"best baseline: {BASELINE_LABELS.get(best, best)}; iloci {verb} it"
+                 f"{by} on the same folds."]
     d = metrics.get("dataset")
     if d:
         writers = f", {d['writers']} writers" if d.get("writers") else ""
@@ -177,7 +185,6 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     results : sequence of FoldResult
         As :func:`~iloci.evaluation.evaluate.evaluate` returns them.
     """
-    from iloci.evaluation import figures
 
     out = Path(out_dir)
     fig_dir = out / "figures"
@@ -369,7 +376,6 @@ def stream_headline(metrics: dict[str, Any]) -> str:
 def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
                          steps: list[dict]) -> Path:
     """Write the stream protocol's metrics.json, stream.json, figure and report.md."""
-    from iloci.evaluation import figures
 
     out = Path(out_dir)
     fig_dir = out / "figures"

@@ -28,9 +28,12 @@ from typing import Any
 
 import numpy as np
 
+from iloci.agent import build
 from iloci.config import Config, load_config
+from iloci.data import load_lasa
 from iloci.data.concepts import GroundTruth, majority_names
 from iloci.evaluation.metrics import mean_std, purity
+from iloci.plugins import get_plugin_manager, get_registry
 
 __all__ = ["StreamStep", "stream_order", "run_stream", "summarize_stream", "FIRST_SCORED"]
 
@@ -104,9 +107,6 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     limit : int, optional
         Stop after this many demonstrations (for tests).
     """
-    from iloci.agent import build
-    from iloci.data import load_lasa
-    from iloci.plugins import get_plugin_manager, get_registry
 
     pm = plugin_manager or get_plugin_manager()
     config = load_config(config, registry=get_registry(pm))

@@ -280,13 +280,14 @@ def _pool(s: np.ndarray, p: np.ndarray, share: np.ndarray, delta: float
     b = np.floor((s - s[0]) / delta).astype(np.int64)
     if b[-1] + 1 >= len(s) // 4:  # too few samples per stretch to gain anything
         return s, p, share
-    _, b = np.unique(b, return_inverse=True)
-    w = np.bincount(b, share)
+    # s is sorted, so each stretch's samples are one run: sums by np.add.reduceat, O(N)
+    starts = np.flatnonzero(np.concatenate([[True], b[1:] != b[:-1]]))
+    w = np.add.reduceat(share, starts)
     keep = w > 0
     safe = np.where(keep, w, 1.0)
-    ps = np.bincount(b, share * s) / safe
-    px = np.bincount(b, share * p[:, 0]) / safe
-    py = np.bincount(b, share * p[:, 1]) / safe
+    ps = np.add.reduceat(share * s, starts) / safe
+    px = np.add.reduceat(share * p[:, 0], starts) / safe
+    py = np.add.reduceat(share * p[:, 1], starts) / safe
     return ps[keep], np.column_stack([px, py])[keep], w[keep]
 
 

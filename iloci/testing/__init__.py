@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from iloci.interfaces import KINDS
+from iloci.plugins import get_registry
+from iloci.registry import validate_params
 from iloci.testing.checks import CHECKS, Factory
 
 __all__ = ["CHECKS", "ConformanceError", "CheckResult", "check_component",
@@ -114,8 +116,6 @@ def check_component(component: Any, kind: str, *, checks: Iterable[str] | None =
 
 def registry_factory(kind: str, name: str, **params: Any) -> Factory:
     """``make(seed)`` building registered component ``name`` with ``params``."""
-    from iloci.plugins import get_registry
-    from iloci.registry import validate_params
 
     registry = get_registry()
     spec = registry.get(kind, name)

@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from iloci.errors import IlociError, InvalidInputError
+from iloci.errors import IlociError, InvalidInputError, UnreachableTargetError
 from iloci.interfaces import Demonstration, Execution, Response
+from iloci.sensorimotor.robots import get_robot
 
 Factory = Callable[[int], Any]
 #: A conformance check: raises when the component ``make`` builds misbehaves.
@@ -337,7 +338,6 @@ def ik_bad_input(make: Factory) -> None:
     far[5] = [10.0, 10.0, 10.0]
     nan = t.copy()
     nan[2, 1] = np.nan
-    from iloci.errors import UnreachableTargetError
     _expect_error(lambda: ik.solve(far, q[0]), "unreachable target", (UnreachableTargetError,))
     _expect_error(lambda: ik.solve(nan, q[0]), "NaN target", (InvalidInputError,))
     _expect_error(lambda: ik.solve(t[:, :2], q[0]), "targets of width 2", (InvalidInputError,))
@@ -389,7 +389,6 @@ IK_SOLVER_CHECKS: list[Check] = [ik_protocol, ik_forward_shapes_batch_vs_single,
 # -- Simulator ---------------------------------------------------------------
 
 def _sim_path(n: int = 60, sim: Any = None) -> np.ndarray:
-    from iloci.sensorimotor.robots import get_robot
     robot = getattr(sim, "robot", None) or get_robot()
     lo, hi = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
     s = np.linspace(0, 1, n)[:, None]

@@ -128,6 +128,10 @@ def test_sweep_stores_each_run_and_resumes_without_recomputing(tmp_path, ray_loc
     report = write_report(out, spec, third, info3)
     text = report.read_text()
     assert "Best setting" in text and "figures/learner-k_cutoff.png" in text
+    # the baselines ran on each run's fold (same for both settings: same folds)
+    assert [r["baselines"] for r in third] == [records[0]["baselines"]] * 2
+    assert set(records[0]["baselines"]) == {"dtw_normalised", "dollar1", "dtw_raw"}
+    assert "Baselines on the same folds" in text and "the best baseline" in text
     assert (out / "figures/learner-k_cutoff.png").stat().st_size > 1000
     with open(out / "results.csv") as fh:
         rows = list(csv.DictReader(fh))

@@ -109,7 +109,7 @@ def check_plane(ik: Any, plane: Any, q_start: np.ndarray, *, edge: float = 0.0,
     return PlaneCheck(ok, True, margin, sv, qc)
 
 
-def _fmt(v) -> str:
+def _fmt(v: Any) -> str:
     """A direction for a message: ``(1, 0, 0)``."""
     return "(" + ", ".join(f"{float(x):.3g}" for x in v) + ")"
 

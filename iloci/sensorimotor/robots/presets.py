@@ -5,12 +5,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from iloci.errors import UnknownComponentError
+from iloci.errors import PluginError, UnknownComponentError
 from iloci.plugins import get_plugin_manager
 from iloci.sensorimotor.robots.model import DrawingPlane, Robot, _frozen
 
@@ -34,6 +34,8 @@ class RobotPreset:
         Distribution providing it (``"iloci"`` for the built-in one).
     plane : str
         ``"given"`` or ``"auto"`` (placed by the search when built).
+    plugin : str
+        The plugin that registered it (set by :func:`available_robots`).
     """
 
     name: str
@@ -42,6 +44,7 @@ class RobotPreset:
     joints: int
     source: str = "iloci"
     plane: str = "given"
+    plugin: str = "iloci"
 
 
 def _nao_v32_right_arm() -> Robot:
@@ -92,7 +95,36 @@ def available_robots(plugin_manager: Any = None) -> dict[str, RobotPreset]:
     """
     pm = plugin_manager or get_plugin_manager()
     found: dict[str, RobotPreset] = dict(ROBOTS)
-    pm.hook.iloci_register_robots(robots=found)
+    info = getattr(pm, "iloci_plugin_info", {}) or {}
+
+    def who(plugin: str) -> str:
+        dist = getattr(info.get(plugin), "distribution", None)
+        return f"plugin {plugin!r} (distribution {dist or 'none'})"
+
+    # registration order (built-ins, installed plugins, the caller's), so a name
+    # registered twice is blamed on the later plugin, as for components
+    for impl in pm.hook.iloci_register_robots.get_hookimpls():
+        before = dict(found)
+        returned = impl.function(**{arg: found for arg in impl.argnames})
+        changed = {k: v for k, v in found.items() if before.get(k) is not v}
+        bad = {k: v for k, v in changed.items() if not isinstance(v, RobotPreset)}
+        if returned is not None or bad or len(found) < len(before):
+            what = (f"added {', '.join(f'{k!r}: {type(v).__name__}' for k, v in bad.items())}"
+                    if bad else f"returned {type(returned).__name__}" if returned is not None
+                    else "removed robots")
+            raise PluginError(
+                f"{who(impl.plugin_name)}: its iloci_register_robots {what}; it must add "
+                "RobotPreset objects to the dict it receives (robots[name] = RobotPreset(...)) "
+                f"and return nothing. Fix the plugin, or block it with "
+                f"ILOCI_BLOCK_PLUGINS={impl.plugin_name}.")
+        taken = [k for k in changed if k in before]
+        if taken:  # a later plugin must not silently replace an earlier one's robot
+            raise PluginError(
+                f"robot {taken[0]!r} is registered twice: by {who(before[taken[0]].plugin)} "
+                f"and by {who(impl.plugin_name)}. Uninstall or block one of them "
+                f"(ILOCI_BLOCK_PLUGINS={impl.plugin_name}).")
+        for k, v in changed.items():  # provenance: who registered it
+            found[k] = replace(v, plugin=impl.plugin_name)
     return found
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from iloci_ray.sweep import RUN_METRICS, SweepSpec
+from iloci_ray.sweep import BASELINES_METRIC, RUN_METRICS, SweepSpec
 
 __all__ = ["summarize", "write_report"]
 
@@ -31,7 +31,10 @@ def summarize(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per setting: ``{setting, seeds, runs, <metric>_mean, <metric>_std}``.
 
     Metrics: :data:`iloci_ray.sweep.RUN_METRICS`; ``feedbacks`` is the
-    number of teacher feedbacks (+1 or -1) of a fold's learning phase.
+    number of teacher feedbacks (+1 or -1) of a fold's learning phase. When
+    every run of a setting has them, ``baselines``: name -> ``{"mean",
+    "std"}`` of each baseline's CCR on the same folds, aggregated the same
+    way.
     """
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in records:
@@ -45,6 +48,13 @@ def summarize(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             per_seed = [float(np.mean([r[m] for r in runs if r["seed"] == s])) for s in seeds]
             row[f"{m}_mean"] = float(np.mean(per_seed))
             row[f"{m}_std"] = float(np.std(per_seed))
+        if all(r.get(BASELINES_METRIC) for r in runs):
+            row["baselines"] = {}
+            for name in runs[0][BASELINES_METRIC]:
+                per_seed = [float(np.mean([r[BASELINES_METRIC][name] for r in runs
+                                           if r["seed"] == s])) for s in seeds]
+                row["baselines"][name] = {"mean": float(np.mean(per_seed)),
+                                          "std": float(np.std(per_seed))}
         rows.append(row)
     return rows
 
@@ -106,6 +116,23 @@ def plot_against(rows: Sequence[dict[str, Any]], key: str, path: Path) -> Path |
     return path
 
 
+def _baseline_lines(top: dict[str, Any]) -> list[str]:
+    """The baselines on the best setting's folds, and how far its CCR is from the best one."""
+    bases = top.get("baselines")
+    if not bases:
+        return ["Baselines: not run (they need dtaidistance, the `report` extra).", ""]
+    name = max(bases, key=lambda n: bases[n]["mean"])
+    gap = round(100 * (top["ccr_mean"] - bases[name]["mean"]), 2)
+    return ["Baselines on the same folds (iloci.evaluation.baselines; each stores every "
+            "learning demonstration with its true concept, no feedback): "
+            + ", ".join(f"{n} {100 * b['mean']:.2f} ± {100 * b['std']:.2f} %"
+                        for n, b in bases.items())
+            + ". The best setting "
+            + (f"equals the best baseline ({name})." if gap == 0 else
+               f"{'beats' if gap > 0 else 'trails'} the best baseline ({name}) by "
+               f"{abs(gap):.2f} points."), ""]
+
+
 def write_report(out: str | Path, spec: SweepSpec, records: Sequence[dict[str, Any]],
                  info: dict[str, Any]) -> Path:
     """Write results.csv, summary.json, figures/*.png and report.md; return report.md."""
@@ -134,6 +161,7 @@ def write_report(out: str | Path, spec: SweepSpec, records: Sequence[dict[str, A
              f"**Best setting** (highest mean CCR): {_label(top['setting'])}: CCR "
              f"{100 * top['ccr_mean']:.2f} ± {100 * top['ccr_std']:.2f} %, "
              f"{top['feedbacks_mean']:.1f} feedbacks per fold.", "",
+             *_baseline_lines(top),
              "| setting | CCR (%) | feedbacks per fold | rewarded (%) | entries | concepts "
              "| runs |", "|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: -r["ccr_mean"]):

@@ -47,6 +47,10 @@ __all__ = ["SweepSpec", "Run", "load_spec", "plan_runs", "run_key", "run_sweep",
 #: Metrics stored per run (from the fold's result; see iloci.evaluation.evaluate).
 RUN_METRICS = ("ccr", "feedbacks", "rewarded", "interactions_per_demo", "entries",
                "concepts", "generation_error", "wall_seconds")
+#: Also stored per run when ``dtaidistance`` (the ``report`` extra) is installed:
+#: ``baselines``, name -> CCR of each baseline of iloci.evaluation.baselines on the
+#: run's fold (the same learning and test sets).
+BASELINES_METRIC = "baselines"
 
 
 @dataclass(frozen=True)
@@ -239,23 +243,43 @@ def plan_runs(spec: SweepSpec) -> list[Run]:
 
 
 def fold_run(config: dict[str, Any], fold: int) -> dict[str, Any]:
-    """One run, in a Ray task: fold ``fold`` of the config's k-fold split; its metrics."""
+    """One run, in a Ray task: fold ``fold`` of the config's k-fold split; its metrics.
+
+    The data are LASA or the config's ``[data] path`` (split as
+    ``[evaluation] split`` says); the baselines run on the same fold when
+    ``dtaidistance`` is installed (``baselines``: name -> CCR).
+    """
     from iloci.data import load_lasa
     from iloci.evaluation.evaluate import fold_plan, run_fold
 
     from iloci.config import load_config
+    from iloci.errors import MissingBackendError
 
     cfg = load_config(config)
-    demos = load_lasa(list(cfg.data.shapes) or None)
-    learn, test = fold_plan(demos, cfg)[fold]
+    samples = None
+    if cfg.data.path:
+        from iloci.data.datasets import load_dataset
+        dataset = load_dataset(cfg.data.path)
+        demos, samples = dataset.demos, dataset.samples
+    else:
+        demos = load_lasa(list(cfg.data.shapes) or None)
+    learn, test = fold_plan(demos, cfg, samples)[fold]
     res = run_fold(cfg, fold, [demos[i] for i in learn], [demos[i] for i in test],
                    baseline=False, details=False)
     fb = res.feedbacks
-    return {"ccr": res.ccr, "feedbacks": len(fb),
-            "rewarded": sum(1 for f in fb if f == 1) / max(1, len(fb)),
-            "interactions_per_demo": res.interactions_per_demo, "entries": res.entries,
-            "concepts": res.concepts, "generation_error": res.generation_error,
-            "wall_seconds": res.wall_seconds}
+    out: dict[str, Any] = {
+        "ccr": res.ccr, "feedbacks": len(fb),
+        "rewarded": sum(1 for f in fb if f == 1) / max(1, len(fb)),
+        "interactions_per_demo": res.interactions_per_demo, "entries": res.entries,
+        "concepts": res.concepts, "generation_error": res.generation_error,
+        "wall_seconds": res.wall_seconds}
+    try:
+        from iloci.evaluation.baselines import run_baselines
+        runs = run_baselines([demos[i] for i in learn], [demos[i] for i in test])
+        out[BASELINES_METRIC] = {name: r["ccr"] for name, r in runs.items()}
+    except MissingBackendError:  # without the report extra: iloci's metrics only
+        pass
+    return out
 
 
 def _store(out: Path, run: Run, metrics: dict[str, Any]) -> None:
@@ -437,8 +461,5 @@ def summary_lines(info: dict[str, Any], records: list[dict[str, Any]], command: 
 
 def check_out(out: str | Path) -> Path:
     """``out`` as a directory to write to (created), or an InvalidInputError."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InvalidInputError(f"--out {out} is a file; give a directory.")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    from iloci.data.files import writable_dir
+    return writable_dir(out, "--out")

@@ -1,0 +1,128 @@
+"""The memory file: one ``.npz`` of numeric arrays and a JSON header, written atomically.
+
+File format
+-----------
+One ``.npz`` file (``np.load(allow_pickle=False)``) holding numeric arrays
+only:
+
+* ``__header__`` - UTF-8 JSON as ``uint8``: format name, format version,
+  iloci version, the agent's config, the per-entry strings (concept labels,
+  source demonstration keys) and a SHA-256 checksum of everything else;
+* ``mem/*`` - per-entry arrays (PB, PB_rec, numSamples, ...);
+* ``enc/*`` - the sensorimotor encoder's state (its scales);
+* ``net/*`` - the perceptual model's :meth:`state`.
+
+It is written with :func:`iloci.data.files.write_atomic`: to a temporary
+file in the target directory, flushed to disk and renamed over the target
+(:func:`os.replace`), so a crash leaves either the old or the new memory,
+never a mixture. Replacing a memory file keeps its permission bits.
+
+:func:`~iloci.concepts.memory.save_memory` and
+:func:`~iloci.concepts.memory.load_memory` turn a
+:class:`~iloci.concepts.memory.Memory` into arrays and back; this module
+writes and reads the file and checks it (format, version, checksum).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+import hashlib
+import json
+import os
+from pathlib import Path
+import struct
+from typing import Any
+import zipfile
+import zlib
+
+import numpy as np
+
+from iloci.data.files import write_atomic
+from iloci.errors import MemoryFileError
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "read_memory_file", "write_memory_file"]
+
+#: Name written in every memory file's header.
+FORMAT = "iloci-memory"
+#: Version of the file layout this iloci writes and the newest it reads.
+FORMAT_VERSION = 1
+
+
+def _checksum(header: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> str:
+    h = hashlib.sha256()
+    h.update(json.dumps({k: v for k, v in header.items() if k != "checksum"},
+                        sort_keys=True).encode())
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode())
+        h.update(str(a.dtype.str).encode())
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def write_memory_file(path: str | os.PathLike[str], arrays: dict[str, np.ndarray],
+                      header: Mapping[str, Any]) -> Path:
+    """Write ``arrays`` and ``header`` (with format, version and checksum) atomically.
+
+    A symlinked memory is written through to its target (the link stays).
+    Returns the path written.
+    """
+    path = Path(os.path.realpath(os.fspath(path)))
+    from iloci._version import __version__
+    full: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
+                            "iloci": __version__, **dict(header)}
+    full["checksum"] = _checksum(full, arrays)
+    arrays = {**arrays, "__header__": np.frombuffer(json.dumps(full, sort_keys=True).encode(),
+                                                    np.uint8)}
+    return write_atomic(path, lambda fh: np.savez(fh, allow_pickle=False, **arrays), mkdir=True)
+
+
+def read_memory_file(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray],
+                                                            dict[str, Any]]:
+    """The arrays (header removed) and the checked header of a memory file.
+
+    Raises
+    ------
+    MemoryFileError
+        Missing, truncated, tampered with (checksum mismatch), not an iloci
+        memory, or written by a newer iloci.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MemoryFileError(f"memory file not found: {path}. Teach the robot first "
+                              "(`iloci teach --memory FILE`), or check the path.")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, zlib.error,
+            struct.error, OverflowError,
+            # a damaged zip directory can claim a compression method zipfile lacks
+            # (NotImplementedError) or an encrypted member (RuntimeError)
+            NotImplementedError, RuntimeError) as exc:
+        raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
+                              f"or not an iloci memory ({type(exc).__name__}: {exc}).") from None
+    raw = arrays.pop("__header__", None)
+    try:
+        if raw is None:
+            raise ValueError("no header")
+        header = json.loads(raw.tobytes().decode("utf-8"))
+        if not isinstance(header, dict):
+            raise ValueError("header is not an object")
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise MemoryFileError(f"{path} is not an iloci memory file ({exc}).") from None
+    if header.get("format") != FORMAT:
+        raise MemoryFileError(f"{path} is not an iloci memory file (format "
+                              f"{header.get('format')!r}).")
+    version = header.get("version")
+    if not isinstance(version, int) or version < 1:
+        raise MemoryFileError(f"{path}: invalid memory format version {version!r}.")
+    if version > FORMAT_VERSION:
+        raise MemoryFileError(
+            f"{path} was written by a newer iloci ({header.get('iloci')}, memory format "
+            f"version {version}); this iloci reads format version {FORMAT_VERSION} and "
+            "older. Upgrade iloci to load it.")
+    if header.get("checksum") != _checksum(header, arrays):
+        raise MemoryFileError(f"{path} is corrupted or was modified: its checksum does not "
+                              "match its content. Restore it from a backup or teach again.")
+    return arrays, header
