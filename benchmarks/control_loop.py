@@ -45,7 +45,7 @@ whatever the process does, and the SCHED_FIFO runs separate what the
 library does to the loop (the GIL) from that.
 
     python benchmarks/control_loop.py [--knobs none switch preload all process]
-                                      [--priorities normal rt]
+                                      [--priorities normal rt] [--model native-rnnpb]
 """
 
 from __future__ import annotations
@@ -63,7 +63,9 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results" / "control_loop.json"
 EPOCHS = 300
-SETTINGS = {"perceptual_model": {"name": "torch-rnnpb", "epochs": EPOCHS},
+#: the perceptual model (``--model``; children read it from the environment)
+MODEL = os.environ.get("ILOCI_CONTROL_LOOP_MODEL", "torch-rnnpb")
+SETTINGS = {"perceptual_model": {"name": MODEL, "epochs": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 SHAPES = ["GShape", "Angle", "Sine", "Leaf_1", "CShape"]
 
@@ -118,23 +120,25 @@ def child(knob: str, rt: bool, memory: str) -> dict:
             if now - deadline > 0.01:
                 k = int((now - t0) * 100)
 
-    thread = threading.Thread(target=loop, name="control-loop")
+    thread = threading.Thread(target=loop, name="control-loop", daemon=True)
     thread.start()
     time.sleep(0.5)
-    if knob == "process":
-        import multiprocessing as mp
-        ctx = mp.get_context("spawn")
-        here, there = ctx.Pipe()
-        worker = ctx.Process(target=_phases_to_pipe, args=(knob, memory, there))
-        worker.start()
-        phases = here.recv()
-        worker.join()
-    else:
-        phases = run_phases(knob, memory)
-    time.sleep(0.3)
-    stop.set()
-    thread.join()
-    out: dict = {"knob": knob, "priority": "SCHED_FIFO 10" if rt else "normal",
+    try:
+        if knob == "process":
+            import multiprocessing as mp
+            ctx = mp.get_context("spawn")
+            here, there = ctx.Pipe()
+            worker = ctx.Process(target=_phases_to_pipe, args=(knob, memory, there))
+            worker.start()
+            phases = here.recv()
+            worker.join()
+        else:
+            phases = run_phases(knob, memory)
+        time.sleep(0.3)
+    finally:  # a failed phase must not leave the loop running
+        stop.set()
+        thread.join()
+    out: dict = {"knob": knob, "priority": "SCHED_FIFO 10" if rt else "normal", "model": MODEL,
                  "switch_interval_s": sys.getswitchinterval()}
     for name, a, b in phases:
         out[name] = {"seconds": round(b - a, 2),
@@ -174,7 +178,8 @@ def run_phases(knob: str, memory: str) -> list[tuple[str, float, float]]:
         for demo in items:
             turn = agent.observe(demo)
             while not turn.done:
-                turn.feedback(agent.teacher.feedback(demo, turn.answer.response))
+                turn.feedback(agent.teacher.feedback(demo, turn.answer.response),
+                              turn.answer.id)
 
     phase("learn", lambda: learn(demos[:6]))
 
@@ -191,10 +196,10 @@ def run_phases(knob: str, memory: str) -> list[tuple[str, float, float]]:
     return phases
 
 
-def make_memory(path: Path) -> dict:
+def make_memory(path: Path, settings: dict) -> dict:
     import iloci
     from iloci.data import load_lasa
-    agent = iloci.build(SETTINGS)
+    agent = iloci.build(settings)
     demos = [load_lasa([s])[i] for i in (0, 1) for s in SHAPES]
     agent.teach(demos)
     agent.save(path)
@@ -207,6 +212,8 @@ def main(argv=None) -> int:
                     default=["none", "switch", "preload", "all", "process"])
     ap.add_argument("--priorities", nargs="+", default=["normal", "rt"],
                     choices=["normal", "rt"])
+    ap.add_argument("--model", default=MODEL,
+                    help="perceptual model (default torch-rnnpb, whose import loads libtorch)")
     ap.add_argument("--child", nargs=3, metavar=("KNOB", "RT", "MEMORY"),
                     help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -220,14 +227,19 @@ def main(argv=None) -> int:
                     "settings": SETTINGS,
                     "targets": {"span_p99_ms": 5, "span_max_ms": 20, "priority": "normal"},
                     "runs": []}
-    if RESULTS.exists():  # runs of other knobs or priorities are kept
+    os.environ["ILOCI_CONTROL_LOOP_MODEL"] = args.model
+    result["settings"] = {**SETTINGS, "perceptual_model": {"name": args.model,
+                                                          "epochs": EPOCHS}}
+    if RESULTS.exists():  # runs of other knobs, priorities or models are kept
         previous = json.loads(RESULTS.read_text()).get("runs", [])
-        ran = {(k, "SCHED_FIFO 10" if p == "rt" else "normal")
+        ran = {(k, "SCHED_FIFO 10" if p == "rt" else "normal", args.model)
                for k in args.knobs for p in args.priorities}
-        result["runs"] = [r for r in previous if (r["knob"], r["priority"]) not in ran]
+        result["runs"] = [r for r in previous
+                          if (r["knob"], r["priority"], r.get("model", "torch-rnnpb"))
+                          not in ran]
     with tempfile.TemporaryDirectory() as tmp:
         memory = Path(tmp) / "memory.npz"
-        result["memory"] = make_memory(memory)
+        result["memory"] = make_memory(memory, result["settings"])
         for knob in args.knobs:
             for prio in args.priorities:
                 before = list(os.getloadavg())

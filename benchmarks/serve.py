@@ -41,10 +41,11 @@ Targets (issue 14): median answer <= 300 ms with 30 entries; p99 lateness
     ``shape/1..3`` in a seeded order: ``clicks_per_new_concept`` over round 1,
     ``first_guess`` over rounds 2 to 4. Then Recognize: 16 taught drawings
     (``shape/4``, ``shape/5``) named, and one drawing of each of 4
-    never-taught shapes answered "unknown". Run twice in one run, on the same
-    drawings: ``page`` (``iloci serve``'s default, the interactive protocol and
-    the Something-new button) and ``paper`` (``--protocol paper``, a person
-    who can only say yes or no: what the page did before).
+    never-taught shapes answered "unknown". Run three times in one run, on
+    the same drawings: ``page`` (``iloci serve``'s default: "unknown" and the
+    Something-new button), ``page_with_novelty_and_confirmations`` (the same
+    with ``iloci teach``'s interactive protocol) and ``paper`` (``--protocol
+    paper``, a person who can only say yes or no: what the page did before).
 
 Options: ``--entries N`` (30), ``--strokes N`` (20), ``--loop-epochs N``
 (rehearsal epochs while the loop runs; default the config's),
@@ -278,12 +279,22 @@ def teaching_benchmark(seed: int = 0) -> dict:
     out: dict = {"taught": TAUGHT, "untaught": UNTAUGHT, "seed": seed,
                  "targets": {"clicks_per_new_concept": 2, "first_guess": "same as paper",
                              "untaught_unknown": "3/4", "taught_named": "15/16"}}
-    for protocol, args in (("page", ()), ("paper", ("--protocol", "paper"))):
+    # the page with iloci teach's interactive protocol too: the novelty
+    # answer and the confirmations (iloci.commands.teach.INTERACTIVE)
+    from iloci.commands.teach import INTERACTIVE
+    full = "[learner]\n" + "".join(f"{k} = {str(v).lower()}\n" for k, v in INTERACTIVE.items())
+    for protocol, args in (("page", ()), ("page_with_novelty_and_confirmations",
+                                          ("--config", "full.toml")),
+                           ("paper", ("--protocol", "paper"))):
         with tempfile.TemporaryDirectory() as tmp:
+            if "--config" in args:
+                (Path(tmp) / "full.toml").write_text(full)
+                args = ("--config", str(Path(tmp) / "full.toml"))
             server, client = start_server(Path(tmp) / "memory.npz", *args)
             t0 = time.perf_counter()
             try:
-                out[protocol] = _teach_as_a_person(client, protocol, seed)
+                person = "paper" if protocol == "paper" else "page"
+                out[protocol] = _teach_as_a_person(client, person, seed)
             finally:
                 client.close()
                 server.terminate()

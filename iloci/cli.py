@@ -121,7 +121,7 @@ def _bytes_escape(exc: UnicodeError) -> tuple[str, int]:
 def _show_progress(what: str, fraction: float, seconds: float) -> None:
     """A long step's progress, one line on stderr (see :func:`iloci.progress.long_step`)."""
     state = f"done in {seconds:.1f} s" if fraction >= 1.0 else \
-        f"{100 * fraction:.0f} % after {seconds:.0f} s"
+        f"{100 * fraction:.0f} % after {seconds:.1f} s"
     print(f"{what}: {state}", file=sys.stderr, flush=True)
 
 

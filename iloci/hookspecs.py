@@ -90,6 +90,18 @@ def iloci_register_simulators(registry: KindRegistry) -> None:
 
 
 @hookspec
+def iloci_register_executors(registry: KindRegistry) -> None:
+    """Register fold executors (``iloci evaluate --executor NAME``).
+
+    ``registry.add(name, factory, requires=..., install=..., summary=...)``
+    as for components; the factory is called with ``jobs`` (folds at once)
+    and ``address`` (where the executor's engine runs, None: start one on
+    this machine) and returns a :class:`iloci.interfaces.FoldExecutor`.
+    The kernel registers ``local``; ``iloci-ray`` registers ``ray``.
+    """
+
+
+@hookspec
 def iloci_register_robots(robots: dict) -> None:
     """Register robot presets (config ``[robot] name``).
 
@@ -145,6 +157,10 @@ def iloci_add_commands(subparsers: argparse._SubParsersAction) -> None:
 @hookspec(firstresult=True)
 def iloci_make_executor(name: str, jobs: int, address: str | None) -> FoldExecutor | None:
     """Return the fold executor called ``name``, or None when this plugin has none.
+
+    Deprecated: register executors with :func:`iloci_register_executors`
+    (listed by ``iloci plugins``, with provenance and install hints); this
+    hook is still asked first.
 
     Called by :func:`iloci.evaluation.executors.make_executor` (``iloci
     evaluate --executor NAME``) before the kernel's own ``local``; the

@@ -34,8 +34,10 @@ __all__ = [
     "Teacher",
     "IKSolver",
     "Simulator",
+    "ALL_KINDS",
     "ComponentKind",
     "COMPONENT_KINDS",
+    "EXTRA_KINDS",
     "KINDS",
     "check_feedback",
     "unmet_members",
@@ -642,3 +644,14 @@ class FoldExecutor(Protocol):
         are cancelled; so is ``KeyboardInterrupt``.
         """
         ...
+
+
+#: Kinds registered like components but chosen outside the config's
+#: component sections: fold executors (``iloci evaluate --executor NAME``).
+EXTRA_KINDS: Mapping[str, ComponentKind] = MappingProxyType({k.name: k for k in (
+    ComponentKind("executor", FoldExecutor, "fold executor", "iloci_register_executors",
+                  optional=True),
+)})
+
+#: Every kind the registry holds: the components, then :data:`EXTRA_KINDS`.
+ALL_KINDS: Mapping[str, ComponentKind] = MappingProxyType({**COMPONENT_KINDS, **EXTRA_KINDS})

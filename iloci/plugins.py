@@ -29,7 +29,7 @@ import pluggy
 
 from iloci import hookspecs
 from iloci.errors import PluginError
-from iloci.interfaces import COMPONENT_KINDS
+from iloci.interfaces import ALL_KINDS
 from iloci.registry import FIRST_PARTY, Registry
 
 __all__ = [
@@ -46,7 +46,7 @@ __all__ = [
 ]
 
 #: iloci's own plugins, registered through the same hooks as third-party ones.
-DEFAULT_PLUGINS = ("iloci.teachers",)
+DEFAULT_PLUGINS = ("iloci.teachers", "iloci.evaluation.executors")
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
@@ -306,7 +306,7 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
         info = pm.iloci_plugin_info = {}  # type: ignore[attr-defined]
     registry = Registry()
     failed: set[str] = set()
-    for kind in COMPONENT_KINDS.values():
+    for kind in ALL_KINDS.values():
         caller = getattr(pm.hook, kind.hook)
         # registration order: built-ins first, then installed plugins, then the
         # caller's, so a name registered twice is blamed on the later plugin

@@ -24,7 +24,7 @@ from typing import Any, Union
 from iloci.constraints import violations
 from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
                           PluginNotLoadedError, UnknownComponentError)
-from iloci.interfaces import COMPONENT_KINDS, KINDS
+from iloci.interfaces import ALL_KINDS
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
 
@@ -41,19 +41,20 @@ FIRST_PARTY = {
     ("ik", "pinocchio"): "iloci-pinocchio",
     ("simulator", "pybullet"): "iloci-pybullet",
     ("simulator", "mujoco"): "iloci-mujoco",
+    ("executor", "ray"): "iloci-ray",
 }
 
 
 def _label(kind: str) -> str:
-    k = COMPONENT_KINDS.get(kind)
+    k = ALL_KINDS.get(kind)
     return k.label if k is not None else kind
 
 
 def _check_kind(kind: str) -> None:
-    if kind not in COMPONENT_KINDS:
+    if kind not in ALL_KINDS:
         from iloci.errors import did_you_mean
         raise InvalidInputError(f"unknown component kind {kind!r}; kinds are "
-                                f"{', '.join(KINDS)}.{did_you_mean(str(kind), KINDS)}")
+                                f"{', '.join(ALL_KINDS)}.{did_you_mean(str(kind), ALL_KINDS)}")
 
 
 def install_command(distribution: str) -> str:
@@ -68,7 +69,7 @@ class ComponentSpec:
     Attributes
     ----------
     kind : str
-        One of :data:`iloci.interfaces.KINDS`.
+        One of :data:`iloci.interfaces.ALL_KINDS` (the components' and ``executor``).
     name : str
         The name a config uses.
     factory : str or callable
@@ -144,7 +145,7 @@ class Registry:
     """All registered components, by kind and name."""
 
     def __init__(self) -> None:
-        self._specs: dict[str, dict[str, ComponentSpec]] = {k: {} for k in KINDS}
+        self._specs: dict[str, dict[str, ComponentSpec]] = {k: {} for k in ALL_KINDS}
         #: Installed plugins that were not loaded (blocked, not autoloaded,
         #: failed): :class:`~iloci.plugins.PluginInfo` each, set by
         #: :func:`~iloci.plugins.get_registry`, so a config naming one of
@@ -165,7 +166,7 @@ class Registry:
         """Register a component. See :class:`ComponentSpec` for the arguments."""
         if kind not in self._specs:
             raise PluginError(f"plugin {plugin!r} registers unknown kind {kind!r}; "
-                              f"kinds are {', '.join(KINDS)}.")
+                              f"kinds are {', '.join(ALL_KINDS)}.")
         if not isinstance(name, str) or not name or name == "none":
             raise PluginError(f"plugin {plugin!r} registers an invalid {kind} "
                               f"name {name!r} (non-empty string, not 'none').")
@@ -204,7 +205,7 @@ class Registry:
     def specs(self, kind: str | None = None) -> list[ComponentSpec]:
         if kind is not None:
             _check_kind(kind)
-        kinds = KINDS if kind is None else (kind,)
+        kinds = tuple(ALL_KINDS) if kind is None else (kind,)
         return [self._specs[k][n] for k in kinds for n in sorted(self._specs[k])]
 
     def get(self, kind: str, name: str) -> ComponentSpec:
@@ -302,8 +303,8 @@ def check_built(spec: ComponentSpec, obj: Any) -> Any:
         factory, not an AttributeError when the member is first used.
     """
     from iloci.errors import PluginError
-    from iloci.interfaces import COMPONENT_KINDS, unmet_members
-    kind = COMPONENT_KINDS[spec.kind]
+    from iloci.interfaces import unmet_members
+    kind = ALL_KINDS[spec.kind]
     unmet = ["(it is a class, not an instance)"] if isinstance(obj, type) else \
         unmet_members(obj, kind.protocol)
     if unmet:

@@ -43,3 +43,36 @@ def _plane_cache(tmp_path_factory):
     mp.setenv("ILOCI_CACHE_DIR", str(tmp_path_factory.mktemp("iloci-cache")))
     yield
     mp.undo()
+
+
+#: the module each first-party back end is imported from
+_BACK_END_MODULES = {"jax-rnnpb": "iloci_jax", "torch-rnnpb": "iloci_torch",
+                     "native-rnnpb": "iloci_native", "pinocchio": "iloci_pinocchio",
+                     "scipy": "iloci_scipy", "sklearn": "iloci_sklearn"}
+
+
+def needs_default_back_ends() -> None:
+    """Skip the calling test unless the default config's back ends are installed.
+
+    For tests that build an agent from the default config (no ``--config``), which
+    the kernel alone (tox env ``bare``) cannot.
+    """
+    from iloci.config import DEFAULT_NAMES
+    for kind in ("perceptual_model", "ik", "clusterer"):
+        name = DEFAULT_NAMES[kind]
+        if name in _BACK_END_MODULES:
+            pytest.importorskip(_BACK_END_MODULES[name],
+                                reason=f"default {kind} {name!r} not installed")
+
+
+@pytest.fixture
+def default_back_ends() -> None:
+    """A fixture form of :func:`needs_default_back_ends` (``usefixtures``)."""
+    needs_default_back_ends()
+
+
+@pytest.fixture
+def dtaidistance():
+    """The DTW baselines' library, or a skip where it is absent (the bare kernel)."""
+    return pytest.importorskip("dtaidistance",
+                               reason="the DTW baselines need dtaidistance (iloci[report])")

@@ -173,6 +173,14 @@ def test_teach_in_the_browser(server, browser, tmp_path):
     assert Agent.load(memory).memory.concepts() == ["G", "c2"]
 
 
+def ink(page, canvas_id: str) -> int:
+    """Pixels drawn on a canvas of the page."""
+    return page.evaluate("""(id) => { const c = document.getElementById(id);
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n; }""",
+                         canvas_id)
+
+
 def teach_first(page, lasa, key="GShape/0"):
     draw(page, lasa[key], "slow")
     sync_api.expect(page.locator("#message")).to_contain_text("new concept", timeout=WAIT)
@@ -357,6 +365,17 @@ def test_undo_export_and_import_in_the_browser(server, browser, tmp_path):
     page.locator("#new").click()                               # one click: a new concept
     expect(page.locator("#message")).to_contain_text('new concept, "c2"', timeout=WAIT)
     expect(page.locator(".concept")).to_have_count(2)
+    # no stale guess once the turn is over
+    expect(page.locator("#judge")).to_be_hidden()
+    assert page.locator("#guess").inner_text().strip() == ""
+    assert ink(page, "answer") == 0
+    # Recognize shows the robot's drawing of the concept it names
+    page.locator("input[value=recognize]").check()
+    draw(page, lasa["GShape/2"], "slow")
+    expect(page.locator("#guess")).to_contain_text("Recognized", timeout=WAIT)
+    page.wait_for_timeout(2500)                                 # the drawing is animated
+    assert ink(page, "answer") > 100, "Recognize drew nothing"
+    page.locator("input[value=teach]").check()
     page.locator("#undo").click()
     expect(page.locator(".concept")).to_have_count(1)
     expect(page.locator("#message")).to_contain_text("Undone")

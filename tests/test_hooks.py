@@ -145,6 +145,10 @@ class Recorder:
         registry.add("echo", EchoSimulator, summary="test stand-in")
 
     @hookimpl
+    def iloci_register_executors(self, registry):
+        self.calls["iloci_register_executors"].append(registry.kind)
+
+    @hookimpl
     def iloci_register_robots(self, robots):
         self.calls["iloci_register_robots"].append(sorted(robots))
 

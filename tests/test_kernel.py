@@ -50,18 +50,20 @@ def test_one_table_of_component_kinds():
 
     from test_hooks import hookspec_names
 
-    from iloci.interfaces import COMPONENT_KINDS, KINDS
+    from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, KINDS
     assert KINDS == ("perceptual_model", "clusterer", "teacher", "ik", "simulator")
-    # robot presets register through their own hook: a robot is not a component
-    assert {k.hook for k in COMPONENT_KINDS.values()} == {
+    # robot presets register through their own hook: a robot is not a component;
+    # executors register as a kind of the registry that is no config section
+    assert {k.hook for k in ALL_KINDS.values()} == {
         n for n in hookspec_names() if n.startswith("iloci_register_")} - {
         "iloci_register_robots"}
+    assert list(ALL_KINDS) == [*KINDS, "executor"]
     fields = [f.name for f in dataclasses.fields(Config)]
     assert fields[:len(KINDS)] == list(KINDS)
     assert list(Config().to_dict())[:len(KINDS)] == list(KINDS)
     assert [k for k, v in COMPONENT_KINDS.items() if v.optional] == ["simulator"]
     from iloci.registry import FIRST_PARTY
-    assert {kind for kind, _ in FIRST_PARTY} == set(KINDS) - {"teacher"}
+    assert {kind for kind, _ in FIRST_PARTY} == set(ALL_KINDS) - {"teacher"}
     reg = get_registry()
     with pytest.raises(InvalidInputError, match="kinds are perceptual_model, clusterer, "
                        "teacher, ik, simulator"):
@@ -90,15 +92,15 @@ def test_block_named_plugin(monkeypatch):
 
 
 def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
-    from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
+    from iloci.plugins import DEFAULT_PLUGINS, FIRST_PARTY_DISTRIBUTIONS
     monkeypatch.setenv("ILOCI_DISABLE_PLUGIN_AUTOLOAD", "1")
     monkeypatch.delenv("ILOCI_BLOCK_PLUGINS", raising=False)
     pm = get_plugin_manager()
     loaded = set(dict(pm.list_name_plugin()))
     info = pm.iloci_plugin_info
     # the built-ins and every installed first-party back end, nothing else
-    assert "iloci.teachers" in loaded
-    for name in loaded - {"iloci.teachers"}:
+    assert set(DEFAULT_PLUGINS) <= loaded
+    for name in loaded - set(DEFAULT_PLUGINS):
         assert info[name].distribution in FIRST_PARTY_DISTRIBUTIONS
     for name, i in info.items():
         if i.distribution in FIRST_PARTY_DISTRIBUTIONS:
@@ -106,7 +108,7 @@ def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
         elif i.distribution != "iloci":
             assert i.status == "not autoloaded", (name, i)
     assert set(dict(get_plugin_manager(autoload=False).list_name_plugin())) == \
-        {"iloci.teachers"}
+        set(DEFAULT_PLUGINS) == {"iloci.teachers", "iloci.evaluation.executors"}
 
 
 def test_disable_autoload_env_keeps_installed_back_ends(monkeypatch):

@@ -30,6 +30,7 @@ def _line(i: int, n: int = 60, length: float = 2.0) -> np.ndarray:
 
 # ---------------------------------------------------------------- baselines
 
+@pytest.mark.usefixtures("dtaidistance")
 def test_normalised_dtw_does_not_care_where_or_how_large_a_shape_is_drawn():
     from iloci.evaluation.baselines import dtw_normalised_1nn, dtw_raw_1nn
 
@@ -85,6 +86,7 @@ def test_dollar1_golden_section_matches_the_papers_scalar_search():
                                [scalar(t) for t in temps], rtol=1e-12)
 
 
+@pytest.mark.usefixtures("dtaidistance")
 def test_baselines_run_side_by_side_on_one_fold_of_lasa():
     from iloci.evaluation.baselines import BASELINE_NAMES, best_baseline, run_baselines
 
@@ -229,6 +231,7 @@ def test_bad_data_sets_get_one_clear_error_naming_paths(tmp_path, breakage, mess
 
 # ---------------------------------------------------------------- the oracle
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_the_oracle_knows_the_founding_demonstration_of_a_concept_outside_lasa():
     """Two circles and two lines: the first circle founds a concept without a question,
     so the oracle never judged it and, looking 'circle/0' up by LASA shape name, said
@@ -279,6 +282,7 @@ def _square(i: int, n: int = 60) -> np.ndarray:
             * f[:, None]) * (1 + 0.05 * i)
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
     root = _shapes(tmp_path / "shapes", per=4, writers=("ann", "bob", "cy", "di"))
     for i in range(4):
@@ -307,6 +311,7 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
     assert "$1 recognizer" in report and "best baseline" in report
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_iloci_evaluate_data_refuses_a_bad_data_set_before_learning(tmp_path, cli):
     root = _shapes(tmp_path / "shapes", per=3)
     (root / "line" / "2.csv").write_text("x,y\n0,0\n")

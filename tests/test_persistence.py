@@ -10,6 +10,8 @@ import zipfile
 import numpy as np
 import pytest
 
+from conftest import needs_default_back_ends
+
 import iloci
 from iloci.concepts import memory as memory_module
 from iloci.concepts import storage
@@ -285,20 +287,8 @@ def test_cli_teach_then_recognize(taught, tmp_path, cli):
     assert "memory unchanged" in out.stdout and memory.read_bytes() == before
 
 
-def _needs_default_back_ends():
-    """The CLI below builds an agent from the default config (no --config)."""
-    from iloci.config import DEFAULT_NAMES
-    modules = {"jax-rnnpb": "iloci_jax", "torch-rnnpb": "iloci_torch",
-               "native-rnnpb": "iloci_native", "pinocchio": "iloci_pinocchio",
-               "scipy": "iloci_scipy"}
-    for kind in ("perceptual_model", "ik", "clusterer"):
-        name = DEFAULT_NAMES[kind]
-        if name in modules:
-            pytest.importorskip(modules[name], reason=f"default {kind} {name!r} not installed")
-
-
 def test_cli_errors(tmp_path, cli):
-    _needs_default_back_ends()
+    needs_default_back_ends()
     out = cli("recognize", "--memory", str(tmp_path / "none.npz"), "GShape/0")
     assert out.returncode == 2 and "memory file not found" in out.stderr
     out = cli("teach", "--memory", str(tmp_path / "m.npz"), "GShap/1")
@@ -309,7 +299,7 @@ def test_cli_errors(tmp_path, cli):
 
 
 def test_default_teaching_stream_is_seeded():
-    _needs_default_back_ends()
+    needs_default_back_ends()
     from iloci.data import default_stream
     from iloci.config import load_config
     cfg = load_config({"data": {"shapes": ["GShape", "Angle", "Sine"]},

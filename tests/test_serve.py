@@ -576,24 +576,37 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
 
 
 def test_the_interactive_protocol_is_the_default_where_the_config_is_silent(tmp_path):
-    from iloci.commands.teach import INTERACTIVE
+    from iloci.commands.teach import PAGE
 
     classroom = build_classroom(tmp_path / "a.npz", CONFIG, worker=False)
     try:
         learner = classroom.agent.config.learner
-        assert all(getattr(learner, k) == v for k, v in INTERACTIVE.items())
+        assert PAGE == {"unknown_below": 0.8} and learner.unknown_below == 0.8
+        assert learner.novelty_below == 0.0 and learner.confirm_rewards is False
     finally:
         classroom.close()
-    own = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.0}}
+    own = {**CONFIG, "learner": {**CONFIG["learner"], "unknown_below": 0.5,
+                                 "novelty_below": 0.8}}
     classroom = build_classroom(tmp_path / "b.npz", own, worker=False)
     try:
-        assert classroom.agent.config.learner.novelty_below == 0.0     # the config's word
-        assert classroom.agent.config.learner.unknown_below == 0.8
+        assert classroom.agent.config.learner.unknown_below == 0.5     # the config's word
+        assert classroom.agent.config.learner.novelty_below == 0.8
     finally:
         classroom.close()
     classroom = build_classroom(tmp_path / "c.npz", CONFIG, worker=False, protocol="paper")
     try:
-        assert classroom.agent.config.learner.novelty_below == 0.0
-        assert classroom.agent.config.learner.confirm_rewards is False
+        assert classroom.agent.config.learner.unknown_below == 0.0
     finally:
         classroom.close()
+
+
+def test_teach_uses_the_interactive_protocol_unless_told_otherwise(tmp_path):
+    from iloci.commands.teach import INTERACTIVE, command_config
+
+    cfg = command_config(None, None)
+    assert all(getattr(cfg.learner, k) == v for k, v in INTERACTIVE.items())
+    toml = tmp_path / "c.toml"
+    toml.write_text("[learner]\nconfirm_rewards = false\n")
+    cfg = command_config(str(toml), None)
+    assert cfg.learner.confirm_rewards is False and cfg.learner.novelty_below == 0.8
+    assert command_config(None, None, "paper").learner.novelty_below == 0.0

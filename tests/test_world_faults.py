@@ -62,6 +62,7 @@ def _toml(path: Path, urdf: str, simulator: str = "none") -> Path:
     ({"j3_kind": "continuous"}, "none", ["'s3' are continuous", 'type="revolute"']),
     ({"mass": ""}, "mujoco", ["'a', 'b', 'c'", "<inertial>", "pybullet"]),
 ], ids=["mimic", "xacro", "no-limits", "zero-range", "continuous", "no-inertials"])
+@pytest.mark.usefixtures("default_back_ends")
 def test_urdf_faults_are_named_by_config_check_and_robots(tmp_path, capsys, spoil, simulator,
                                                          names):
     urdf = _arm(tmp_path / "arm.urdf", **spoil)
@@ -107,6 +108,7 @@ def test_mimic_joint_off_the_pen_chain_is_accepted(tmp_path):
     assert robot.joint_names == ("s1", "s2", "s3")
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_relative_urdf_is_read_beside_the_config_from_any_folder(tmp_path, monkeypatch):
     (tmp_path / "robots").mkdir()
     _arm(tmp_path / "robots" / "arm.urdf")
@@ -215,6 +217,7 @@ def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
 
 # -- files from elsewhere -----------------------------------------------------------------
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
     import iloci._version
     from iloci import Agent
@@ -233,6 +236,7 @@ def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
         Agent.load(tmp_path / "m.npz")
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_a_config_from_a_newer_iloci_names_both_versions(tmp_path, capsys):
     from iloci._version import __version__
     from iloci.config import to_toml
@@ -252,6 +256,7 @@ def test_a_config_from_a_newer_iloci_names_both_versions(tmp_path, capsys):
     assert "upgrade" not in capsys.readouterr().err
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
     from iloci.data.files import writable_dir
     from iloci.evaluation.evaluate import evaluate
@@ -283,6 +288,7 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatc
 @pytest.mark.skipif(not hasattr(__import__("os"), "fsencode") or
                     __import__("sys").getfilesystemencoding() != "utf-8",
                     reason="a UTF-8 file system encoding")
+@pytest.mark.usefixtures("default_back_ends")
 def test_a_file_name_that_is_not_utf8_is_accepted_by_teach_and_show(tmp_path, capsys):
     import os
 
@@ -357,6 +363,7 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
         get_registry(get_plugin_manager(autoload=False, plugins=[_ReturningPlugin()]))
 
 
+@pytest.mark.usefixtures("default_back_ends")
 def test_an_installed_plugin_with_a_wrong_factory_result_is_named_with_its_distribution(
         tmp_path, cli):
     site = tmp_path / "site"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from iloci.interfaces import COMPONENT_KINDS
+from iloci.interfaces import ALL_KINDS
 from iloci.plugins import get_plugin_manager, get_registry, plugin_infos
 
 
@@ -23,7 +23,7 @@ def rows() -> tuple[list[dict], list[dict]]:
     for spec in registry.specs():
         missing = spec.missing()
         out.append({
-            "kind": COMPONENT_KINDS[spec.kind].label, "name": spec.name,
+            "kind": ALL_KINDS[spec.kind].label, "name": spec.name,
             "distribution": spec.distribution or "-", "version": spec.version or "-",
             "status": "available" if not missing else
             f"missing {', '.join(missing)}: {spec.install or 'pip install ' + ' '.join(missing)}",

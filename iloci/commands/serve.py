@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from iloci.commands.teach import DEFAULT_MEMORY, add_protocol_argument, command_config
+from iloci.commands.teach import DEFAULT_MEMORY, PAGE, add_protocol_argument, command_config
 from iloci.errors import InvalidInputError, MissingBackendError
 
 __all__ = ["register", "run", "build_classroom"]
@@ -47,8 +47,8 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
 
     The config is ``config`` (a TOML path or a mapping), else the memory's,
     else the defaults; with ``protocol="interactive"`` the ``[learner]``
-    settings of :data:`iloci.commands.teach.INTERACTIVE` fill what
-    ``config`` does not set (see :func:`~iloci.commands.teach.command_config`).
+    settings of :data:`iloci.commands.teach.PAGE` fill what ``config`` does
+    not set (see :func:`~iloci.commands.teach.command_config`).
     The agent's network runs in a worker process unless ``worker=False``.
     With ``lock`` (the default) the memory's lock is taken first, the one
     ``iloci teach`` takes (:func:`iloci.progress.acquire_memory_lock`), and
@@ -79,7 +79,7 @@ def _build(memory: str | Path, config: Any, worker: bool, protocol: str):
 
     path = Path(memory)
     header = load_memory(path)[2] if path.exists() else None
-    cfg = command_config(config, header, protocol)
+    cfg = command_config(config, header, protocol, PAGE)
     # the person at the page is the teacher: no teacher object is asked
     agent = Agent.load(path, cfg) if header is not None else build(cfg)
     if worker:

@@ -21,15 +21,13 @@ import signal
 import sys
 from typing import Any
 
-from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.errors import InvalidInputError, UnknownComponentError
+from iloci.hookspecs import hookimpl
 from iloci.interfaces import FoldExecutor
-from iloci.plugins import get_plugin_manager
+from iloci.plugins import get_plugin_manager, get_registry
 
-__all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "make_executor",
-           "KNOWN_EXECUTORS"]
-
-#: Executors iloci knows of, and where each comes from (for error messages).
-KNOWN_EXECUTORS = {"local": "the kernel", "ray": "./plugins/iloci-ray"}
+__all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "local_executor",
+           "make_executor"]
 
 
 def _worker_init() -> None:
@@ -153,7 +151,8 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     Parameters
     ----------
     name : str
-        ``"local"`` or one a plugin provides (``iloci_make_executor``).
+        ``"local"`` or one a plugin registers (``iloci_register_executors``;
+        the deprecated ``iloci_make_executor`` hook is asked first).
     jobs : int
         Folds run at once.
     address : str, optional
@@ -164,7 +163,8 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     Raises
     ------
     MissingBackendError
-        ``ray`` without the ``iloci-ray`` plugin.
+        ``ray`` without the ``iloci-ray`` plugin, or a registered
+        executor's library is missing (with its install command).
     PluginError
         A plugin's ``iloci_make_executor`` returned something that is not an
         executor (naming the plugin and its distribution).
@@ -186,14 +186,29 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
                 f"{', '.join(unmet) or 'an instance'} (see iloci.interfaces.FoldExecutor). Fix "
                 f"the plugin, or block it with ILOCI_BLOCK_PLUGINS={plugin}.")
         return made  # the first result, as pluggy's firstresult hook gives it
-    if name == "local":
-        if address is not None:
-            raise InvalidInputError("the local executor runs on this machine: --address "
-                                    "needs another executor (e.g. --executor ray).")
-        return LocalExecutor(jobs)
-    if name in KNOWN_EXECUTORS:
-        plugin = KNOWN_EXECUTORS[name].rsplit("/", 1)[-1]
-        raise MissingBackendError("executor", name, [plugin],
-                                  f"pip install {KNOWN_EXECUTORS[name]}")
-    raise InvalidInputError(f"unknown executor {name!r}; known: "
-                            f"{', '.join(sorted(KNOWN_EXECUTORS))}.")
+    registry = get_registry(pm)
+    try:
+        registry.get("executor", name)
+    except UnknownComponentError as exc:
+        raise InvalidInputError(f"unknown executor {name!r}: {exc}") from None
+    return registry.build("executor", name, jobs=jobs, address=address)
+
+
+def local_executor(jobs: int, address: str | None = None) -> LocalExecutor:
+    """The kernel's ``local`` executor (registered through ``iloci_register_executors``).
+
+    Raises
+    ------
+    InvalidInputError
+        ``address`` is given: the local executor runs on this machine.
+    """
+    if address is not None:
+        raise InvalidInputError("the local executor runs on this machine: --address "
+                                "needs another executor (e.g. --executor ray).")
+    return LocalExecutor(jobs)
+
+
+@hookimpl
+def iloci_register_executors(registry: Any) -> None:
+    registry.add("local", local_executor,
+                 summary="worker processes on this machine (joblib's loky pool)")

@@ -40,6 +40,7 @@ def _run(cmd: list[str]) -> str:
 
 @pytest.fixture(scope="module")
 def x86_outputs(tmp_path_factory) -> dict[str, str]:
+    pytest.importorskip("iloci_native", reason="native-rnnpb (plugins/iloci-native) not installed")
     if platform.machine() not in ("x86_64", "AMD64"):
         pytest.skip("the x86 side of the comparison needs an x86-64 machine")
     cc = shutil.which("gcc") or shutil.which("cc")

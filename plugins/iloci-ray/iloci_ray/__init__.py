@@ -19,8 +19,7 @@ def iloci_add_commands(subparsers) -> None:
 
 
 @hookimpl
-def iloci_make_executor(name, jobs, address):
-    if name != "ray":
-        return None
-    from iloci_ray.executor import RayExecutor
-    return RayExecutor(jobs, address=address)
+def iloci_register_executors(registry) -> None:
+    registry.add("ray", "iloci_ray.executor:RayExecutor", requires=("ray",),
+                 install="pip install ./plugins/iloci-ray  (from a checkout of iloci)",
+                 summary="folds as Ray tasks, on this machine or a running cluster (--address)")

