@@ -9,6 +9,8 @@ Writes ``benchmarks/results/evaluate.json``::
     fold_wall_seconds               each fold's own wall time
     interactions_per_demo, entries, exemplars, prototypes, concepts
     targets                         the issue's targets and whether this run met them
+    rnnpb_kernel                    native-rnnpb's kernel and instruction set here
+                                    (``ILOCI_RNNPB_ISA=avx2`` forces one: same results)
     machine                         CPU count and load average before and after
 
 It runs exactly what ``iloci evaluate`` runs (the default back ends unless
@@ -27,6 +29,14 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results" / "evaluate.json"
+
+
+def _kernel(model: str) -> str | None:
+    """What native-rnnpb's float32 code is here (``ILOCI_RNNPB_ISA`` included), else None."""
+    if model != "native-rnnpb":
+        return None
+    from iloci_native.native import kernel_info
+    return kernel_info()
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -68,6 +78,7 @@ def main(argv: list[str] | None = None) -> dict:
                                          if baseline else None),
             "wall_le_180_s": wall <= 180.0,
         },
+        "rnnpb_kernel": _kernel(config.perceptual_model.name),
         "machine": {"python": platform.python_version(), "platform": platform.platform(),
                     "cpus": os.cpu_count(), "load_average_before": load_before,
                     "load_average_after": os.getloadavg()},

@@ -25,6 +25,7 @@ import numpy as np
 import pluggy
 
 from iloci.concepts.memory import Memory, load_memory, save_memory
+from iloci.concepts.policies import Policies
 from iloci.concepts.rehearsal import regenerate
 from iloci.config import Config, load_config
 from iloci.data.files import TrajectoryFile, trajectory_files
@@ -511,7 +512,8 @@ class Agent:
             out.
         """
 
-        angles = [s * float(a) for a in self.config.learner.tilts for s in (1.0, -1.0)]
+        tilts = Policies.of(self.config.learner).inference.tilts   # [learner] read once, there
+        angles = [s * float(a) for a in tilts for s in (1.0, -1.0)]
 
         def readings(b: int) -> list[tuple[float, np.ndarray]]:
             out = []
