@@ -183,8 +183,8 @@ def test_a_manifest_names_files_concepts_and_writers(tmp_path):
     rows = [{"file": f"{c}/{i}.csv", "concept": c.upper(), "writer": f"w{i % 2}"}
             for c in ("circle", "line") for i in range(5)]
     (root / "list.json").write_text(json.dumps(rows))
-    (root / "list.csv").write_text("File;Label;Subject\n" + "".join(
-        f"{r['file']};{r['concept']};{r['writer']}\n" for r in rows))
+    (root / "list.csv").write_text("File;Label;Subject\n" + "".join(  # Windows paths too
+        f"{r['file'].replace('/', chr(92))};{r['concept']};{r['writer']}\n" for r in rows))
     for m in ("list.json", "list.csv"):
         ds = load_dataset(root / m)
         assert ds.concepts == {"CIRCLE": 5, "LINE": 5} and ds.writers == ["w0", "w1"]

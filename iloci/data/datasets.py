@@ -236,8 +236,9 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
             v = row.get(col) if col else None
             return None if v is None or str(v).strip() == "" else str(v).strip()
 
-        samples.append(Sample(Path(str(f).strip()).as_posix(), str(c).strip(), opt(wcol),
-                              opt(scol)))
+        # a manifest written on Windows names files with backslashes
+        samples.append(Sample(Path(str(f).strip().replace("\\", "/")).as_posix(),
+                              str(c).strip(), opt(wcol), opt(scol)))
     if not samples and not problems:
         problems.append(f"{path}: the manifest lists no samples")
     return samples, problems
