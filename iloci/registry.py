@@ -24,7 +24,7 @@ from typing import Any, Union
 from iloci.constraints import violations
 from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
                           PluginNotLoadedError, UnknownComponentError)
-from iloci.interfaces import ALL_KINDS
+from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
 
@@ -203,9 +203,10 @@ class Registry:
         return sorted(self._specs[kind])
 
     def specs(self, kind: str | None = None) -> list[ComponentSpec]:
+        """The specs of ``kind``; without one, of every component kind (not executors)."""
         if kind is not None:
             _check_kind(kind)
-        kinds = tuple(ALL_KINDS) if kind is None else (kind,)
+        kinds = tuple(COMPONENT_KINDS) if kind is None else (kind,)
         return [self._specs[k][n] for k in kinds for n in sorted(self._specs[k])]
 
     def get(self, kind: str, name: str) -> ComponentSpec:

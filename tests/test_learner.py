@@ -20,7 +20,8 @@ import iloci
 from iloci import hookimpl
 from iloci.agent import SkippedDemonstrationWarning
 from iloci.concepts import rehearsal
-from iloci.concepts.learner import novelty_scale
+from iloci.concepts.learner import (novelty_scale, pattern_distances,
+                                    regenerated_patterns, regeneration_scale)
 from iloci.concepts.memory import entries_equal
 from iloci.data import load_lasa
 from iloci.errors import FeedbackError, MissingBackendError, NotFittedError
@@ -441,8 +442,9 @@ def test_novelty_answer_asks_the_configured_familiarity(lasa, kind):
 
 
 def test_familiarity_setting_is_checked():
-    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be 'reproduction' "
-                                                       "or 'prediction', got 'pb'"):
+    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be one of "
+                                                       "'reproduction', 'prediction', "
+                                                       "'regeneration', got 'pb'"):
         iloci.build(small_config(familiarity="pb"))
 
 
@@ -653,6 +655,60 @@ def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa)
         assert r.concept == agent.memory.entries[r.entry].concept
     with pytest.raises(iloci.errors.ConfigError, match="decision must be"):
         iloci.build(small_config(decision="nearest"))
+
+
+def test_regeneration_decision_answers_with_the_nearest_regenerated_pattern(lasa):
+    agent = make_agent(decision="regeneration", familiarity="regeneration", tilts=())
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    demos = [lasa["GShape/2"], lasa["Sine/3"], lasa["Angle/5"]]
+    seqs = [agent._encode(agent.motion(d))[0] for d in demos]
+    mem, model = agent.memory, agent.perceptual_model
+    # what the network regenerates from each entry's PB, not the kept demonstration
+    patterns = regenerated_patterns(model, mem)
+    for g, e in zip(patterns, mem.entries):
+        np.testing.assert_allclose(g, model.generate(e.pb[None], e.initial_input[None],
+                                                     [e.num_steps])[0])
+        assert not np.array_equal(g, e.pattern)
+    d = agent.learner.regeneration_distances(seqs)
+    assert d.shape == (3, len(mem))
+    for b, seq in enumerate(seqs):
+        for m, g in enumerate(patterns):
+            assert d[b, m] == pytest.approx(np.mean((seq - g) ** 2), rel=1e-9)
+    recs = agent.recognize(demos)
+    for r, row in zip(recs, d):
+        assert r.entry == int(np.argmin(row))
+        assert r.concept == mem.entries[r.entry].concept
+        # familiarity on the memory's own scale of regenerated patterns
+        scale = regeneration_scale(patterns, mem.concept_labels)
+        assert r.familiarity == pytest.approx(scale / (scale + row.min()))
+    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be"):
+        iloci.build(small_config(familiarity="regenerated"))
+
+
+def test_pattern_distances_and_regeneration_scale():
+    a = np.zeros((5, 2))
+    b = np.ones((5, 2))
+    c = np.stack([np.linspace(0, 1, 9)] * 2, axis=1)
+    d = pattern_distances([a, b], [a, b, c])
+    np.testing.assert_allclose(d[:, :2], [[0.0, 1.0], [1.0, 0.0]])
+    # a pattern of another length is resampled in time to the sequence's
+    assert d[0, 2] == pytest.approx(np.mean(np.linspace(0, 1, 5) ** 2))
+    assert pattern_distances([a], []).shape == (1, 0)
+    # warped: a step pattern shifted by two steps costs only where it jumps
+    x = np.zeros((8, 1))
+    x[3:] = 1.0
+    y = np.zeros((8, 1))
+    y[5:] = 1.0
+    assert pattern_distances([x], [y])[0, 0] == pytest.approx(2 / 8)
+    assert pattern_distances([x], [y], warp=1)[0, 0] == pytest.approx(1 / 8)
+    assert pattern_distances([x], [y], warp=2)[0, 0] == pytest.approx(0.0)
+    with pytest.raises(iloci.errors.ConfigError, match="warp must be"):
+        iloci.build(small_config(warp=-1))
+    assert np.isnan(regeneration_scale([a, b], ["c1", "c1"]))
+    # nearest pattern of another concept: a -> c (0.375), b -> a (1), c -> a (on c's 9 steps)
+    to_c = np.mean(np.linspace(0, 1, 9) ** 2)
+    assert regeneration_scale([a, b, c], ["c1", "c2", "c2"]) == pytest.approx(
+        np.median([0.375, 1.0, to_c]))
 
 
 def test_rehearsal_from_kept_demonstrations(lasa, tmp_path):

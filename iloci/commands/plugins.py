@@ -20,7 +20,7 @@ def rows() -> tuple[list[dict], list[dict]]:
     pm = get_plugin_manager()
     registry = get_registry(pm)
     out = []
-    for spec in registry.specs():
+    for spec in [*registry.specs(), *registry.specs("executor")]:
         missing = spec.missing()
         out.append({
             "kind": ALL_KINDS[spec.kind].label, "name": spec.name,

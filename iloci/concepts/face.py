@@ -36,6 +36,10 @@ class LearnerFace(Protocol):
 
     def entry_errors(self, sequences: Sequence[np.ndarray]) -> np.ndarray: ...
 
+    def regeneration_distances(self, sequences: Sequence[np.ndarray],
+                               patterns: Sequence[np.ndarray] | None = None
+                               ) -> np.ndarray: ...
+
     def respond(self, index: int, attempt: int = 1,
                 frame: TeacherFrame | None = None) -> Response: ...
 

@@ -18,7 +18,8 @@ from iloci.concepts import rehearsal
 from iloci.concepts.memory import Memory
 from iloci.interfaces import PerceptualModel
 
-__all__ = ["Recognition", "TILT_MARGIN", "confidence", "familiarity", "novelty_scale"]
+__all__ = ["Recognition", "TILT_MARGIN", "confidence", "familiarity", "novelty_scale",
+           "pattern_distances", "regenerated_patterns", "regeneration_scale"]
 
 #: A turned reading of the tilt search (``[learner] tilts``) is recognized
 #: only when its entry prediction error is below this fraction of the
@@ -126,6 +127,133 @@ def novelty_scale(model: PerceptualModel, memory: Memory) -> float:
     errors = np.asarray(model.prediction_error(patterns, memory.pbs[other]), dtype=np.float64)
     errors = errors[np.isfinite(errors)]
     return float(np.median(errors)) if errors.size else float("nan")
+
+
+def regenerated_patterns(model: PerceptualModel, memory: Memory) -> list[np.ndarray]:
+    """Every entry's pattern as the network regenerates it: closed-loop from its PB and initialInfo.
+
+    Unlike :func:`iloci.concepts.rehearsal.regenerate`, never the entry's
+    kept demonstration: this is what the robot's network itself makes of
+    each entry (what it would perform), the ground of ``[learner] decision
+    = "regeneration"``.
+
+    Returns
+    -------
+    list of ndarray, each (numSteps_i, D)
+        Encoded units, one per entry of ``memory`` (empty for an empty memory).
+    """
+    entries = memory.entries
+    if not entries:
+        return []
+    made = model.generate(memory.pbs, _stack_rows([e.initial_input for e in entries]),
+                          [e.num_steps for e in entries])
+    return [np.asarray(g, dtype=np.float64) for g in made]
+
+
+def _stack_rows(rows: Sequence[np.ndarray]) -> np.ndarray:
+    return np.asarray(np.stack([np.asarray(r, dtype=np.float64) for r in rows]),
+                      dtype=np.float64)
+
+
+def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
+    """``pattern`` (T, D) linearly resampled in time to ``steps`` rows (itself when T = steps)."""
+    if len(pattern) == steps:
+        return pattern
+    t = np.linspace(0.0, 1.0, len(pattern))
+    u = np.linspace(0.0, 1.0, steps)
+    return np.stack([np.interp(u, t, pattern[:, j]) for j in range(pattern.shape[1])], axis=1)
+
+
+def pattern_distances(sequences: Sequence[np.ndarray],
+                      patterns: Sequence[np.ndarray], warp: int = 0) -> np.ndarray:
+    """Mean squared difference of each encoded sequence to each regenerated pattern, (B, M).
+
+    Over the sequence's rows and every feature (encoded units; pen
+    displacement and joint displacements alike); a pattern of another
+    length is first resampled linearly in time to the sequence's. Both
+    sides come from the same preprocessing (arc-length resampling to
+    ``[sensorimotor] steps`` points), so step ``t`` is the same fraction of
+    the path's length in both. With ``warp = 0`` step ``t`` is compared
+    with step ``t``; with ``warp > 0`` the steps are aligned by dynamic
+    time warping (Sakoe and Chiba 1978, symmetric steps, a band of
+    ``warp`` steps around the diagonal) and the squared differences along
+    the alignment are summed and divided by the sequence's length times
+    ``D``: a corner drawn a little earlier or later along the path then
+    costs its shape difference, not a shift of every later step.
+
+    Parameters
+    ----------
+    sequences : sequence of ndarray, each (T_b, D)
+    patterns : sequence of ndarray, each (T_m, D)
+    warp : int
+        Band half-width of the alignment, in steps; 0 aligns step by step.
+
+    Returns
+    -------
+    ndarray, shape (B, M)
+    """
+    seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
+    pats = [np.asarray(p, dtype=np.float64) for p in patterns]
+    out = np.zeros((len(seqs), len(pats)), dtype=np.float64)
+    if not pats:
+        return out
+    by_len: dict[int, list[int]] = {}
+    for b, s in enumerate(seqs):
+        by_len.setdefault(len(s), []).append(b)
+    for n, rows in by_len.items():
+        S = np.stack([seqs[b] for b in rows])                        # (b, T, D)
+        P = np.stack([_on_steps(p, n) for p in pats])                # (M, T, D)
+        if warp <= 0:
+            out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
+        else:
+            out[rows] = _warped(S, P, int(warp)) / (n * S.shape[2])
+    return out
+
+
+def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:
+    """DTW cost (summed squared differences) of every (sequence, pattern) pair, (B, M).
+
+    ``S`` (B, T, D), ``P`` (M, T, D); cells further than ``band`` steps from
+    the diagonal are not visited. Vectorised over the pairs, one cell at a time.
+    """
+    b, t = S.shape[0], S.shape[1]
+    m = P.shape[0]
+    # squared distance of step i of S[b] to step j of P[m], laid out (i, j, pair)
+    cost = ((S * S).sum(-1).T[:, None, :, None] + (P * P).sum(-1).T[None, :, None, :]
+            - 2.0 * np.einsum("bid,mjd->ijbm", S, P)).reshape(t, t, b * m)
+    np.maximum(cost, 0.0, out=cost)
+    acc = np.full((t + 1, t + 1, b * m), np.inf)
+    acc[0, 0] = 0.0
+    for i in range(1, t + 1):
+        for j in range(max(1, i - band), min(t, i + band) + 1):
+            acc[i, j] = cost[i - 1, j - 1] + np.minimum(np.minimum(acc[i - 1, j], acc[i, j - 1]),
+                                                        acc[i - 1, j - 1])
+    return acc[t, t].reshape(b, m)
+
+
+def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],
+                       warp: int = 0) -> float:
+    """The memory's own scale for "unlike everything it knows", on regenerated patterns.
+
+    For each entry, :func:`pattern_distances` (with ``warp``) from its regenerated pattern to
+    the nearest regenerated pattern of an entry of *another* concept (how
+    far apart two known concepts lie); the median over entries. The
+    project's calibration (the paper has none), the counterpart of
+    :func:`novelty_scale` for ``[learner] familiarity = "regeneration"``.
+
+    Returns
+    -------
+    float
+        Mean squared difference, encoded units; NaN with fewer than two concepts.
+    """
+    lab = np.asarray(list(labels))
+    if len(set(lab.tolist())) < 2:
+        return float("nan")
+    pats = list(patterns)
+    d = np.stack([pattern_distances([p], pats, warp)[0] for p in pats])
+    other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
+    other = other[np.isfinite(other)]
+    return float(np.median(other)) if other.size else float("nan")
 
 
 def familiarity(error: np.ndarray | float, scale: float) -> np.ndarray:

@@ -30,7 +30,8 @@ from scipy.spatial.distance import cdist
 from iloci.concepts import rehearsal
 from iloci.concepts.answers import ACTIONS, Answer, LearnOutcome
 from iloci.concepts.inference import (TILT_MARGIN, Recognition, confidence, familiarity,
-                                      novelty_scale)
+                                      novelty_scale, pattern_distances,
+                                      regenerated_patterns, regeneration_scale)
 from iloci.concepts.memory import Entry, Memory
 from iloci.concepts.perform import ik_joint_limits, perform, perform_novel
 from iloci.concepts.policies import Policies
@@ -45,6 +46,7 @@ from iloci.sensorimotor.frames import TeacherFrame
 
 __all__ = ["ACTIONS", "Answer", "Learner", "LearnOutcome", "Phase", "Recognition", "TILT_MARGIN",
            "Turn", "confidence", "familiarity", "ik_joint_limits", "novelty_scale", "perform",
+           "pattern_distances", "regenerated_patterns", "regeneration_scale",
            "run_turn", "show_to_teacher"]
 
 
@@ -261,6 +263,29 @@ class Learner:
                             dtype=np.float64)
         return errors.reshape(len(seqs), m)
 
+    def regeneration_distances(self, sequences: Sequence[np.ndarray],
+                               patterns: Sequence[np.ndarray] | None = None) -> np.ndarray:
+        """How far each sequence lies from each entry's regenerated pattern, shape (B, M).
+
+        :func:`~iloci.concepts.inference.pattern_distances` (with ``[learner]
+        warp``) of the sequences to the memory's
+        :func:`~iloci.concepts.inference.regenerated_patterns` (``patterns``
+        when given, e.g. computed once for several calls): ``[learner]
+        decision = "regeneration"`` answers with the entry of the lowest one.
+        """
+        pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
+        return pattern_distances(sequences, pats, self.policies.warp)
+
+    def tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
+        """Per sequence, how well the memory reproduces it: the tilt search's criterion.
+
+        The best over entries of the quantity ``[learner] decision`` ranks
+        by (regeneration distance, else the entry prediction error), shape (B,).
+        """
+        if self.policies.rank_by_regeneration:
+            return self.regeneration_distances(sequences).min(axis=1)
+        return self.entry_errors(sequences).min(axis=1)
+
     def respond(self, index: int, attempt: int = 1,
                 frame: TeacherFrame | None = None) -> Response:
         """The robot's answer: entry ``index`` performed (see :func:`perform`).
@@ -403,9 +428,9 @@ class Learner:
         if not turned:
             return out
         seqs = list(sequences)
-        upright = self.entry_errors([seqs[b] for b in ask]).min(axis=1)
+        upright = self.tilt_scores([seqs[b] for b in ask])
         best = {b: (TILT_MARGIN * float(e), -1) for b, e in zip(ask, upright)}
-        for j, e in enumerate(self.entry_errors(turned).min(axis=1)):
+        for j, e in enumerate(self.tilt_scores(turned)):
             b = owners[j][0]
             if e < best[b][0]:
                 best[b] = (float(e), j)
@@ -436,9 +461,15 @@ class Learner:
         below = policies.inference.unknown_below
         entry_errors = (self.entry_errors(seqs) if policies.rank_by_reproduction
                         or (below > 0 and reproduction) else None)
-        ranking = (entry_errors if entry_errors is not None
-                   and policies.rank_by_reproduction else dist)
-        nearest, conf = confidence(ranking, labels)
+        regen = None
+        if policies.rank_by_regeneration or policies.familiar_by_regeneration:
+            patterns = regenerated_patterns(self.model, self.memory)
+            regen = self.regeneration_distances(seqs, patterns)
+            if policies.familiar_by_regeneration:
+                scale = regeneration_scale(patterns, labels, policies.warp)
+        ranking = (entry_errors if policies.rank_by_reproduction
+                   else regen if policies.rank_by_regeneration else dist)
+        nearest, conf = confidence(dist if ranking is None else ranking, labels)
         # "unknown" asks whether anything the robot knows reproduces the
         # demonstration (its best entry's error), on the scale at which one
         # known concept reproduces its neighbour (novelty_scale): the same
@@ -447,7 +478,11 @@ class Learner:
         # it never learned.
         rep = (entry_errors.min(axis=1) if entry_errors is not None
                else np.full(len(seqs), np.nan))
-        fam = familiarity(rep if entry_errors is not None and reproduction else errors, scale)
+        if regen is not None and policies.familiar_by_regeneration:
+            fam = familiarity(regen.min(axis=1), scale)
+        else:
+            fam = familiarity(rep if entry_errors is not None and reproduction else errors,
+                              scale)
         out = []
         for b, i in enumerate(nearest):
             e = self.memory.entries[int(i)]

@@ -156,11 +156,14 @@ class Policies:
     Attributes
     ----------
     ranking : str
-        ``"pb_distance"`` (the paper) or ``"reproduction"``: what orders
-        the concepts for a demonstration (``decision``).
+        ``"regeneration"``, ``"pb_distance"`` (the paper) or
+        ``"reproduction"``: what orders the concepts for a demonstration
+        (``decision``).
     familiarity : str
-        ``"reproduction"`` or ``"prediction"`` (see
+        ``"reproduction"``, ``"prediction"`` or ``"regeneration"`` (see
         :func:`~iloci.concepts.inference.familiarity`).
+    warp : int
+        DTW band (steps) of the regeneration distances (``warp``).
     confirmation : Confirmation
     novelty : Novelty
     placement : Placement
@@ -168,8 +171,9 @@ class Policies:
     inference : Inference
     """
 
-    ranking: str = "pb_distance"
+    ranking: str = "regeneration"
     familiarity: str = "reproduction"
+    warp: int = 0
     confirmation: Confirmation = Confirmation()
     novelty: Novelty = Novelty()
     placement: Placement = Placement()
@@ -182,6 +186,7 @@ class Policies:
         return cls(
             ranking=config.decision,
             familiarity=config.familiarity,
+            warp=config.warp,
             confirmation=Confirmation(after_no=config.confirm_rewards,
                                       new_exemplars=config.confirm_new_exemplars,
                                       twice_deep=config.confirm_twice_after_novelty),
@@ -197,6 +202,16 @@ class Policies:
     def rank_by_reproduction(self) -> bool:
         """Concepts are ranked by entry reproduction errors, not PB distances."""
         return self.ranking == "reproduction"
+
+    @property
+    def rank_by_regeneration(self) -> bool:
+        """Concepts are ranked by the distance to each entry's regenerated pattern."""
+        return self.ranking == "regeneration"
+
+    @property
+    def familiar_by_regeneration(self) -> bool:
+        """Familiarity is taken of the distance to the nearest regenerated pattern."""
+        return self.familiarity == "regeneration"
 
     @property
     def familiar_by_reproduction(self) -> bool:

@@ -71,7 +71,8 @@ import numpy as np
 
 from iloci.concepts.answers import Answer, LearnOutcome, check_answer_id
 from iloci.concepts.face import LearnerFace
-from iloci.concepts.inference import familiarity, novelty_scale
+from iloci.concepts.inference import (familiarity, novelty_scale, regenerated_patterns,
+                                      regeneration_scale)
 from iloci.concepts.memory import Entry, demonstration_digest
 from iloci.errors import InvalidInputError
 from iloci.events import InteractionEvent, RehearsalEvent
@@ -186,7 +187,8 @@ class Turn:
         # what orders the guesses: PB distance (the paper) or how well each
         # entry's PB reproduces the demonstration (policy "ranking")
         self.ranking = (learner.entry_errors([seq])[0] if policies.rank_by_reproduction
-                        else self.distances)
+                        else learner.regeneration_distances([seq])[0]
+                        if policies.rank_by_regeneration else self.distances)
         if policies.novelty.at_start(lambda: self.familiarity):
             self._step(self._offer_novelty)
             return
@@ -199,6 +201,12 @@ class Turn:
         learner, seq = self.learner, self.sequence
         # is it like an entry the robot knows (reproduction), or can the
         # network reproduce it at all (prediction)
+        if learner.policies.familiar_by_regeneration:
+            patterns = regenerated_patterns(learner.model, learner.memory)
+            return float(familiarity(
+                float(np.min(learner.regeneration_distances([seq], patterns)[0])),
+                regeneration_scale(patterns, learner.memory.concept_labels,
+                                   learner.policies.warp)))
         if learner.policies.familiar_by_reproduction:
             error = float(np.min(self.ranking if learner.policies.rank_by_reproduction
                                  else learner.entry_errors([seq])[0]))
