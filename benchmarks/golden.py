@@ -8,10 +8,11 @@ The runs a refactoring must leave bit for bit as they were:
     quality-noisy-0.1-seed0         and ``noisy-0.1`` on seed 0
 
 Each is kept in ``benchmarks/results/golden.json`` as the deterministic part
-of ``metrics.json`` (wall times, job counts, versions and the machine
-dropped) in full, and, per fold, a digest of each field of the fold's
-record (``folds.json``: predictions, confidences, PB points, ...), so a
-mismatch names the fold and the field that moved. The cheap golden outputs
+of ``metrics.json`` (every ``...seconds`` key at any depth, job counts,
+versions and the machine dropped) in full, and, per fold, a digest of each
+field of the fold's record (``folds.json``: predictions, confidences, PB
+points, ..., times dropped), so a mismatch names the fold and the field
+that moved. The cheap golden outputs
 (a scripted step-wise session and its saved memory file) are held by
 ``tests/test_golden.py`` on every test run.
 
@@ -66,6 +67,15 @@ def runs() -> dict[str, tuple[dict[str, Any], bool]]:
             "quality-noisy-0.1-seed0": (_quality_config("noisy-0.1", 0), False)}
 
 
+def _timeless(value: Any) -> Any:
+    """``value`` without any key that holds a time (``...seconds``), at any depth."""
+    if isinstance(value, dict):
+        return {k: _timeless(v) for k, v in value.items() if not str(k).endswith("seconds")}
+    if isinstance(value, list):
+        return [_timeless(v) for v in value]
+    return value
+
+
 def record(config: dict[str, Any], baseline: bool, jobs: int) -> dict[str, Any]:
     """One run's golden record (see the module docstring)."""
     from iloci.config import load_config
@@ -77,7 +87,7 @@ def record(config: dict[str, Any], baseline: bool, jobs: int) -> dict[str, Any]:
     for r in results:
         d = r.to_dict()
         robust = d.pop("robustness", {})
-        fields = {k: digest(v) for k, v in d.items() if k not in VOLATILE_FOLD}
+        fields = {k: digest(_timeless(v)) for k, v in d.items() if k not in VOLATILE_FOLD}
         if robust:
             fields["robustness"] = digest({name: {k: v for k, v in part.items()
                                                   if k != "seconds"}
@@ -89,7 +99,7 @@ def record(config: dict[str, Any], baseline: bool, jobs: int) -> dict[str, Any]:
                          for f in kept["folds"]]
     if "baseline" in kept:
         kept["baseline"] = {k: v for k, v in kept["baseline"].items() if k != "seconds"}
-    return canonical({"metrics": kept, "folds": folds})
+    return canonical({"metrics": _timeless(kept), "folds": folds})
 
 
 def _git_head() -> str | None:
