@@ -46,14 +46,16 @@ class Recognition:
         values near 1 mean it lies much closer to the answer. 1 when the
         memory holds a single concept. (The paper reports a confidence per
         answer without defining it; this margin is the project's
-        definition.) With ``[learner] decision = "reproduction"`` the same
-        margin is taken on the entries' prediction errors
-        (:meth:`Learner.entry_errors`) instead of PB distances.
+        definition.) The margin is taken on what ``[learner] decision``
+        ranks by: PB distances (``"pb_distance"``), the distances to the
+        entries' regenerated patterns (``"regeneration"``, the default,
+        :func:`pattern_distances`) or the entries' prediction errors
+        (``"reproduction"``, :meth:`Learner.entry_errors`).
     distance : float
         PB distance from PB_obs to the answering entry's PB_rec.
     entry : int
         Index of the answering entry in ``Memory.entries`` at recognition
-        time (the nearest one, or the best reproducing one).
+        time (the best by ``[learner] decision``).
     source : str
         Key of the demonstration the nearest entry holds.
     sources : tuple of str
