@@ -6,7 +6,8 @@
   reparametrisation, the state format), whose names it re-exports;
 * :mod:`iloci.rnnpb.reference`: the forward pass and the whole training
   step (BPTT, clipping, schedule, Adam) in plain numpy, what the back ends'
-  kernels are tested against.
+  kernels are tested against; its float32 mode, :mod:`iloci.rnnpb.float32`,
+  states native-rnnpb's float32 arithmetic (the same bits as its C kernel).
 
 Numpy only: back ends (``torch-rnnpb``, ``jax-rnnpb``) are plugins.
 """
