@@ -21,8 +21,22 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["TrajectoryFile", "load_trajectory", "shape_name", "trajectory_files", "writable_dir",
-           "writable_file", "write_atomic", "write_text_atomic"]
+__all__ = ["TrajectoryFile", "bytes_escape", "load_trajectory", "shape_name", "trajectory_files",
+           "writable_dir", "writable_file", "write_atomic", "write_text_atomic"]
+
+def bytes_escape(exc: UnicodeError) -> tuple[str, int]:
+    """Codec error handler ``"iloci-bytes"``: a byte the OS gave undecoded (a lone
+    surrogate U+DC80-U+DCFF) as ``\\xNN``, like :func:`shape_name`; anything else as a
+    backslash escape."""
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    text = exc.object[exc.start:exc.end]
+    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
+                   else c.encode("ascii", "backslashreplace").decode() for c in text), exc.end
+
+
+codecs.register_error("iloci-bytes", bytes_escape)
+
 
 def shape_name(path: str | os.PathLike[str]) -> str:
     """The shape name a trajectory file gives its demonstration: the file's stem, as text.
@@ -671,7 +685,8 @@ def write_text_atomic(path: str | os.PathLike[str], text: str, *, encoding: str 
     ----------
     path : str or path-like
     text : str
-        Written as is (no newline translation).
+        Written as is (no newline translation); a byte of a file name the OS gave
+        undecoded (a lone surrogate) as ``\\xNN`` (:func:`bytes_escape`).
     encoding : str
         Text encoding, UTF-8 by default (not the locale's).
     mkdir : bool
@@ -682,5 +697,5 @@ def write_text_atomic(path: str | os.PathLike[str], text: str, *, encoding: str 
     pathlib.Path
         The written file.
     """
-    data = text.encode(encoding)
+    data = text.encode(encoding, "iloci-bytes")
     return write_atomic(path, lambda fh: fh.write(data), mkdir=mkdir)
