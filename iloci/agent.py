@@ -28,6 +28,7 @@ from iloci.concepts.memory import Memory, load_memory, save_memory
 from iloci.concepts.policies import Policies
 from iloci.concepts.rehearsal import regenerate
 from iloci.config import Config, load_config
+from iloci.controls import MemoryControls
 from iloci.data.files import TrajectoryFile, trajectory_files
 from iloci.errors import (ConfigError, InvalidDemonstrationError, InvalidInputError,
                           MemoryFileError, NotFittedError, NotLoadedError, ObserverError,
@@ -127,7 +128,7 @@ class TeachReport:
         return [r for o in self.outcomes for r in o.rehearsals]
 
 
-class Agent:
+class Agent(MemoryControls):
     """A robot that learns concepts by imitation.
 
     Built by :func:`build` from a :class:`~iloci.config.Config`. Holds one
