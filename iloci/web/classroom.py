@@ -5,7 +5,7 @@ undo, forget, start over, import) as async methods taking the request's
 JSON and answering JSON; one step at a time (an asyncio lock), the
 network in the agent's worker. The memory and the network are reached
 through the :class:`~iloci.agent.Agent`'s public methods only
-(:class:`~iloci.controls.MemoryControls` for undo, forget, start over and
+(:class:`~iloci.agent.controls.MemoryControls` for undo, forget, start over and
 import).
 """
 

@@ -4,7 +4,7 @@ After every change the memory is saved atomically (under the memory's
 lock, :func:`iloci.progress.memory_lock`); a failed save (disk full,
 permissions, another writer) puts memory and network back as the file
 holds them and is reported (507, or 423 for a lock). Each saved step keeps
-a :class:`~iloci.controls.Snapshot` of what came before it: an undo
+a :class:`~iloci.agent.controls.Snapshot` of what came before it: an undo
 restores it exactly (memory and network), and saves.
 """
 

@@ -1,6 +1,6 @@
 """A person's controls over an agent's memory: undo, forget, start over, import.
 
-:class:`MemoryControls` is a base of :class:`iloci.agent.Agent`: the web
+:class:`Controls` is a base of :class:`iloci.agent.Agent`: the web
 page (``iloci serve``) and any other front end reach the robot's memory
 and network through these methods, never through
 :mod:`iloci.concepts` (``docs/development.md``, "Architecture", forbids
@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from iloci.agent.persistence import Persistence
 from iloci.concepts.memory import Memory, load_memory
 from iloci.concepts.perform import ik_joint_limits, perform
 from iloci.errors import InvalidInputError
@@ -25,14 +26,13 @@ from iloci.sensorimotor.frames import TeacherFrame
 
 if TYPE_CHECKING:
     from iloci.interfaces import Demonstration
-    from iloci.sensorimotor.pipeline import Motion
 
-__all__ = ["MemoryControls", "Snapshot"]
+__all__ = ["Controls", "Snapshot"]
 
 
 @dataclass(frozen=True)
 class Snapshot:
-    """The memory and the network at one moment (:meth:`MemoryControls.snapshot`).
+    """The memory and the network at one moment (:meth:`Controls.snapshot`).
 
     Attributes
     ----------
@@ -54,20 +54,8 @@ class Snapshot:
     network: dict[str, np.ndarray]
 
 
-class MemoryControls:
-    """Undo, forget, start over and import for :class:`~iloci.agent.Agent`."""
-
-    memory: Memory
-    perceptual_model: Any
-    ik_solver: Any
-    config: Any
-    _lock: Any
-
-    if TYPE_CHECKING:
-        def motion(self, demo: Demonstration) -> Motion: ...
-
-        @classmethod
-        def load(cls, path: str | os.PathLike[str], config: Any = None) -> Any: ...
+class Controls(Persistence):
+    """Undo, forget, start over and import for :class:`~iloci.agent.Agent` (see the module)."""
 
     def snapshot(self, what: str = "") -> Snapshot:
         """The memory and the network now, restored exactly by :meth:`restore`.
