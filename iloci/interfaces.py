@@ -33,6 +33,7 @@ __all__ = [
     "Clusterer",
     "Teacher",
     "IKSolver",
+    "RobotDescription",
     "Simulator",
     "ALL_KINDS",
     "ComponentKind",
@@ -571,6 +572,10 @@ class ComponentKind:
         The :mod:`iloci.hookspecs` hook through which plugins register it.
     optional : bool
         Whether a config may leave it out with ``name = "none"``.
+    facts : tuple of str
+        What a registration of this kind states besides its factory, for the
+        listings (a robot's ``joints`` and ``plane``): keyword arguments of
+        ``registry.add``, each required.
     """
 
     name: str
@@ -578,6 +583,7 @@ class ComponentKind:
     label: str
     hook: str
     optional: bool = False
+    facts: tuple[str, ...] = ()
 
     @property
     def label_article(self) -> str:
@@ -646,11 +652,38 @@ class FoldExecutor(Protocol):
         ...
 
 
+@runtime_checkable
+class RobotDescription(Protocol):
+    """What a robot preset's factory returns: :class:`iloci.sensorimotor.robots.Robot`.
+
+    Build one with :func:`iloci.sensorimotor.robots.describe_robot` from a
+    URDF; a preset registers the function that does (``iloci_register_robots``).
+    Lengths in m, angles in rad, arrays of shape ``(J,)``.
+    """
+
+    name: str
+    urdf_path: Any
+    joint_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    end_effector_frame: str
+    q_home: np.ndarray
+    plane: Any
+    plane_report: dict[str, Any]
+
+    def describe(self) -> dict[str, Any]:
+        """URDF, frames, joints, limits and drawing plane, as ``iloci robots --show`` prints."""
+        ...
+
+
 #: Kinds registered like components but chosen outside the config's
-#: component sections: fold executors (``iloci evaluate --executor NAME``).
+#: component sections: fold executors (``iloci evaluate --executor NAME``)
+#: and robot presets (``[robot] name``, a plain section).
 EXTRA_KINDS: Mapping[str, ComponentKind] = MappingProxyType({k.name: k for k in (
     ComponentKind("executor", FoldExecutor, "fold executor", "iloci_register_executors",
                   optional=True),
+    ComponentKind("robot", RobotDescription, "robot", "iloci_register_robots",
+                  facts=("joints", "plane")),
 )})
 
 #: Every kind the registry holds: the components, then :data:`EXTRA_KINDS`.

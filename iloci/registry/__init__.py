@@ -40,6 +40,8 @@ FIRST_PARTY = {
     ("simulator", "pybullet"): "iloci-pybullet",
     ("simulator", "mujoco"): "iloci-mujoco",
     ("executor", "ray"): "iloci-ray",
+    ("robot", "panda"): "iloci-robots",
+    ("robot", "ur5"): "iloci-robots",
 }
 
 
@@ -67,7 +69,7 @@ class ComponentSpec:
     Attributes
     ----------
     kind : str
-        One of :data:`iloci.interfaces.ALL_KINDS` (the components' and ``executor``).
+        One of :data:`iloci.interfaces.ALL_KINDS` (the components', ``executor``, ``robot``).
     name : str
         The name a config uses.
     factory : str or callable
@@ -91,6 +93,10 @@ class ComponentSpec:
         ``"module:function"`` returning one line on how the component runs
         on this machine (e.g. which compute kernel), for ``iloci plugins``;
         called only when the component is available. Empty: nothing to say.
+    facts : tuple of (str, value)
+        What the registration stated for its kind's
+        :attr:`~iloci.interfaces.ComponentKind.facts` (a robot's ``joints``
+        and ``plane``); read one with :meth:`fact`.
     """
 
     kind: str
@@ -104,6 +110,11 @@ class ComponentSpec:
     distribution: str | None = None
     version: str | None = None
     describe: str = ""
+    facts: tuple[tuple[str, Any], ...] = ()
+
+    def fact(self, name: str) -> Any:
+        """The value the registration gave for fact ``name`` (KeyError: none)."""
+        return dict(self.facts)[name]
 
     def missing(self) -> list[str]:
         """Modules in :attr:`requires` that cannot be imported."""
@@ -160,8 +171,9 @@ class Registry:
             params: type | None = None, requires: Iterable[str] = (),
             install: str = "", summary: str = "", plugin: str = "",
             distribution: str | None = None, version: str | None = None,
-            describe: str = "") -> ComponentSpec:
-        """Register a component. See :class:`ComponentSpec` for the arguments."""
+            describe: str = "", **facts: Any) -> ComponentSpec:
+        """Register a component. See :class:`ComponentSpec` for the arguments;
+        ``facts`` are those the kind requires (:attr:`ComponentKind.facts`)."""
         if kind not in self._specs:
             raise PluginError(f"plugin {plugin!r} registers unknown kind {kind!r}; "
                               f"kinds are {', '.join(ALL_KINDS)}.")
@@ -186,8 +198,16 @@ class Registry:
         if describe and ":" not in describe:
             raise PluginError(f"plugin {plugin!r}: describe of {kind} {name!r} must be "
                               f"'module:function', got {describe!r}.")
+        needed = ALL_KINDS[kind].facts
+        if set(facts) != set(needed) or not all(
+                isinstance(v, (str, int, float)) for v in facts.values()):
+            raise PluginError(
+                f"plugin {plugin!r}: {_label(kind)} {name!r} must state "
+                f"{', '.join(needed) or 'no facts'} (keyword arguments of registry.add, a "
+                f"string or a number each), got {facts or 'none'}.")
         spec = ComponentSpec(kind, name, factory, params, tuple(requires),
-                             install or "", summary, plugin, distribution, version, describe)
+                             install or "", summary, plugin, distribution, version, describe,
+                             tuple((k, facts[k]) for k in needed))
         self._specs[kind][name] = spec
         return spec
 
@@ -201,7 +221,7 @@ class Registry:
         return sorted(self._specs[kind])
 
     def specs(self, kind: str | None = None) -> list[ComponentSpec]:
-        """The specs of ``kind``; without one, of every component kind (not executors)."""
+        """The specs of ``kind``; without one, of every component kind (not executors, robots)."""
         if kind is not None:
             _check_kind(kind)
         kinds = tuple(COMPONENT_KINDS) if kind is None else (kind,)
@@ -346,12 +366,14 @@ class KindRegistry:
 
     def add(self, name: str, factory: str | Callable[..., Any], *,
             params: type | None = None, requires: Iterable[str] = (),
-            install: str = "", summary: str = "", describe: str = "") -> ComponentSpec:
-        """Register component ``name`` of this kind (see :class:`ComponentSpec`)."""
+            install: str = "", summary: str = "", describe: str = "",
+            **facts: Any) -> ComponentSpec:
+        """Register component ``name`` of this kind (see :class:`ComponentSpec`);
+        ``facts``: those the kind requires (a robot's ``joints=J, plane="given"``)."""
         return self._registry.add(self.kind, name, factory, params=params,
                                   requires=requires, install=install, summary=summary,
                                   plugin=self._plugin, distribution=self._distribution,
-                                  version=self._version, describe=describe)
+                                  version=self._version, describe=describe, **facts)
 
     def names(self) -> list[str]:
         return self._registry.names(self.kind)
