@@ -9,6 +9,7 @@ in every environment the preset is installed in.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import json
 from pathlib import Path
 from typing import Any
@@ -19,8 +20,11 @@ from iloci.interfaces import RobotDescription, unmet_members
 
 __all__ = ["ROBOT_CHECKS", "check_registration"]
 
+#: ``make(seed) -> robot description`` (the seed is ignored).
+Factory = Callable[[int], Any]
 
-def rb_protocol(make: Any) -> None:
+
+def rb_protocol(make: Factory) -> None:
     """The description has every member of ``RobotDescription``; its URDF exists."""
     robot = make(0)
     unmet = unmet_members(robot, RobotDescription)
@@ -28,7 +32,7 @@ def rb_protocol(make: Any) -> None:
     assert Path(robot.urdf_path).is_file(), f"its URDF {robot.urdf_path} is not a file"
 
 
-def rb_joints_and_limits(make: Any) -> None:
+def rb_joints_and_limits(make: Factory) -> None:
     """``J >= 1`` joints; ``lower``, ``upper`` and ``q_home`` of shape ``(J,)``, finite,
     ``lower < upper`` and ``q_home`` within them."""
     robot = make(0)
@@ -44,7 +48,7 @@ def rb_joints_and_limits(make: Any) -> None:
     assert np.all((lo <= q) & (q <= hi)), f"q_home {q} outside [{lo}, {hi}]"
 
 
-def rb_describe_is_json(make: Any) -> None:
+def rb_describe_is_json(make: Factory) -> None:
     """``describe()`` is what ``iloci robots --show --json`` prints: JSON, the same joints."""
     robot = make(0)
     desc = robot.describe()
@@ -53,13 +57,13 @@ def rb_describe_is_json(make: Any) -> None:
     assert list(desc["joints"]) == list(robot.joint_names), "describe()'s joints differ"
 
 
-def rb_deterministic(make: Any) -> None:
+def rb_deterministic(make: Factory) -> None:
     """Two builds describe the same robot (joints, limits, start posture, plane)."""
     a, b = make(0), make(1)
     assert a.describe() == b.describe(), "two builds of the preset differ"
 
 
-ROBOT_CHECKS = [rb_protocol, rb_joints_and_limits, rb_describe_is_json, rb_deterministic]
+ROBOT_CHECKS: list[Callable[[Factory], None]] = [rb_protocol, rb_joints_and_limits, rb_describe_is_json, rb_deterministic]
 
 
 def check_registration(spec: Any, robot: Any) -> None:
