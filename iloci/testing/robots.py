@@ -63,7 +63,8 @@ def rb_deterministic(make: Factory) -> None:
     assert a.describe() == b.describe(), "two builds of the preset differ"
 
 
-ROBOT_CHECKS: list[Callable[[Factory], None]] = [rb_protocol, rb_joints_and_limits, rb_describe_is_json, rb_deterministic]
+ROBOT_CHECKS: list[Callable[[Factory], None]] = [rb_protocol, rb_joints_and_limits,
+                                                 rb_describe_is_json, rb_deterministic]
 
 
 def check_registration(spec: Any, robot: Any) -> None:
