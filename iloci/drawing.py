@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from iloci.agent import _upgrade_config
+from iloci.agent.persistence import upgrade_config
 from iloci.concepts.learner import ik_joint_limits, perform
 from iloci.concepts.memory import load_memory
 from iloci.config import DEFAULT_NAMES, EvaluationConfig, RobotConfig, SensorimotorConfig
@@ -336,7 +336,7 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
     if not isinstance(saved, dict):
         raise MemoryFileError(f"{source} holds no config: it names no perceptual model to "
                               "regenerate its concepts with.")
-    saved = _upgrade_config(saved)
+    saved = upgrade_config(saved)
     robot_cfg = validate_dataclass(RobotConfig, dict(saved.get("robot") or {}),
                                    section="robot", source=source)
 

@@ -108,6 +108,73 @@ def test_mimic_joint_off_the_pen_chain_is_accepted(tmp_path):
     assert robot.joint_names == ("s1", "s2", "s3")
 
 
+
+def _spoilt(tmp_path: Path, old: str, new: str, count: int = 1) -> Path:
+    f = tmp_path / "arm.urdf"
+    text = _arm(f).read_text()
+    assert old in text
+    f.write_text(text.replace(old, new, count))
+    return f
+
+
+@pytest.mark.parametrize("old, new, names", [
+    ('name="s2" type="revolute"', 'name="s2" type="planar"',
+     ["'s2' (planar)", "fixed joint", "base_frame below it"]),
+    ('name="s1" type="revolute"', 'name="s1" type="floating"', ["'s1' (floating)"]),
+    ('name="s2" type="revolute"', 'name="s2" type="revolut"',
+     ["type 'revolut'", "Did you mean 'revolute'?"]),
+    ('<link name="pen"/>', '<link name="pen"/><link name="b"/>', ["link 'b' is defined twice"]),
+    ('name="s3"', 'name="s2"', ["joint 's2' is defined twice"]),
+    ('<link name="pen"/>', '<link name="pen"/><link name="x"/><joint name="x" type="fixed">'
+     '<parent link="a"/><child link="c"/></joint>', ["link 'c' is the child of joints"]),
+    ('<limit lower="-2" upper="2"', '<limit lower="2" upper="-2"', ["[2, -2] (lower above "
+                                                                   "upper: swapped?)"]),
+    ('<limit lower="-2" upper="2"', '<limit lower="-inf" upper="2"', ["not a finite number"]),
+    ('<robot name="spoilt">', '<robot name="spoilt"><!-- caf\xe9 -->',
+     ["not valid XML", "not UTF-8 (byte 0xe9", 'encoding="ISO-8859-1"']),
+], ids=["planar", "floating", "bad-type", "dup-link", "dup-joint", "two-parents", "inverted",
+        "infinite", "latin1-undeclared"])
+@pytest.mark.usefixtures("default_back_ends")
+def test_more_urdf_faults_are_named(tmp_path, capsys, old, new, names):
+    urdf = _spoilt(tmp_path, old, new)
+    if "caf" in new:
+        urdf.write_bytes(urdf.read_text().encode("latin-1"))
+    cfg = _toml(tmp_path / "arm.toml", "arm.urdf")
+    for argv in (["config", "check", str(cfg)], ["robots", "--show", "--config", str(cfg)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert str(urdf) in err and "Traceback" not in err
+        for name in names:
+            assert name in err, (argv, name, err)
+
+
+def test_a_chain_without_a_movable_joint_says_where_one_is(tmp_path):
+    _arm(tmp_path / "arm.urdf")
+    with pytest.raises(InvalidInputError, match=r"between the base frame 'b' and the pen-tip "
+                       r"frame 'b'.*tip_frame below a movable joint \('c'\)"):
+        describe_robot(tmp_path / "arm.urdf", base_frame="b", tip_frame="b")
+    with pytest.raises(InvalidInputError, match=r"'a' does not hang below the base frame 'c'"):
+        describe_robot(tmp_path / "arm.urdf", base_frame="c", tip_frame="a")
+
+
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16", "iso-8859-1"])
+def test_a_urdf_in_any_declared_encoding_reaches_the_ik(tmp_path, encoding):
+    """Pinocchio's own parser reads UTF-8 only: it is given the text as iloci decoded it."""
+    pytest.importorskip("pinocchio")
+    from iloci.plugins import get_registry
+
+    text = _arm(tmp_path / "plain.urdf").read_text().replace(
+        '<?xml version="1.0"?>', f'<?xml version="1.0" encoding="{encoding.upper()}"?>'
+        if encoding != "utf-8-sig" else '<?xml version="1.0"?>').replace(
+        '<robot name="spoilt">', '<robot name="spoilt"><!-- caf\xe9 -->')
+    (tmp_path / "arm.urdf").write_bytes(text.encode(encoding))
+    robot = describe_robot(tmp_path / "arm.urdf", tip_frame="pen")
+    ik = get_registry().build("ik", "pinocchio", robot=robot)
+    q = np.array([0.3, -0.4, 0.5])
+    plain = get_registry().build("ik", "pinocchio",
+                                 robot=describe_robot(tmp_path / "plain.urdf", tip_frame="pen"))
+    assert np.allclose(ik.forward(q), plain.forward(q))
+
 @pytest.mark.usefixtures("default_back_ends")
 def test_relative_urdf_is_read_beside_the_config_from_any_folder(tmp_path, monkeypatch):
     (tmp_path / "robots").mkdir()
