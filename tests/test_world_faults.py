@@ -203,18 +203,18 @@ def _stroke(n: int, seed: int = 0) -> np.ndarray:
 
 
 def test_a_huge_stroke_is_read_in_linear_time_close_to_the_exact_fit(monkeypatch):
-    import iloci.sensorimotor.preprocess as pp
+    import iloci.sensorimotor.path as path
     from scipy.ndimage import gaussian_filter1d
 
-    xy = _stroke(pp.POOL_ABOVE + 10_000)
+    xy = _stroke(path.POOL_ABOVE + 10_000)
     # the path's Gaussian by FFT above FFT_ABOVE: scipy's direct convolution's result
-    sigma = pp.PRESMOOTH * len(xy)
-    assert np.allclose(pp._gaussian(xy, sigma), gaussian_filter1d(xy, sigma, axis=0,
+    sigma = path.PRESMOOTH * len(xy)
+    assert np.allclose(path._gaussian(xy, sigma), gaussian_filter1d(xy, sigma, axis=0,
                                                                   mode="nearest"),
                        rtol=0, atol=1e-12)
-    pooled = pp.resample_path(xy)
-    monkeypatch.setattr(pp, "POOL_ABOVE", 10**12)
-    exact = pp.resample_path(xy)
+    pooled = path.resample_path(xy)
+    monkeypatch.setattr(path, "POOL_ABOVE", 10**12)
+    exact = path.resample_path(xy)
     assert np.abs(pooled - exact).max() < 1e-4 * np.ptp(exact, axis=0).max()
 
 
@@ -239,7 +239,7 @@ def test_beyond_the_maximum_a_stroke_is_refused_before_any_work(tmp_path, monkey
 
 
 def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypatch):
-    import iloci.data.files as files
+    import iloci.data.csvfile as csvfile
     from iloci.data import load_trajectory
     from iloci.errors import InvalidDemonstrationError
 
@@ -247,7 +247,7 @@ def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypat
     f = tmp_path / "big.csv"
     np.savetxt(f, rows, delimiter=";", header="time_ms;pos_x;pos_y", comments="", fmt="%.7g")
     fast = load_trajectory(f)
-    monkeypatch.setattr(files, "_SAMPLE", 10**12)  # dialect from the whole file: no fast path
+    monkeypatch.setattr(csvfile, "_SAMPLE", 10**12)  # dialect from the whole file: no fast path
     slow = load_trajectory(f)
     assert np.array_equal(fast.positions, slow.positions)
     assert np.array_equal(fast.times, slow.times) and fast.times[1] == pytest.approx(1e-5)
@@ -265,6 +265,7 @@ def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypat
 
 def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
     import iloci.progress as progress
+    import iloci.sensorimotor.path as path
     import iloci.sensorimotor.preprocess as pp
     from iloci import Demonstration
     from iloci.sensorimotor.robots import NAO_PLANE
@@ -272,10 +273,10 @@ def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
     monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
     monkeypatch.setattr(progress, "_EVERY", 0.0)
     seen = []
-    demo = Demonstration(positions=_stroke(pp.POOL_ABOVE + 1), shape="long")
+    demo = Demonstration(positions=_stroke(path.POOL_ABOVE + 1), shape="long")
     with progress.progress_sink(lambda what, f, s: seen.append((what, f))):
         pp.preprocess(demo, plane=NAO_PLANE)
-    assert seen[0][0] == f"reading the drawing long/0 ({pp.POOL_ABOVE + 1:,} samples)"
+    assert seen[0][0] == f"reading the drawing long/0 ({path.POOL_ABOVE + 1:,} samples)"
     fractions = [f for _, f in seen]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 3
     pp.preprocess(demo, plane=NAO_PLANE)  # nobody listening: nothing shown, nothing kept
@@ -500,6 +501,17 @@ class _SloppyPlugin:
         return "an executor" if name == "sloppy" else None
 
     @hookimpl
+    def iloci_register_robots(self, registry):
+        registry.add("sloppy-arm", lambda: "panda", summary="returns a name", joints=4,
+                     plane="given")
+
+
+class _SloppyOldRobots:
+    """The deprecated dict form of ``iloci_register_robots``, adding no preset."""
+
+    from iloci import hookimpl
+
+    @hookimpl
     def iloci_register_robots(self, robots):
         robots["sloppy-arm"] = "panda"
 
@@ -516,7 +528,7 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
     from iloci.errors import PluginError
     from iloci.evaluation.executors import make_executor
     from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import available_robots
+    from iloci.sensorimotor.robots import available_robots, get_robot
 
     pm = get_plugin_manager(autoload=False, plugins=[_SloppyPlugin()])
     registry = get_registry(pm)
@@ -524,11 +536,18 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
                        r"none\), registered through iloci_register_teachers: its factory .* "
                        r"returned dict .* lacks feedback"):
         registry.build("teacher", "sloppy")
-    with pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
+    with pytest.warns(DeprecationWarning, match="implements iloci_make_executor: deprecated"), \
+            pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
                        "for executor 'sloppy', which is not a fold executor: it lacks name, run"):
         make_executor("sloppy", 1, plugin_manager=pm)
-    with pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
-        available_robots(pm)
+    with pytest.raises(PluginError, match=r"robot 'sloppy-arm' of plugin '.*' \(distribution "
+                       r"none\), registered through iloci_register_robots: its factory .* "
+                       r"returned str 'panda', which is not a robot: it lacks .*joint_names"):
+        get_robot("sloppy-arm", pm)
+    old = get_plugin_manager(autoload=False, plugins=[_SloppyOldRobots()])
+    with pytest.warns(DeprecationWarning, match="iloci_register_robots\\(robots\\), a dict"), \
+            pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
+        available_robots(old)
     with pytest.raises(PluginError, match=r"iloci_register_clusterers returned dict .* "
                        r"returns nothing: it registers each component with registry.add"):
         get_registry(get_plugin_manager(autoload=False, plugins=[_ReturningPlugin()]))

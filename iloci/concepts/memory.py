@@ -188,6 +188,8 @@ class Memory:
         d_cutoff : float
             The cut the clusters were taken at (NaN below two entries).
         """
+        # clustering imports scipy: loaded when a concept is first clustered, so
+        # `import iloci` stays light
         from iloci.concepts import clustering
         entries = [e.copy() for e in self.entries]
         idx = [i for i, e in enumerate(entries) if e.concept == concept]

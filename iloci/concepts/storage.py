@@ -37,6 +37,7 @@ import zlib
 
 import numpy as np
 
+from iloci._version import __version__
 from iloci.data.files import write_atomic
 from iloci.errors import MemoryFileError
 
@@ -126,7 +127,6 @@ def write_memory_file(path: str | os.PathLike[str], arrays: dict[str, np.ndarray
     Returns the path written.
     """
     path = Path(os.path.realpath(os.fspath(path)))
-    from iloci._version import __version__
     full: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                             "iloci": __version__, **dict(header)}
     full["checksum"] = _checksum(full, arrays)
