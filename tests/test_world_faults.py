@@ -297,6 +297,8 @@ def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
     import iloci.concepts.memory as memory_module
     monkeypatch.setattr(iloci._version, "__version__", "99.1.0")
     monkeypatch.setattr(memory_module, "__version__", "99.1.0", raising=False)
+    import iloci.concepts.storage as storage  # the writer names its version in the header
+    monkeypatch.setattr(storage, "__version__", "99.1.0", raising=False)
     save_memory(tmp_path / "m.npz", Memory(), {}, extra={"config": saved})
     monkeypatch.undo()
     with pytest.raises(MemoryFileError, match=r"written by iloci 99.1.0, this is iloci "
@@ -397,6 +399,8 @@ def test_a_memory_from_an_older_or_newer_iloci_names_the_versions(tmp_path, monk
                        rf"by iloci {iloci._version.__version__}; this is iloci"):
         load_memory(tmp_path / "old.npz")
     monkeypatch.setattr(iloci._version, "__version__", "42.0")
+    import iloci.concepts.storage as storage  # the writer names its version in the header
+    monkeypatch.setattr(storage, "__version__", "42.0", raising=False)
     save_memory(tmp_path / "new.npz", Memory(), {})
     monkeypatch.undo()
     with pytest.warns(UserWarning, match="new.npz was written by iloci 42.0, this is iloci "
