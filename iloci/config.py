@@ -423,7 +423,8 @@ def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
 
 
 def check_installed(config: Config, registry: Registry | None = None) -> None:
-    """Raise unless every configured component's back-end modules can be imported.
+    """Raise unless every configured component's back-end modules can be imported,
+    and the ``[robot]`` preset (without ``urdf``) is registered.
 
     :func:`load_config` checks that each configured name is registered
     (its plugin installed and loaded); this checks what the plugin needs
@@ -434,7 +435,12 @@ def check_installed(config: Config, registry: Registry | None = None) -> None:
     Raises
     ------
     MissingBackendError
-        Naming the component, the missing modules and the install command.
+        Naming the component, the missing modules and the install command
+        (for ``panda``/``ur5`` without ``iloci-robots``: that plugin).
+    UnknownComponentError
+        No robot preset of that name (the known ones listed).
+    PluginNotLoadedError
+        The robot's plugin is installed but blocked or not loaded.
     """
     registry = registry or config._registry
     if registry is None:
@@ -448,6 +454,16 @@ def check_installed(config: Config, registry: Registry | None = None) -> None:
         missing = spec.missing()
         if missing:
             raise MissingBackendError(kind.label, name, missing,
+                                      spec.install or f"pip install {' '.join(missing)}")
+    if not config.robot.urdf:  # a preset: registered, by an installed and loaded plugin
+        try:
+            spec = registry.get("robot", config.robot.name)
+        except UnknownComponentError as exc:
+            exc.args = (f"{config.source or 'config'}: [robot] name: {exc.args[0]}",)
+            raise
+        missing = spec.missing()
+        if missing:
+            raise MissingBackendError("robot", spec.name, missing,
                                       spec.install or f"pip install {' '.join(missing)}")
 
 

@@ -396,6 +396,17 @@ class _SloppyPlugin:
         return "an executor" if name == "sloppy" else None
 
     @hookimpl
+    def iloci_register_robots(self, registry):
+        registry.add("sloppy-arm", lambda: "panda", summary="returns a name", joints=4,
+                     plane="given")
+
+
+class _SloppyOldRobots:
+    """The deprecated dict form of ``iloci_register_robots``, adding no preset."""
+
+    from iloci import hookimpl
+
+    @hookimpl
     def iloci_register_robots(self, robots):
         robots["sloppy-arm"] = "panda"
 
@@ -412,7 +423,7 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
     from iloci.errors import PluginError
     from iloci.evaluation.executors import make_executor
     from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import available_robots
+    from iloci.sensorimotor.robots import available_robots, get_robot
 
     pm = get_plugin_manager(autoload=False, plugins=[_SloppyPlugin()])
     registry = get_registry(pm)
@@ -420,11 +431,18 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
                        r"none\), registered through iloci_register_teachers: its factory .* "
                        r"returned dict .* lacks feedback"):
         registry.build("teacher", "sloppy")
-    with pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
+    with pytest.warns(DeprecationWarning, match="implements iloci_make_executor: deprecated"), \
+            pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
                        "for executor 'sloppy', which is not a fold executor: it lacks name, run"):
         make_executor("sloppy", 1, plugin_manager=pm)
-    with pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
-        available_robots(pm)
+    with pytest.raises(PluginError, match=r"robot 'sloppy-arm' of plugin '.*' \(distribution "
+                       r"none\), registered through iloci_register_robots: its factory .* "
+                       r"returned str 'panda', which is not a robot: it lacks .*joint_names"):
+        get_robot("sloppy-arm", pm)
+    old = get_plugin_manager(autoload=False, plugins=[_SloppyOldRobots()])
+    with pytest.warns(DeprecationWarning, match="iloci_register_robots\\(robots\\), a dict"), \
+            pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
+        available_robots(old)
     with pytest.raises(PluginError, match=r"iloci_register_clusterers returned dict .* "
                        r"returns nothing: it registers each component with registry.add"):
         get_registry(get_plugin_manager(autoload=False, plugins=[_ReturningPlugin()]))

@@ -21,6 +21,10 @@ Where each part lives (each module imports only those above it):
   ``entry_drawings``, ``respond``);
 - :mod:`~iloci.agent.worker_process`: the network in a worker process;
 - :mod:`~iloci.agent.persistence`: ``save``, ``load``;
+- :mod:`~iloci.agent.controls`: a person's controls over the memory
+  (``snapshot``, ``restore``, ``forget_concept``, ``forget_entry``,
+  ``start_over``, ``replace_memory``, ``drawing_in_frame``), what the web
+  page uses;
 - :mod:`~iloci.agent.core`: :class:`Agent`, joining them, and :func:`build`.
 """
 

@@ -8,6 +8,7 @@ from typing import Any
 import pluggy
 
 from iloci.agent.assembly import assemble
+from iloci.agent.controls import Controls
 from iloci.agent.inference import Inference
 from iloci.agent.persistence import Persistence
 from iloci.agent.stepwise import Stepwise, TeachReport
@@ -17,7 +18,7 @@ from iloci.interfaces import Demonstration
 __all__ = ["Agent", "build", "learn_and_recognize"]
 
 
-class Agent(Stepwise, Inference, WorkerProcess, Persistence):
+class Agent(Stepwise, Inference, WorkerProcess, Controls, Persistence):
     """A robot that learns concepts by imitation.
 
     Built by :func:`build` from a :class:`~iloci.config.Config`. Holds one

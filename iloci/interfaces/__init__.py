@@ -13,7 +13,7 @@ four joint deltas), ``P`` size of a parametric-bias (PB) vector (4),
 One module per kind of component (:mod:`~iloci.interfaces.perceptual_model`,
 :mod:`~iloci.interfaces.clusterer`, :mod:`~iloci.interfaces.teacher`,
 :mod:`~iloci.interfaces.ik`, :mod:`~iloci.interfaces.simulator`,
-:mod:`~iloci.interfaces.executor`), the values they exchange
+:mod:`~iloci.interfaces.executor`, :mod:`~iloci.interfaces.robot`), the values they exchange
 (:mod:`~iloci.interfaces.values`) and the table of kinds
 (:mod:`~iloci.interfaces.kinds`); every name is importable from here.
 """
@@ -24,6 +24,7 @@ from iloci.interfaces.ik import IKSolver
 from iloci.interfaces.kinds import (ALL_KINDS, COMPONENT_KINDS, EXTRA_KINDS, KINDS,
                                     OPTIONAL_MEMBERS, ComponentKind, unmet_members)
 from iloci.interfaces.perceptual_model import PerceptualModel
+from iloci.interfaces.robot import RobotDescription
 from iloci.interfaces.simulator import Simulator
 from iloci.interfaces.teacher import Teacher, check_feedback
 from iloci.interfaces.values import LONGEST_STROKE_S, Demonstration, Execution, Response
@@ -37,6 +38,7 @@ __all__ = [
     "Clusterer",
     "Teacher",
     "IKSolver",
+    "RobotDescription",
     "Simulator",
     "ALL_KINDS",
     "ComponentKind",

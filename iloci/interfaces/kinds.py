@@ -2,7 +2,7 @@
 
 The registry, the config, the plugin manager and :func:`iloci.build` read
 :data:`COMPONENT_KINDS`; :data:`EXTRA_KINDS` holds the kinds registered like
-components but chosen outside the config's sections (fold executors).
+components but chosen outside the config's sections (fold executors, robots).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from iloci.interfaces.clusterer import Clusterer
 from iloci.interfaces.executor import FoldExecutor
 from iloci.interfaces.ik import IKSolver
 from iloci.interfaces.perceptual_model import PerceptualModel
+from iloci.interfaces.robot import RobotDescription
 from iloci.interfaces.simulator import Simulator
 from iloci.interfaces.teacher import Teacher
 
@@ -42,6 +43,10 @@ class ComponentKind:
         The :mod:`iloci.hookspecs` hook through which plugins register it.
     optional : bool
         Whether a config may leave it out with ``name = "none"``.
+    facts : tuple of str
+        What a registration of this kind states besides its factory, for the
+        listings (a robot's ``joints`` and ``plane``): keyword arguments of
+        ``registry.add``, each required.
     """
 
     name: str
@@ -49,6 +54,7 @@ class ComponentKind:
     label: str
     hook: str
     optional: bool = False
+    facts: tuple[str, ...] = ()
 
     @property
     def label_article(self) -> str:
@@ -96,10 +102,13 @@ def unmet_members(obj: Any, protocol: type) -> list[str]:
 
 
 #: Kinds registered like components but chosen outside the config's
-#: component sections: fold executors (``iloci evaluate --executor NAME``).
+#: component sections: fold executors (``iloci evaluate --executor NAME``)
+#: and robot presets (``[robot] name``, a plain section).
 EXTRA_KINDS: Mapping[str, ComponentKind] = MappingProxyType({k.name: k for k in (
     ComponentKind("executor", FoldExecutor, "fold executor", "iloci_register_executors",
                   optional=True),
+    ComponentKind("robot", RobotDescription, "robot", "iloci_register_robots",
+                  facts=("joints", "plane")),
 )})
 
 #: Every kind the registry holds: the components, then :data:`EXTRA_KINDS`.
