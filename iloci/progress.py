@@ -267,7 +267,7 @@ def _lock_the_file(memory: str | os.PathLike[str]) -> int | None:
 
 
 def _flock_holder(st: os.stat_result) -> str:
-    """``"iloci serve, pid 123"`` for the process holding an flock on the file ``st``, from /proc/locks."""
+    """``"iloci serve, pid 123"``: who holds an flock on the file ``st`` (from /proc/locks)."""
     want = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
     try:
         with open("/proc/locks", encoding="ascii", errors="replace") as fh:

@@ -108,15 +108,15 @@ def run(args: argparse.Namespace) -> int:
     classroom = build_classroom(args.memory, args.config, protocol=args.protocol)
     hosts = [args.host, *args.allow_host]
     app = create_app(classroom, hosts=hosts, on_shutdown=lambda: _stop_worker(classroom))
-    mem = classroom.agent.memory
-    print(f"memory {args.memory}: {mem.summary().splitlines()[0]}")
-    print(f"teach the robot at http://{_shown(args.host)}:{args.port}/ (Ctrl-C to stop)",
-          flush=True)
     # uvicorn stops gracefully on SIGTERM, then raises it again once it has
     # stopped: with the default action the process would end before the
     # lines below release the memory's lock; as SystemExit they run
     previous = signal.signal(signal.SIGTERM, _exit_on_sigterm)
     try:
+        mem = classroom.agent.memory
+        print(f"memory {args.memory}: {mem.summary().splitlines()[0]}")
+        print(f"teach the robot at http://{_shown(args.host)}:{args.port}/ (Ctrl-C to stop)",
+              flush=True)
         # a request's head must arrive within 10 s and at most 128 connections stay
         # open (iloci.web.connections): a client that connects and sends slowly
         # does not hold the server

@@ -44,7 +44,7 @@ GRACE_SECONDS = 1.0
 
 
 def connection_limit(wanted: int = MAX_CONNECTIONS) -> int:
-    """``wanted``, or a quarter of the process's soft descriptor limit if that is lower (at least 8).
+    """``wanted``, or a quarter of the soft descriptor limit if lower (at least 8).
 
     The rest of the descriptors stay for the memory file, the worker's
     pipes and the libraries.
@@ -90,16 +90,19 @@ def guarded_protocol(head_seconds: float = HEAD_SECONDS,
         _head_timer: Any = None
         _waiting_since = 0.0
 
-        def connection_made(self, transport: Any) -> None:  # type: ignore[override]
+        def connection_made(self, transport: Any) -> None:
             super().connection_made(transport)
             self._await_head()
-            if len(self.connections) > limit:
+            connections: Any = self.connections     # uvicorn's set of open protocols
+            if len(connections) > limit:
                 now = self.loop.time()
-                idle = sorted((c for c in self.connections
-                               if c is not self and getattr(c, "_waiting_head", lambda: False)()
-                               and now - c._waiting_since >= min(GRACE_SECONDS, head_seconds)),
-                              key=lambda c: c._waiting_since)
-                for c in idle[:len(self.connections) - limit]:
+                grace = min(GRACE_SECONDS, head_seconds)
+                idle: list[Any] = sorted(
+                    (c for c in connections
+                     if c is not self and getattr(c, "_waiting_head", lambda: False)()
+                     and now - c._waiting_since >= grace),
+                    key=lambda c: c._waiting_since)
+                for c in idle[:len(connections) - limit]:
                     c._close_waiting()
 
         def _waiting_head(self) -> bool:
@@ -142,6 +145,6 @@ def guarded_protocol(head_seconds: float = HEAD_SECONDS,
 
 def uvicorn_options(head_seconds: float = HEAD_SECONDS,
                     max_connections: int | None = None) -> dict[str, Any]:
-    """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config``: the guarded protocol and its backlog."""
+    """Keyword arguments for ``uvicorn.run`` / ``uvicorn.Config``: the protocol, its backlog."""
     protocol = guarded_protocol(head_seconds, max_connections)
     return {"http": protocol, "backlog": protocol.max_connections}  # type: ignore[attr-defined]
