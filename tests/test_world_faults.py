@@ -293,9 +293,9 @@ def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
 
     saved = load_config(None).to_dict()
     saved["learner"]["forgetting_rate"] = 0.1  # a setting of a later version
-    import iloci.concepts.memory as memory_module
+    import iloci.concepts.storage as storage  # the memory file's writer
     monkeypatch.setattr(iloci._version, "__version__", "99.1.0")
-    monkeypatch.setattr(memory_module, "__version__", "99.1.0", raising=False)
+    monkeypatch.setattr(storage, "__version__", "99.1.0")
     save_memory(tmp_path / "m.npz", Memory(), {}, extra={"config": saved})
     monkeypatch.undo()
     with pytest.raises(MemoryFileError, match=r"written by iloci 99.1.0, this is iloci "

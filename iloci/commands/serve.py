@@ -11,8 +11,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from iloci.agent import Agent, build
 from iloci.commands.teach import DEFAULT_MEMORY, PAGE, add_protocol_argument, command_config
+from iloci.concepts.memory import load_memory
 from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.progress import acquire_memory_lock
 
 __all__ = ["register", "run", "build_classroom"]
 
@@ -60,7 +63,6 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
         Another process (``iloci teach``, another ``iloci serve``) holds
         the memory; its holder is named.
     """
-    from iloci.progress import acquire_memory_lock
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:
         classroom = _build(memory, config, worker, protocol)
@@ -73,8 +75,7 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
 
 
 def _build(memory: str | Path, config: Any, worker: bool, protocol: str):
-    from iloci.agent import Agent, build
-    from iloci.concepts.memory import load_memory
+    # the web page needs the serve extra (starlette): loaded when the command runs
     from iloci.web.app import Classroom
 
     path = Path(memory)
@@ -91,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         import uvicorn
 
+        # the web page needs the serve extra (starlette): loaded when the command runs
         from iloci.web.app import create_app
     except ImportError as exc:
         raise MissingBackendError("command", "serve", ["starlette", "uvicorn"],
