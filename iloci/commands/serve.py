@@ -14,6 +14,7 @@ from typing import Any
 from iloci.agent import Agent, build
 from iloci.commands.teach import DEFAULT_MEMORY, PAGE, add_protocol_argument, command_config
 from iloci.concepts.memory import load_memory
+from iloci.data.files import writable_file
 from iloci.errors import InvalidInputError, MissingBackendError
 from iloci.progress import acquire_memory_lock
 
@@ -62,7 +63,10 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
     MemoryLockedError
         Another process (``iloci teach``, another ``iloci serve``) holds
         the memory; its holder is named.
+    InvalidInputError
+        The memory's folder cannot take files (nothing was done).
     """
+    writable_file(memory, "--memory")  # before the lock: its folder must take files
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:
         classroom = _build(memory, config, worker, protocol)
