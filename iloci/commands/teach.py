@@ -22,12 +22,11 @@ import warnings
 from iloci.agent import Agent, SkippedDemonstrationWarning, build
 from iloci.concepts.memory import load_memory
 from iloci.config import load_config
-from iloci.data.files import writable_file
 from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
 from iloci.errors import IlociError, MemoryFileError
 from iloci.interfaces import Demonstration
-from iloci.progress import (PROGRESS_KEY, item_digest, progress_record, resume_point,
-                            teaching_lock, why_not_saved)
+from iloci.progress import (PROGRESS_KEY, check_memory_path, item_digest, progress_record,
+                            resume_point, teaching_lock, why_not_saved)
 
 __all__ = ["register", "run"]
 
@@ -176,7 +175,7 @@ def _describe(outcome) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    memory_path = writable_file(args.memory, "--memory")  # before anything is learned
+    memory_path = check_memory_path(args.memory)  # before anything is learned
     with teaching_lock(memory_path):
         return _teach(args, memory_path)
 
