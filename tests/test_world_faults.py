@@ -300,7 +300,8 @@ def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
     save_memory(tmp_path / "m.npz", Memory(), {}, extra={"config": saved})
     monkeypatch.undo()
     with pytest.raises(MemoryFileError, match=r"written by iloci 99.1.0, this is iloci "
-                       rf"{iloci._version.__version__}: upgrade iloci.*forgetting_rate"):
+                       rf"{iloci._version.__version__}: upgrade iloci.*forgetting_rate"), \
+            pytest.warns(UserWarning, match="written by iloci 99.1.0"):
         Agent.load(tmp_path / "m.npz")
 
 
@@ -324,6 +325,107 @@ def test_a_config_from_a_newer_iloci_names_both_versions(tmp_path, capsys):
     assert "upgrade" not in capsys.readouterr().err
 
 
+
+def _memory_members(path: Path) -> dict[str, bytes]:
+    import zipfile
+    with zipfile.ZipFile(path) as z:
+        return {n: z.read(n) for n in z.namelist()}
+
+
+def test_a_memory_file_from_elsewhere_is_refused_before_it_is_unpacked(tmp_path, monkeypatch):
+    """Pickles (whole file, or an object array inside), a zip bomb, a lying array header and
+    a file that is no archive: each its own sentence, nothing unpickled or unpacked."""
+    import io
+    import pickle
+    import zipfile
+
+    import iloci.concepts.storage as storage
+    from iloci.concepts.memory import Memory, load_memory, save_memory
+    from iloci.errors import MemoryFileError
+
+    good = save_memory(tmp_path / "good.npz", Memory(), {"w": np.zeros(3)})
+    members = _memory_members(good)
+
+    def npz(name: str, extra: dict[str, bytes], **kw) -> Path:
+        f = tmp_path / name
+        with zipfile.ZipFile(f, "w", **kw) as z:
+            for n, b in {**members, **extra}.items():
+                z.writestr(n, b)
+        return f
+
+    def npy(a: np.ndarray) -> bytes:
+        buf = io.BytesIO()
+        np.save(buf, a, allow_pickle=True)
+        return buf.getvalue()
+
+    (tmp_path / "p.npz").write_bytes(pickle.dumps({"a": 1}))
+    with pytest.raises(MemoryFileError, match="p.npz is refused: the file is a Python pickle"):
+        load_memory(tmp_path / "p.npz")
+    f = npz("o.npz", {"mem/evil.npy": npy(np.array([{"a": 1}], dtype=object))})
+    with pytest.raises(MemoryFileError, match="'mem/evil' holds Python objects.*run any code"):
+        load_memory(f)
+    monkeypatch.setattr(storage, "MAX_UNPACKED", 10**6)
+    f = npz("bomb.npz", {"mem/z.npy": npy(np.zeros(2 * 10**5))},
+            compression=zipfile.ZIP_DEFLATED)
+    assert f.stat().st_size < 10**5
+    with pytest.raises(MemoryFileError, match="would unpack to 0.0 GiB.*up to 0 GiB.*nothing "
+                       "was unpacked"):
+        load_memory(f)
+    monkeypatch.undo()
+    header = npy(np.zeros(4)).replace(b"(4,), ", b"(999999,),")
+    f = npz("lie.npz", {"mem/lie.npy": header})
+    with pytest.raises(MemoryFileError, match=r"'mem/lie' claims shape \(999999,\).*corrupted"):
+        load_memory(f)
+    (tmp_path / "t.npz").write_text("hello")
+    with pytest.raises(MemoryFileError, match="not a complete .npz archive"):
+        load_memory(tmp_path / "t.npz")
+    assert load_memory(good)[1]["w"].shape == (3,)
+
+
+def test_a_memory_from_an_older_or_newer_iloci_names_the_versions(tmp_path, monkeypatch):
+    import iloci._version
+    from iloci.concepts.memory import Memory, load_memory, save_memory
+    from iloci.concepts.storage import read_memory_file, write_memory_file
+    from iloci.errors import MemoryFileError
+
+    save_memory(tmp_path / "m.npz", Memory(), {})
+    arrays, header = read_memory_file(tmp_path / "m.npz")
+    header = {k: v for k, v in header.items() if k not in ("checksum", "iloci")}
+    arrays.pop("mem/prototype")  # an array an older iloci did not write
+    write_memory_file(tmp_path / "old.npz", arrays, header)
+    with pytest.raises(MemoryFileError, match=r"old.npz: .*it lacks 'mem/prototype'.*written "
+                       rf"by iloci {iloci._version.__version__}; this is iloci"):
+        load_memory(tmp_path / "old.npz")
+    monkeypatch.setattr(iloci._version, "__version__", "42.0")
+    import iloci.concepts.storage as storage  # the writer names its version in the header
+    monkeypatch.setattr(storage, "__version__", "42.0", raising=False)
+    save_memory(tmp_path / "new.npz", Memory(), {})
+    monkeypatch.undo()
+    with pytest.warns(UserWarning, match="new.npz was written by iloci 42.0, this is iloci "
+                      ".*saving the memory from here drops"):
+        load_memory(tmp_path / "new.npz")
+
+
+def test_a_data_set_with_names_that_are_not_utf8_is_read_and_reported(tmp_path):
+    import os
+
+    from iloci.data.datasets import load_dataset
+    from iloci.data.files import write_text_atomic
+
+    if os.sys.getfilesystemencoding() != "utf-8":
+        pytest.skip("a UTF-8 file system encoding")
+    root = tmp_path / os.fsdecode(b"data\xe9")
+    t = np.linspace(0.0, 1.0, 40)
+    for concept, k in ((os.fsdecode(b"Sin\xe9"), 6), ("GShape", 3)):
+        for i in range(2):
+            (root / concept).mkdir(parents=True, exist_ok=True)
+            np.savetxt(root / concept / os.fsdecode(b"s%d\xff.csv" % i),
+                       np.column_stack([np.cos(k * t) + i, np.sin(k * t)]), delimiter=",")
+    ds = load_dataset(root)
+    assert sorted({d.true_concept for d in ds.demos}) == ["GShape", "Sin\\xe9"]
+    report = write_text_atomic(tmp_path / "r.md", f"data set {root}, {ds.demos[-1].key}\n")
+    assert report.read_bytes().endswith(b"data\\xe9, Sin\\xe9/1\n")
+
 @pytest.mark.usefixtures("default_back_ends")
 def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
     from iloci.data.files import writable_dir
@@ -342,6 +444,10 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatc
     assert learned == []
     with pytest.raises(InvalidInputError, match="is a file, not a directory"):
         writable_dir(blocker, "--out")
+    from iloci.commands.serve import build_classroom
+    with pytest.raises(InvalidInputError, match="--memory .*a-file.*is a file, not a directory"):
+        build_classroom(blocker / "m.npz", worker=False)  # before its lock is taken
+    assert not (blocker.parent / "m.npz.lock").exists()
     argv = [["evaluate", "--out", str(tmp_path / "o"), "--memories", str(blocker / "m"),
              "--no-baseline"],
             ["teach", "--memory", str(blocker / "m.npz"), "GShape/0"],

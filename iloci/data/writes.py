@@ -8,6 +8,7 @@ there.
 
 from __future__ import annotations
 
+import codecs
 from collections.abc import Callable
 import errno
 import os
@@ -19,7 +20,22 @@ from typing import IO, Any
 
 from iloci.errors import InvalidInputError
 
-__all__ = ["writable_dir", "writable_file", "write_atomic", "write_text_atomic"]
+__all__ = ["bytes_escape", "writable_dir", "writable_file", "write_atomic",
+           "write_text_atomic"]
+
+
+def bytes_escape(exc: UnicodeError) -> tuple[str, int]:
+    """Codec error handler ``"iloci-bytes"``: a byte the OS gave undecoded (a lone
+    surrogate U+DC80-U+DCFF) as ``\\xNN``, like :func:`iloci.data.files.shape_name`;
+    anything else as a backslash escape."""
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    text = exc.object[exc.start:exc.end]
+    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
+                   else c.encode("ascii", "backslashreplace").decode() for c in text), exc.end
+
+
+codecs.register_error("iloci-bytes", bytes_escape)
 
 
 def writable_dir(path: str | os.PathLike[str], what: str) -> Path:
@@ -208,7 +224,8 @@ def write_text_atomic(path: str | os.PathLike[str], text: str, *, encoding: str 
     ----------
     path : str or path-like
     text : str
-        Written as is (no newline translation).
+        Written as is (no newline translation); a byte of a file name the OS gave
+        undecoded (a lone surrogate) as ``\\xNN`` (:func:`bytes_escape`).
     encoding : str
         Text encoding, UTF-8 by default (not the locale's).
     mkdir : bool
@@ -219,5 +236,5 @@ def write_text_atomic(path: str | os.PathLike[str], text: str, *, encoding: str 
     pathlib.Path
         The written file.
     """
-    data = text.encode(encoding)
+    data = text.encode(encoding, "iloci-bytes")
     return write_atomic(path, lambda fh: fh.write(data), mkdir=mkdir)
