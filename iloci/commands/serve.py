@@ -16,8 +16,9 @@ from typing import Any
 from iloci.agent import Agent, build
 from iloci.commands.teach import DEFAULT_MEMORY, PAGE, add_protocol_argument, command_config
 from iloci.concepts.memory import load_memory
+from iloci.data.writes import check_memory_path
 from iloci.errors import InvalidInputError, MissingBackendError
-from iloci.progress import acquire_memory_lock, check_memory_path
+from iloci.progress import acquire_memory_lock
 
 __all__ = ["register", "run", "build_classroom"]
 

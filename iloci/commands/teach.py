@@ -23,9 +23,10 @@ from iloci.agent import Agent, SkippedDemonstrationWarning, build
 from iloci.concepts.memory import load_memory
 from iloci.config import load_config
 from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
+from iloci.data.writes import check_memory_path
 from iloci.errors import IlociError, MemoryFileError
 from iloci.interfaces import Demonstration
-from iloci.progress import (PROGRESS_KEY, check_memory_path, item_digest, progress_record,
+from iloci.progress import (PROGRESS_KEY, item_digest, progress_record,
                             resume_point, teaching_lock, why_not_saved)
 
 __all__ = ["register", "run"]
