@@ -33,6 +33,7 @@ from iloci.data.files import write_atomic
 from iloci.errors import (ConfigError, InvalidInputError, MemoryFileError, MissingBackendError,
                           UnknownComponentError, did_you_mean)
 from iloci.interfaces import Execution, IKSolver, PerceptualModel, Response, Simulator
+from iloci.plugins import get_registry
 from iloci.registry import validate_dataclass, validate_params
 from iloci.sensorimotor.robots import get_robot, robot_and_ik
 
@@ -329,7 +330,6 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
 
     source = str(memory_path)
     if registry is None:
-        from iloci.plugins import get_registry
         registry = get_registry()
     memory, net_state, header = loaded if loaded is not None else load_memory(memory_path)
     saved = header.get("config")

@@ -22,10 +22,10 @@ import signal
 import sys
 from typing import Any
 
-from iloci.errors import InvalidInputError, UnknownComponentError
+from iloci.errors import InvalidInputError, PluginError, UnknownComponentError
 from iloci.hookspecs import hookimpl
-from iloci.interfaces import FoldExecutor
-from iloci.plugins import get_plugin_manager, get_registry
+from iloci.interfaces import FoldExecutor, unmet_members
+from iloci.plugins import get_plugin_manager, get_registry, hook_results
 
 __all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "local_executor",
            "make_executor"]
@@ -172,9 +172,6 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     InvalidInputError
         An unknown name, or ``address`` for ``local``.
     """
-    from iloci.errors import PluginError
-    from iloci.interfaces import FoldExecutor, unmet_members
-    from iloci.plugins import hook_results
     pm = plugin_manager or get_plugin_manager()
     _warn_old_hook(pm)
     for made, plugin, distribution in hook_results(pm, "iloci_make_executor", name=name,
