@@ -36,11 +36,11 @@ class LearnerConfig:
     #: let regenerated patterns drift further from what was demonstrated
     #: (measured in docs/method.md, "Where the paper is silent").
     rehearsal_epochs: int = constrained(0, Interval(0))
-    #: Recognition answers "unknown" when its familiarity (see
-    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration that
-    #: some memory entry's PB reproduces well, 0.5 when the best entry
-    #: reproduces it as badly as one known concept reproduces its neighbour)
-    #: is below this; 0 never does (the paper always names a concept).
+    #: Recognition answers "unknown" when its familiarity (``familiarity``
+    #: below, ``iloci.concepts.inference.familiarity``: near 1 for a
+    #: demonstration like something the memory knows, 0.5 when it lies as
+    #: far from everything known as two known concepts lie apart) is below
+    #: this; 0 never does (the paper always names a concept).
     unknown_below: float = constrained(0.0, Interval(0, 1))
     #: Novelty answer: when a demonstration's familiarity (``familiarity``
     #: below) is below this, the robot first imitates it back as something
