@@ -46,7 +46,8 @@ __all__ = [
 ]
 
 #: iloci's own plugins, registered through the same hooks as third-party ones.
-DEFAULT_PLUGINS = ("iloci.teachers", "iloci.evaluation.executors")
+DEFAULT_PLUGINS = ("iloci.teachers", "iloci.evaluation.executors",
+                   "iloci.sensorimotor.robots.presets")
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
@@ -317,7 +318,10 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
             view = registry.view(kind.name, plugin=impl.plugin_name,
                                  distribution=pinfo.distribution, version=pinfo.version)
             try:
-                returned = impl.function(**{arg: view for arg in impl.argnames})
+                if "robots" in impl.argnames:  # the deprecated dict form
+                    returned = _register_robot_dict(impl, view, pinfo)
+                else:
+                    returned = impl.function(**{arg: view for arg in impl.argnames})
                 if returned is not None:
                     raise PluginError(
                         f"plugin {impl.plugin_name!r} (distribution "
@@ -344,3 +348,34 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
                       f"skipped: {error}")
     registry.unloaded = [i for i in info.values() if i.status != "loaded"]
     return registry
+
+
+def _register_robot_dict(impl: Any, view: Any, pinfo: PluginInfo) -> Any:
+    """Call an ``iloci_register_robots(robots)`` of the old, dict form; register what it added.
+
+    Deprecated (a :class:`DeprecationWarning` names the plugin): the dict
+    starts empty, and each value it adds must quack like a
+    :class:`~iloci.sensorimotor.robots.RobotPreset` (``make``, ``summary``,
+    ``joints``, ``plane``); it is registered as if by ``registry.add``, so
+    provenance, collisions and listings are the registry's.
+    """
+    dist = f" (distribution {pinfo.distribution})" if pinfo.distribution else ""
+    warnings.warn(
+        f"iloci plugin {impl.plugin_name!r}{dist} registers robots through "
+        "iloci_register_robots(robots), a dict: deprecated. Write "
+        "iloci_register_robots(registry) and call registry.add(name, factory, summary=..., "
+        "joints=J, plane='given' or 'auto') (docs/hooks.md).", DeprecationWarning, stacklevel=4)
+    robots: dict[str, Any] = {}
+    returned = impl.function(**{arg: robots if arg == "robots" else view
+                                for arg in impl.argnames})
+    for name, preset in robots.items():
+        if not callable(getattr(preset, "make", None)) or not isinstance(
+                getattr(preset, "joints", None), int):
+            raise PluginError(
+                f"plugin {impl.plugin_name!r}{dist}: its iloci_register_robots added "
+                f"{name!r}: {type(preset).__name__}; it must add RobotPreset objects to the "
+                "dict it receives (robots[name] = RobotPreset(...)) and return nothing. Fix "
+                f"the plugin, or block it with ILOCI_BLOCK_PLUGINS={impl.plugin_name}.")
+        view.add(name, preset.make, summary=getattr(preset, "summary", ""),
+                 joints=preset.joints, plane=getattr(preset, "plane", "given"))
+    return returned

@@ -66,12 +66,13 @@ def item_digest(item: Any) -> str:
     """
     h = hashlib.sha256()
     if isinstance(item, Demonstration):
-        h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.true_concept).encode())
+        h.update(b"demo\0" + item.key.encode("utf-8", "surrogatepass") + b"\0"
+                 + str(item.true_concept).encode("utf-8", "surrogatepass"))
         h.update(np.ascontiguousarray(item.positions, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(item.times, dtype=np.float64).tobytes())
     elif isinstance(item, (str, os.PathLike)):
         key = getattr(item, "key", None) or Path(item).stem
-        h.update(b"file\0" + str(key).encode() + b"\0")
+        h.update(b"file\0" + str(key).encode("utf-8", "surrogatepass") + b"\0")
         try:
             h.update(Path(os.fspath(item)).read_bytes())
         except OSError as exc:
@@ -80,7 +81,7 @@ def item_digest(item: Any) -> str:
         try:
             arr = np.asarray(item, dtype=np.float64)
         except (TypeError, ValueError):
-            h.update(b"other\0" + repr(item).encode())
+            h.update(b"other\0" + repr(item).encode("utf-8", "surrogatepass"))
         else:
             h.update(b"array\0" + repr(arr.shape).encode() + arr.tobytes())
     return h.hexdigest()

@@ -59,8 +59,12 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
     MemoryLockedError
         Another process (``iloci teach``, another ``iloci serve``) holds
         the memory; its holder is named.
+    InvalidInputError
+        The memory's folder cannot take files (nothing was done).
     """
+    from iloci.data.files import writable_file
     from iloci.progress import acquire_memory_lock
+    writable_file(memory, "--memory")  # before the lock: its folder must take files
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:
         classroom = _build(memory, config, worker, protocol)
