@@ -62,7 +62,8 @@ class AgentBase:
         #: and IK solver (an evaluation shares one between the folds a
         #: process runs).
         self.motion_cache: Any = None
-        #: Called with each RehearsalProgress (see Learner); None for none.
+        #: Called with each RehearsalProgress (see Learner); None for none. If it
+        #: raises, a ProgressCallbackWarning is issued and learning goes on.
         self.on_progress: Callable[[Any], None] | None = None
         self._worker: Any = None
         # the in-process network while a worker process holds the model
@@ -104,9 +105,19 @@ class AgentBase:
 
     def _report_progress(self, progress: Any) -> None:
         # looked up at each report, so a callback set after observe() applies to that turn
+        # a callback that raises (a display's bug) loses its report, not the learning
         callback = self.on_progress
         if callback is not None:
-            callback(progress)
+            try:
+                callback(progress)
+            except Exception as exc:
+                import warnings
+
+                from iloci.errors import ProgressCallbackWarning
+                warnings.warn(ProgressCallbackWarning(
+                    f"agent.on_progress raised {type(exc).__name__}: {exc} (at the "
+                    f"{getattr(progress, 'phase', '?')!r} phase); the report was dropped and the "
+                    "rehearsal goes on."), stacklevel=2)
 
     def motion(self, demo: Demonstration) -> Motion:
         """The demonstration as the robot performs it (preprocessing + IK).
