@@ -21,7 +21,7 @@ from typing import Any
 
 from iloci._version import __version__
 from iloci.errors import IlociError, PluginError
-from iloci.plugins import get_plugin_manager
+from iloci.plugins import get_plugin_manager, hook_results
 from iloci.progress import progress_sink
 
 __all__ = ["main"]
@@ -52,7 +52,8 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     Raises
     ------
     PluginError
-        A plugin's command has a name already taken.
+        A plugin's command has a name already taken, or its ``iloci_add_commands``
+        raised (naming the plugin).
     """
 
     parser = argparse.ArgumentParser(
@@ -65,10 +66,15 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     for mod in COMMAND_MODULES:
         importlib.import_module(mod).register(sub)
     pm = plugin_manager or get_plugin_manager()
-    try:
-        pm.hook.iloci_add_commands(subparsers=sub)
-    except argparse.ArgumentError as exc:  # a name taken twice (Python >= 3.11)
-        raise PluginError(f"a plugin's command clashes with another: {exc}") from exc
+    try:  # one plugin at a time, so that a failure names the plugin
+        for _ in hook_results(pm, "iloci_add_commands", subparsers=sub):
+            pass
+    except PluginError as exc:
+        if isinstance(exc.__cause__, argparse.ArgumentError):  # a name taken twice
+            raise PluginError(f"{exc.args[0].partition('. Fix')[0]}: a plugin's command "
+                              "clashes with another command; rename it, or block the "
+                              "plugin with ILOCI_BLOCK_PLUGINS.") from exc.__cause__
+        raise
     return parser
 
 

@@ -28,7 +28,7 @@ from typing import Any
 import pluggy
 
 from iloci import hookspecs
-from iloci.errors import PluginError
+from iloci.errors import IlociError, PluginError
 from iloci.interfaces import ALL_KINDS
 from iloci.registry import FIRST_PARTY, Registry
 
@@ -281,16 +281,32 @@ def hook_results(pm: pluggy.PluginManager, hook: str, **kwargs: Any
     """Call hook ``hook`` one implementation at a time, in pluggy's order (the last
     registered first); yield ``(result, plugin, distribution)`` for each non-None result.
 
-    For hooks whose result iloci uses (``iloci_make_executor``): a result of the wrong
-    type can then be refused naming the plugin and its distribution.
+    For hooks whose result iloci uses (``iloci_make_executor``) or that act
+    (``iloci_add_commands``): a result of the wrong type can then be refused naming
+    the plugin and its distribution.
+
+    Raises
+    ------
+    PluginError
+        An implementation raised anything but an iloci error: naming the plugin, its
+        distribution and the hook, and what to do (the original is the cause).
     """
     info = getattr(pm, "iloci_plugin_info", {}) or {}
     caller = getattr(pm.hook, hook)
     for impl in reversed(caller.get_hookimpls()):
-        result = impl.function(**{arg: kwargs[arg] for arg in impl.argnames})
+        pinfo = info.get(impl.plugin_name)
+        dist = getattr(pinfo, "distribution", None)
+        try:
+            result = impl.function(**{arg: kwargs[arg] for arg in impl.argnames})
+        except IlociError:
+            raise
+        except Exception as exc:
+            raise PluginError(
+                f"plugin {impl.plugin_name!r} (distribution {dist or 'none'}) failed in "
+                f"{hook}: {type(exc).__name__}: {exc}. Fix or update the plugin, or block "
+                f"it with ILOCI_BLOCK_PLUGINS={impl.plugin_name}.") from exc
         if result is not None:
-            pinfo = info.get(impl.plugin_name)
-            yield result, impl.plugin_name, getattr(pinfo, "distribution", None)
+            yield result, impl.plugin_name, dist
 
 
 def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:

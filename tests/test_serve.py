@@ -25,7 +25,7 @@ from iloci.commands.serve import build_classroom  # noqa: E402
 from iloci.data import load_lasa  # noqa: E402
 from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, TOKEN_HEADER, create_app  # noqa: E402
 
-from conftest import small_config  # noqa: E402
+from conftest import agent_state, assert_same_state, small_config  # noqa: E402
 
 
 
@@ -490,35 +490,21 @@ def test_something_new_founds_a_concept_in_one_click(served, lasa):
 
 
 # -- a person's controls -----------------------------------------------------------------
-def _state(agent):
-    arrays, meta = agent.memory.to_arrays()
-    return arrays, meta, agent.perceptual_model.state()
-
-
-def _same(s1, s2):
-    (a1, m1, n1), (a2, m2, n2) = s1, s2
-    assert m1 == m2 and a1.keys() == a2.keys() and n1.keys() == n2.keys()
-    for k in a1:
-        np.testing.assert_array_equal(a1[k], a2[k])
-    for k in n1:
-        np.testing.assert_array_equal(n1[k], n2[k])
-
-
 def test_undo_puts_memory_and_network_back_exactly(served, lasa):
     client, classroom, memory = served
     assert client.post("/api/undo", json={}).status_code == 409       # nothing yet
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
-    before, file_before = _state(classroom.agent), memory.read_bytes()
+    before, file_before = agent_state(classroom.agent), memory.read_bytes()
     a = client.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}).json()["answer"]
     out = judge(client, a, 1).json()
     assert out["memory"]["undo"].startswith("drawing")
     with pytest.raises(AssertionError):
-        _same(before, _state(classroom.agent))                       # the step changed it
+        assert_same_state(before, agent_state(classroom.agent))       # the step changed it
     r = client.post("/api/undo", json={})
     assert r.status_code == 200, r.text
-    _same(before, _state(classroom.agent))
+    assert_same_state(before, agent_state(classroom.agent))
     saved = iloci.Agent.load(memory)
-    _same(before, _state(saved))
+    assert_same_state(before, agent_state(saved))
     assert memory.read_bytes() != b"" and len(memory.read_bytes()) == len(file_before)
     # forget, rename, start over: each undone the same way
     for path, body in [("/api/rename", {"concept": "c1", "name": "G"}),
@@ -526,7 +512,7 @@ def test_undo_puts_memory_and_network_back_exactly(served, lasa):
         r = client.post(path, json=body)
         assert r.status_code == 200, (path, r.text)
         client.post("/api/undo", json={})
-        _same(before, _state(classroom.agent))
+        assert_same_state(before, agent_state(classroom.agent))
 
 
 def test_forget_an_entry_and_a_concept(served, lasa):
@@ -564,7 +550,7 @@ def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
                            headers={"content-type": "application/octet-stream"})
             assert r.status_code == 200, r.text
             assert [c["name"] for c in r.json()["memory"]["concepts"]] == ["c1"]
-            _same(_state(classroom.agent), _state(fresh.agent))
+            assert_same_state(agent_state(classroom.agent), agent_state(fresh.agent))
             assert iloci.Agent.load(tmp_path / "fresh.npz").memory.concepts() == ["c1"]
             assert other.post("/api/undo", json={}).json()["memory"]["concepts"] == []
     finally:

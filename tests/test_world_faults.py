@@ -575,3 +575,46 @@ def test_an_installed_plugin_with_a_wrong_factory_result_is_named_with_its_distr
     assert "teacher 'sloppy' of plugin 'sloppy' (distribution iloci-sloppy)" in out.stderr
     assert "iloci_register_teachers" in out.stderr and "returned str 'yes'" in out.stderr
     assert "Traceback" not in out.stderr and not (tmp_path / "m.npz").exists()
+
+
+def _installed(site: Path, name: str, code: str) -> None:
+    """A plugin distribution ``iloci-NAME`` (module NAME_plugin) found on PYTHONPATH=site."""
+    site.mkdir(exist_ok=True)
+    (site / f"{name}_plugin.py").write_text("from iloci import hookimpl\n\n" + code)
+    info = site / f"iloci_{name}-0.3.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: iloci-{name}\nVersion: 0.3\n")
+    (info / "entry_points.txt").write_text(f"[iloci]\n{name} = {name}_plugin\n")
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_an_installed_plugin_that_raises_is_named_with_what_to_do(tmp_path, cli):
+    """A factory that raises, a factory naming a module the plugin lacks, and a command
+    hook that raises: each error names the plugin, its distribution, and how to block it."""
+    site = tmp_path / "site"
+    _installed(site, "shaky", (
+        "def _broken(**kw):\n    raise RuntimeError('no teacher today')\n\n"
+        "@hookimpl\n"
+        "def iloci_register_teachers(registry):\n"
+        "    registry.add('shaky', _broken, summary='raises')\n"
+        "    registry.add('ghost', 'shaky_gone:Teacher', summary='lazy, module missing')\n"))
+    env = {"PYTHONPATH": str(site)}
+    for teacher, says in (("shaky", "its factory _broken raised RuntimeError: no teacher "
+                                    "today"),
+                          ("ghost", "its factory 'shaky_gone:Teacher' names module "
+                                    "shaky_gone, which cannot be imported")):
+        out = cli("teach", "--teacher", teacher, "--memory", str(tmp_path / "m.npz"),
+                  "GShape/0", env=env)
+        assert out.returncode == 2, out.stderr
+        assert (f"teacher {teacher!r} of plugin 'shaky' (distribution iloci-shaky)"
+                in out.stderr), out.stderr
+        assert says in out.stderr and "ILOCI_BLOCK_PLUGINS=shaky" in out.stderr
+        assert "Traceback" not in out.stderr and not (tmp_path / "m.npz").exists()
+    _installed(site, "loud", "@hookimpl\ndef iloci_add_commands(subparsers):\n"
+                             "    raise ValueError('no room')\n")
+    out = cli("plugins", env=env)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert ("plugin 'loud' (distribution iloci-loud) failed in iloci_add_commands: "
+            "ValueError: no room" in out.stderr and "ILOCI_BLOCK_PLUGINS=loud" in out.stderr)
+    out = cli("plugins", env={**env, "ILOCI_BLOCK_PLUGINS": "loud"})
+    assert out.returncode == 0, out.stderr

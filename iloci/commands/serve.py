@@ -66,7 +66,8 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
         the memory, under this name or another (a hard link); its holder
         is named.
     """
-    from iloci.progress import acquire_memory_lock, check_memory_path
+    from iloci.data.writes import check_memory_path
+    from iloci.progress import acquire_memory_lock
     check_memory_path(memory)               # a loop, a directory, a folder that takes no file
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:

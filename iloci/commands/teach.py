@@ -168,7 +168,8 @@ def _describe(outcome) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.progress import check_memory_path, teaching_lock
+    from iloci.data.writes import check_memory_path
+    from iloci.progress import teaching_lock
 
     memory_path = check_memory_path(args.memory)  # before anything is learned
     with teaching_lock(memory_path):

@@ -18,8 +18,8 @@ import importlib.util
 import inspect
 from typing import Any
 
-from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
-                          PluginNotLoadedError, UnknownComponentError)
+from iloci.errors import (ConfigError, IlociError, InvalidInputError, MissingBackendError,
+                          PluginError, PluginNotLoadedError, UnknownComponentError)
 from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
 from iloci.registry.params import params_to_dict, validate_dataclass
 
@@ -264,6 +264,15 @@ class Registry:
             module = importlib.import_module(mod_name)
         except ImportError as exc:
             missing_mod = getattr(exc, "name", None) or mod_name
+            if not _first_party(spec) and not spec.install and \
+                    (mod_name + ".").startswith(missing_mod + "."):
+                # the plugin names a module of its own that is not there: its bug
+                raise PluginError(
+                    f"{_label(spec.kind)} {spec.name!r} of plugin {spec.plugin!r} "
+                    f"(distribution {spec.distribution or 'none'}): its factory "
+                    f"{spec.factory!r} names module {mod_name}, which cannot be imported "
+                    f"({exc}). Fix or reinstall the plugin, or block it with "
+                    f"ILOCI_BLOCK_PLUGINS={spec.plugin}.") from exc
             raise MissingBackendError(
                 _label(spec.kind), spec.name, [missing_mod],
                 spec.install or f"pip install {missing_mod}") from exc
@@ -308,7 +317,25 @@ class Registry:
             except (TypeError, ValueError):
                 takes_all, accepted = True, set()
             kwargs.update({k: v for k, v in extra.items() if takes_all or k in accepted})
-        return check_built(spec, factory(**kwargs))
+        if _first_party(spec):
+            return check_built(spec, factory(**kwargs))
+        try:
+            built = factory(**kwargs)
+        except IlociError:
+            raise
+        except Exception as exc:  # a third-party factory's own failure: name who
+            raise PluginError(
+                f"{_label(spec.kind)} {spec.name!r} of plugin {spec.plugin!r} (distribution "
+                f"{spec.distribution or 'none'}): its factory {_factory_name(spec.factory)} "
+                f"raised {type(exc).__name__}: {exc}. Fix or update the plugin, or block it "
+                f"with ILOCI_BLOCK_PLUGINS={spec.plugin}.") from exc
+        return check_built(spec, built)
+
+
+def _first_party(spec: ComponentSpec) -> bool:
+    """Whether iloci or one of its own plugin distributions registered ``spec``."""
+    return spec.distribution in (None, "iloci") or \
+        spec.distribution in FIRST_PARTY.values()
 
 
 def check_built(spec: ComponentSpec, obj: Any) -> Any:
