@@ -197,6 +197,10 @@ def _parse_toml(text: str, path: Path) -> dict[str, Any]:
         m = _LINE_RE.search(str(exc))
         line = int(m.group(1)) if m else None
         raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
+    except RecursionError:
+        raise ConfigError("its arrays or tables are nested too deeply to read (an iloci "
+                          "config nests two levels: [section] key = value)",
+                          source=str(path)) from None
 
 
 class ConfigData(dict[str, Any]):
