@@ -32,6 +32,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 import hashlib
 import itertools
+import math
 import json
 from pathlib import Path
 import time
@@ -79,6 +80,11 @@ class Run:
 
 
 _SPEC_KEYS = {"base", "seeds", "folds", "search", "samples", "random_seed", "config", "values"}
+
+#: Most settings one spec may name (the grid's product, or random ``samples``): each is
+#: checked against the configuration schema before anything runs (~10-60 ms each), and
+#: each is ``seeds x folds`` runs; 2,000 settings of 5 folds are already 10,000 runs.
+MAX_SETTINGS = 2_000
 
 
 def _error(source: str, message: str) -> ConfigError:
@@ -149,6 +155,14 @@ def load_spec(path: str | Path) -> SweepSpec:
     samples = raw.get("samples", 0)
     if search == "random" and not (isinstance(samples, int) and samples >= 1):
         raise _error(source, "search = 'random' needs samples = N (settings to draw, >= 1).")
+    count = math.prod(len(v) if isinstance(v, list) else 1 for v in values.values()) \
+        if search == "grid" else samples
+    if count > MAX_SETTINGS:
+        sizes = " x ".join(str(len(v)) for v in values.values() if isinstance(v, list))
+        raise _error(source, f"{count:,} settings ({sizes if search == 'grid' else 'samples'}"
+                     f") x {len(seeds)} seed(s); a sweep spec names at most {MAX_SETTINGS:,} "
+                     "settings (iloci_ray.sweep.MAX_SETTINGS): sweep fewer values, split the "
+                     "spec into several, or draw some with search = 'random' and samples = N.")
     spec = SweepSpec(base=base, values=dict(values), seeds=tuple(seeds),
                      folds=None if folds is None else tuple(folds), search=search,
                      samples=int(samples), random_seed=int(raw.get("random_seed", 0)),
@@ -194,7 +208,8 @@ def _resolve(spec: SweepSpec, setting: Mapping[str, Any], seed: int) -> dict[str
     try:
         return load_config(data).to_dict()
     except ConfigError as exc:
-        raise _error(spec.source, f"setting {dict(setting)}: {exc}") from None
+        said = str(exc).removeprefix("<dict>: ")  # the spec is the source, not a mapping
+        raise _error(spec.source, f"setting {dict(setting)}: {said}") from None
 
 
 def _update(data: dict[str, Any], sec: str, values: Mapping[str, Any]) -> None:
