@@ -255,6 +255,28 @@ def test_a_killed_worker_is_retried_and_the_sweep_leaves_no_ray_process(tmp_path
 
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_a_killed_raylet_is_restarted_and_every_run_is_stored(tmp_path):
+    import os
+    import signal
+    import time
+
+    # 4 runs, 2 at once: the last 2 need the raylet after it was killed
+    d = _sweep(tmp_path, '"learner.k_cutoff" = [0.5, 1.0]')
+    _first_worker(d.pid)
+    raylet = next(int(line.split(" ", 1)[0]) for line in _session(d.pid)
+                  if "/raylet/raylet " in line)
+    os.kill(raylet, signal.SIGKILL)  # the node's manager gone: no run is to blame
+    log = d.communicate(timeout=900)[0]
+    assert d.returncode == 0, log
+    assert len(list((tmp_path / "out" / "runs").glob("*.json"))) == 4
+    summary = log.split("4 runs:")[1]
+    assert summary.startswith(" 4 stored") and "0 failed" in summary
+    time.sleep(1)
+    assert _session(d.pid) == []
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
 def test_ray_left_by_a_driver_killed_with_sigkill_is_stopped_by_the_next_start(tmp_path):
     import os
     import signal
@@ -306,7 +328,8 @@ def test_a_base_config_with_a_byte_order_mark_passes_check_and_sweep(tmp_path, c
 
 @pytest.mark.parametrize("encoded, match", [
     ("\ufeff[learner]\r\nk_cutoff = 0.5\r\n".encode(), None),   # BOM and CRLF: read
-    ("# caf\xe9\n[learner]\nk_cutoff = 0.5\n".encode("latin-1"), "not UTF-8 text .*iconv -f cp1252"),
+    ("# caf\xe9\n[learner]\nk_cutoff = 0.5\n".encode("latin-1"),
+     "not UTF-8 text .*iconv -f cp1252"),
     (b"[learner]\rk_cutoff = 0.5\r", "carriage return only"),
 ], ids=["bom-crlf", "latin-1", "cr"])
 def test_a_base_config_in_another_encoding_reads_as_config_check_reads_it(
