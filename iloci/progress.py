@@ -38,7 +38,6 @@ __all__ = [
     "MemoryLockedError",
     "SHOW_AFTER",
     "acquire_memory_lock",
-    "check_memory_path",
     "lock_path_of",
     "memory_lock",
     "saving",
@@ -283,43 +282,6 @@ def _flock_holder(st: os.stat_result) -> str:
     except (OSError, ValueError):
         pass
     return "another process"
-
-
-def check_memory_path(memory: str | os.PathLike[str], what: str = "--memory") -> Path:
-    """``memory`` as a memory file a writer can use, checked before anything is learned.
-
-    A symbolic link is followed (the file it points to is the memory; its
-    folder must take new files); a link that leads back to itself, or a
-    path that is a directory, is refused; the folder is created if missing
-    and must be writable (:func:`iloci.data.files.writable_file`).
-
-    Returns
-    -------
-    Path
-        ``memory`` as given.
-
-    Raises
-    ------
-    InvalidInputError
-        Naming the path, what is wrong and that nothing was done.
-    """
-    import errno
-
-    from iloci.data.files import writable_file
-    from iloci.errors import InvalidInputError
-    path = Path(memory)
-    try:
-        os.stat(path)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise InvalidInputError(
-                f"{what} {str(path)!r} is a symbolic link that leads back to itself (a loop); "
-                "give the memory file's own path. Nothing was done.") from None
-    if os.path.islink(path):
-        writable_file(os.path.realpath(path), f"{what} {str(path)!r} (a link to)")
-    else:
-        writable_file(path, what)
-    return path
 
 
 @contextlib.contextmanager

@@ -18,7 +18,8 @@ import time
 import pytest
 
 from iloci.errors import InvalidInputError
-from iloci.progress import MemoryLockedError, acquire_memory_lock, check_memory_path
+from iloci.data.writes import check_memory_path
+from iloci.progress import MemoryLockedError, acquire_memory_lock
 
 HOLD = ("import sys; from iloci.progress import acquire_memory_lock; "
         "acquire_memory_lock(sys.argv[1], 'iloci serve'); print('held', flush=True); "

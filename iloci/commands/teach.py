@@ -19,6 +19,16 @@ import sys
 from typing import Any
 import warnings
 
+from iloci.agent import Agent, SkippedDemonstrationWarning, build
+from iloci.concepts.memory import load_memory
+from iloci.config import load_config
+from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
+from iloci.data.writes import check_memory_path
+from iloci.errors import IlociError, MemoryFileError
+from iloci.interfaces import Demonstration
+from iloci.progress import (PROGRESS_KEY, item_digest, progress_record,
+                            resume_point, teaching_lock, why_not_saved)
+
 __all__ = ["register", "run"]
 
 #: Memory file used when ``--memory`` is not given.
@@ -67,7 +77,6 @@ def command_config(config: Any, header: dict | None, protocol: str = "interactiv
     keys ``--config`` does not set (a memory's saved config is used as saved:
     it is what the memory was taught with).
     """
-    from iloci.config import load_config
     if config:
         cfg = load_config(config)
         if isinstance(config, Mapping):
@@ -133,9 +142,8 @@ def _show_earlier(agent, items) -> None:
     One that cannot be read or has no concept the teacher knows is left out
     (it was skipped or refused when it was taught).
     """
+    # the learner imports scipy: loaded when the command runs
     from iloci.concepts.learner import show_to_teacher
-    from iloci.errors import IlociError
-    from iloci.interfaces import Demonstration
     for item in items:
         try:
             demo = item.load() if hasattr(item, "load") else item
@@ -168,19 +176,14 @@ def _describe(outcome) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.progress import check_memory_path, teaching_lock
-
     memory_path = check_memory_path(args.memory)  # before anything is learned
     with teaching_lock(memory_path):
         return _teach(args, memory_path)
 
 
 def _teach(args: argparse.Namespace, memory_path: Path) -> int:
-    from iloci.agent import Agent, SkippedDemonstrationWarning, build
-    from iloci.concepts.memory import load_memory
-    from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
+    # rich: loaded when the command runs
     from iloci.display import Bars
-    from iloci.progress import PROGRESS_KEY, item_digest, progress_record, resume_point
 
     header = load_memory(memory_path)[2] if memory_path.exists() else None
     cfg = command_config(args.config, header, getattr(args, "protocol", "interactive"))
@@ -230,8 +233,6 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
         try:
             agent.save(memory_path, extra={PROGRESS_KEY: progress_record(digests, position[0])})
         except OSError as exc:
-            from iloci.errors import MemoryFileError
-            from iloci.progress import why_not_saved
             before = "no memory yet" if not memory_path.exists() else \
                 "the memory as it was before it"
             raise MemoryFileError(

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci._version import __version__, is_newer
 from iloci.concepts.entry import Entry, _pattern, _stack, demonstration_digest, entries_equal
 from iloci.concepts.storage import FORMAT, FORMAT_VERSION, read_memory_file, write_memory_file
 from iloci.errors import InvalidInputError, MemoryFileError
@@ -447,12 +448,10 @@ def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndar
     try:
         memory = Memory.from_arrays(arrays, header.get("memory", {}))
     except MemoryFileError as exc:
-        from iloci._version import __version__
         raise MemoryFileError(f"{path}: {exc} It says it was written by iloci "
                               f"{header.get('iloci', '(no version)')}; this is iloci "
                               f"{__version__}.") from None
     network_state = {k[4:]: v for k, v in arrays.items() if k.startswith("net/")}
-    from iloci._version import __version__, is_newer
     if is_newer(header.get("iloci")):
         import warnings
         warnings.warn(f"{path} was written by iloci {header.get('iloci')}, this is iloci "

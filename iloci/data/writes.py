@@ -86,6 +86,39 @@ def writable_file(path: str | os.PathLike[str], what: str) -> Path:
     return p
 
 
+def check_memory_path(memory: str | os.PathLike[str], what: str = "--memory") -> Path:
+    """``memory`` as a memory file a writer can use, checked before anything is learned.
+
+    A symbolic link is followed (the file it points to is the memory; its
+    folder must take new files); a link that leads back to itself, or a
+    path that is a directory, is refused; the folder is created if missing
+    and must be writable (:func:`writable_file`).
+
+    Returns
+    -------
+    Path
+        ``memory`` as given.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the path, what is wrong and that nothing was done.
+    """
+    path = Path(memory)
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InvalidInputError(
+                f"{what} {str(path)!r} is a symbolic link that leads back to itself (a loop); "
+                "give the memory file's own path. Nothing was done.") from None
+    if os.path.islink(path):
+        writable_file(os.path.realpath(path), f"{what} {str(path)!r} (a link to)")
+    else:
+        writable_file(path, what)
+    return path
+
+
 def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any], *,
                  mkdir: bool = False, overwrite: bool = True) -> Path:
     """Write a file atomically: readers see the old file or the new one, never a part.
