@@ -42,6 +42,7 @@ import numpy as np
 from iloci.errors import InvalidInputError
 from iloci.params import RNNPBParams
 from iloci.rnnpb.common import WEIGHT_NAMES, pad_sequences
+from iloci.rnnpb.float32 import train as train_float32
 
 __all__ = [
     "ADAM_BETA1",
@@ -268,7 +269,6 @@ def train(weights: Mapping[str, np.ndarray], u: np.ndarray, X: np.ndarray, mw: n
         ``dtype`` is neither ``"float64"`` nor ``"float32"``.
     """
     if dtype == "float32":
-        from iloci.rnnpb.float32 import train as train_float32
         w32, u32, loss32, losses32 = train_float32(weights, u, X, mw, params, epochs)
         return TrainResult(w32, u32, loss32, losses32)
     if dtype != "float64":
