@@ -19,6 +19,7 @@ from iloci.concepts.memory import load_memory
 from iloci.data.writes import check_memory_path
 from iloci.errors import InvalidInputError, MissingBackendError
 from iloci.progress import acquire_memory_lock
+from iloci.worker import WorkerError
 
 __all__ = ["register", "run", "build_classroom"]
 
@@ -144,7 +145,6 @@ def _stop_worker(classroom: Any) -> None:
     network cannot be copied back then, and nothing is lost, since the
     memory file was saved after every change.
     """
-    from iloci.worker import WorkerError
     try:
         classroom.agent.close()
     except WorkerError:

@@ -131,7 +131,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--again", action="store_true",
                    help="go through every demonstration given, not only those after where an "
                         "interrupted earlier run of the same stream stopped; one the memory "
-                        "already learned (same key and samples) is not learned again")
+                        "already learned (same key and pen positions) is not learned again")
     p.set_defaults(func=run)
 
 
@@ -261,7 +261,7 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     known = report.already_learned
     learned = len(report.outcomes) - len(known)
     if known:
-        print(f"already learned, not learned again (the same key and samples): "
+        print(f"already learned, not learned again (the same key and pen positions): "
               f"{', '.join(known)}")
     print(f"learned {learned} demonstration(s) in {report.seconds:.1f} s, "
           + (f"{len(known)} already learned, " if known else "")
