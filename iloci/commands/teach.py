@@ -42,8 +42,9 @@ DEFAULT_MEMORY = "iloci-memory.npz"
 #: CCR as the paper's protocol on the same folds, 1.88 instead of 7.14
 #: feedbacks per demonstration; with a teacher wrong 10 % of the time 99.2 %
 #: instead of 52.5 %) and row ``untaught`` (91 % of never-taught shapes
-#: answered unknown, 1.8 % of taught ones). ``iloci evaluate`` keeps the
-#: paper's protocol (the config's own defaults).
+#: answered unknown, 1.8 % of taught ones, with the familiarity of then,
+#: ``"reproduction"``; the default ``"path"``: benchmarks/familiarity.py).
+#: ``iloci evaluate`` keeps the paper's protocol (the config's own defaults).
 INTERACTIVE = {"novelty_below": 0.8, "novelty_after": 2, "confirm_rewards": True,
                "confirm_new_exemplars": True, "confirm_twice_after_novelty": True,
                "unknown_below": 0.8}
