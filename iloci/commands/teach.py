@@ -42,8 +42,9 @@ DEFAULT_MEMORY = "iloci-memory.npz"
 #: CCR as the paper's protocol on the same folds, 1.88 instead of 7.14
 #: feedbacks per demonstration; with a teacher wrong 10 % of the time 99.2 %
 #: instead of 52.5 %) and row ``untaught`` (91 % of never-taught shapes
-#: answered unknown, 1.8 % of taught ones). ``iloci evaluate`` keeps the
-#: paper's protocol (the config's own defaults).
+#: answered unknown, 1.8 % of taught ones, with the familiarity of then,
+#: ``"reproduction"``; the default ``"path"``: benchmarks/familiarity.py).
+#: ``iloci evaluate`` keeps the paper's protocol (the config's own defaults).
 INTERACTIVE = {"novelty_below": 0.8, "novelty_after": 2, "confirm_rewards": True,
                "confirm_new_exemplars": True, "confirm_twice_after_novelty": True,
                "unknown_below": 0.8}
@@ -130,7 +131,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--again", action="store_true",
                    help="go through every demonstration given, not only those after where an "
                         "interrupted earlier run of the same stream stopped; one the memory "
-                        "already learned (same key and samples) is not learned again")
+                        "already learned (same key and pen positions) is not learned again")
     p.set_defaults(func=run)
 
 
@@ -260,7 +261,7 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     known = report.already_learned
     learned = len(report.outcomes) - len(known)
     if known:
-        print(f"already learned, not learned again (the same key and samples): "
+        print(f"already learned, not learned again (the same key and pen positions): "
               f"{', '.join(known)}")
     print(f"learned {learned} demonstration(s) in {report.seconds:.1f} s, "
           + (f"{len(known)} already learned, " if known else "")

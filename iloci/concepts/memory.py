@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from iloci._version import __version__, is_newer
-from iloci.concepts.entry import Entry, _pattern, _stack, demonstration_digest, entries_equal
+from iloci.concepts.entry import (Entry, _digest_v1, _pattern, _stack, demonstration_digest,
+                                  entries_equal)
 from iloci.concepts.storage import FORMAT, FORMAT_VERSION, read_memory_file, write_memory_file
 from iloci.errors import InvalidInputError, MemoryFileError
 from iloci.sensorimotor.encoding import SensorimotorEncoder
@@ -49,7 +50,7 @@ class Memory:
         learning stream).
     learned : set of str
         :func:`demonstration_digest` of every demonstration learned from:
-        one shown again (the same key and the same samples) is recognized
+        one shown again (the same key and pen positions) is recognized
         and not learned twice (:meth:`learned_concept`). Saved with the
         memory; a file written before it was kept has none.
     revision : int
@@ -224,12 +225,14 @@ class Memory:
     def learned_concept(self, demo: Any) -> str | None:
         """The concept ``demo`` was learned into, if this very demonstration was learned.
 
-        "This very demonstration": the same key and the same samples
-        (:func:`demonstration_digest`); one with the same key but other
-        samples is another demonstration. ``None`` when it was not learned
+        "This very demonstration": the same key and the same pen positions
+        to float32 precision (:func:`demonstration_digest`; time stamps do
+        not count); one with the same key but other positions is another
+        demonstration. ``None`` when it was not learned
         (or the entry that stood for it is gone).
         """
-        if demonstration_digest(demo) not in self.learned:
+        if demonstration_digest(demo) not in self.learned \
+                and _digest_v1(demo) not in self.learned:       # a memory saved before v2
             return None
         key = demo.key
         return next((e.concept for e in self.entries if key in e.sources), None)
