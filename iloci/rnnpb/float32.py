@@ -153,29 +153,16 @@ def train(weights: Mapping[str, np.ndarray], u: np.ndarray, X: np.ndarray, mw: n
         The last epoch's loss (float32's value).
     losses : ndarray (float32), shape (epochs,)
     """
-    w_in = np.asarray(weights["w_in"], np.float32)
-    w_out = np.asarray(weights["w_out"], np.float32)
     X = np.asarray(X, np.float32)
     mw = np.asarray(mw, np.float32)
     u = np.array(u, np.float32)
     T, R, D = X.shape
-    H, S = w_out.shape
+    H, S = np.asarray(weights["w_out"]).shape
     P = u.shape[1]
     L, Sp, Hp = T - 1, _round16(S), _round16(H)
     alpha, bound = F32(params.closed_loop), F32(params.pb_bound)
     # the padded parameters, flat as the kernel holds them: Ws | Wp | bh | Wo | bo
-    Ws = np.zeros((Sp, Hp), np.float32)
-    Ws[:S, :H] = w_in[:S]
-    Wp = np.zeros((P, Hp), np.float32)
-    Wp[:, :H] = w_in[S:]
-    bh = np.zeros(Hp, np.float32)
-    bh[:H] = np.asarray(weights["b_hidden"], np.float32)
-    Wo = np.zeros((Hp, Sp), np.float32)
-    Wo[:H, :S] = w_out
-    bo = np.zeros(Sp, np.float32)
-    bo[:S] = np.asarray(weights["b_out"], np.float32)
-    parts = [Ws, Wp, bh, Wo, bo]
-    flat = np.concatenate([p.ravel() for p in parts])
+    flat = np.concatenate([p.ravel() for p in _padded(weights, S, H, P)])
     m, v = np.zeros_like(flat), np.zeros_like(flat)
     mu, vu = np.zeros_like(u), np.zeros_like(u)
     mix = np.zeros(Sp, np.float32)
