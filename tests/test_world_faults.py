@@ -643,3 +643,15 @@ def test_an_installed_plugin_that_raises_is_named_with_what_to_do(tmp_path, cli)
             "ValueError: no room" in out.stderr and "ILOCI_BLOCK_PLUGINS=loud" in out.stderr)
     out = cli("plugins", env={**env, "ILOCI_BLOCK_PLUGINS": "loud"})
     assert out.returncode == 0, out.stderr
+
+
+def test_links_without_inertials_are_said_once_by_pybullet(tmp_path):
+    """PyBullet accepts them (1 kg each): one warning naming the links."""
+    pytest.importorskip("iloci_pybullet")
+    from iloci.plugins import get_registry
+
+    robot = describe_robot(_arm(tmp_path / "arm.urdf", mass=""), tip_frame="pen")
+    with pytest.warns(UserWarning, match=r"'a', 'b', 'c' move with a joint but have no "
+                      r"<inertial>; PyBullet gives each 1 kg"):
+        sim = get_registry().build("simulator", "pybullet", robot=robot)
+    sim.close()

@@ -3,7 +3,8 @@
 :func:`learn_fold` teaches (and runs the baselines and the robustness
 suite); :meth:`LearnedFold.complete` scores the recognitions of the test
 set. :func:`run_fold` is the two in one process; a parallel evaluation runs
-them as two tasks (:mod:`iloci.evaluation.parallel`), with the same results.
+the learning, the baselines (:func:`fold_baselines`) and the recognition as
+three tasks (:mod:`iloci.evaluation.parallel`), with the same results.
 A demonstration's true concept comes from :class:`~iloci.data.concepts.GroundTruth`.
 """
 
