@@ -268,13 +268,13 @@ class Learner:
         """How far each sequence lies from each entry's regenerated pattern, shape (B, M).
 
         :func:`~iloci.concepts.inference.pattern_distances` (with ``[learner]
-        warp``) of the sequences to the memory's
+        warp`` and ``compare``) of the sequences to the memory's
         :func:`~iloci.concepts.inference.regenerated_patterns` (``patterns``
         when given, e.g. computed once for several calls): ``[learner]
         decision = "regeneration"`` answers with the entry of the lowest one.
         """
         pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
-        return pattern_distances(sequences, pats, self.policies.warp)
+        return pattern_distances(sequences, pats, self.policies.warp, self.policies.compare)
 
     def tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
         """Per sequence, how well the memory reproduces it: the tilt search's criterion.
@@ -466,7 +466,7 @@ class Learner:
             patterns = regenerated_patterns(self.model, self.memory)
             regen = self.regeneration_distances(seqs, patterns)
             if policies.familiar_by_regeneration:
-                scale = regeneration_scale(patterns, labels, policies.warp)
+                scale = regeneration_scale(patterns, labels, policies.warp, policies.compare)
         ranking = (entry_errors if policies.rank_by_reproduction
                    else regen if policies.rank_by_regeneration else dist)
         nearest, conf = confidence(dist if ranking is None else ranking, labels)

@@ -206,7 +206,7 @@ class Turn:
             return float(familiarity(
                 float(np.min(learner.regeneration_distances([seq], patterns)[0])),
                 regeneration_scale(patterns, learner.memory.concept_labels,
-                                   learner.policies.warp)))
+                                   learner.policies.warp, learner.policies.compare)))
         if learner.policies.familiar_by_reproduction:
             error = float(np.min(self.ranking if learner.policies.rank_by_reproduction
                                  else learner.entry_errors([seq])[0]))
