@@ -61,6 +61,8 @@ import threading
 import time
 from pathlib import Path
 
+from loop_lateness import run_in_thread, summary
+
 RESULTS = Path(__file__).resolve().parent / "results" / "control_loop.json"
 EPOCHS = 300
 #: the perceptual model (``--model``; children read it from the environment)
@@ -68,15 +70,6 @@ MODEL = os.environ.get("ILOCI_CONTROL_LOOP_MODEL", "torch-rnnpb")
 SETTINGS = {"perceptual_model": {"name": MODEL, "epochs": EPOCHS},
             "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 SHAPES = ["GShape", "Angle", "Sine", "Leaf_1", "CShape"]
-
-
-def stats(values) -> dict:
-    import numpy as np
-    a = np.asarray(values, dtype=np.float64)
-    if a.size == 0:
-        return {"n": 0}
-    return {"n": int(a.size), "p50": round(float(np.median(a)), 2),
-            "p99": round(float(np.percentile(a, 99)), 2), "max": round(float(a.max()), 2)}
 
 
 class Servo:
@@ -107,18 +100,7 @@ def child(knob: str, rt: bool, memory: str) -> dict:
     def loop() -> None:
         if rt:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
-        t0 = time.perf_counter()
-        k = 0
-        while not stop.is_set():
-            k += 1
-            deadline = t0 + k / 100
-            wait = deadline - time.perf_counter()
-            if wait > 0:
-                time.sleep(wait)
-            now = time.perf_counter()
-            ticks.append((now, (now - deadline) * 1000))
-            if now - deadline > 0.01:
-                k = int((now - t0) * 100)
+        run_in_thread(stop, ticks)
 
     thread = threading.Thread(target=loop, name="control-loop", daemon=True)
     thread.start()
@@ -142,11 +124,12 @@ def child(knob: str, rt: bool, memory: str) -> dict:
                  "switch_interval_s": sys.getswitchinterval()}
     for name, a, b in phases:
         out[name] = {"seconds": round(b - a, 2),
-                     **stats([late for t, late in ticks if a <= t <= b + 0.02])}
+                     **summary([late for t, late in ticks if a <= t <= b + 0.02], "p50", "p99")}
     start = next(a for n, a, _ in phases if n == "build")
     end = phases[-1][2]
     out["span"] = {"seconds": round(end - start, 1),
-                   **stats([late for t, late in ticks if start <= t <= end + 0.02])}
+                   **summary([late for t, late in ticks if start <= t <= end + 0.02],
+                           "p50", "p99")}
     return out
 
 

@@ -10,9 +10,9 @@ median of ``--repeats`` runs times
 
 The target (issue 29): time linear in N, the slope of log(time) over log(N)
 (least squares over the four sizes) at most 1.2. Also measured: how far the
-pooled fit used above ``POOL_ABOVE`` samples moves the drawing from the exact
-fit (at 10^5 samples, where the exact one still runs), relative to the plane's
-size, and the exact fit's time there.
+pooled fit used above ``POOL_ABOVE`` samples (:mod:`iloci.sensorimotor.path`)
+moves the drawing from the exact fit (at 10^5 samples, where the exact one
+still runs), relative to the plane's size, and the exact fit's time there.
 
 Usage (writes benchmarks/results/preprocess.json)::
 
@@ -32,6 +32,7 @@ import time
 import numpy as np
 
 from iloci.data import load_trajectory
+import iloci.sensorimotor.path as path_reading
 import iloci.sensorimotor.preprocess as pp
 from iloci.sensorimotor.robots import NAO_PLANE
 
@@ -77,12 +78,12 @@ def main() -> None:
             print(rows[-1], flush=True)
         demo = load_trajectory(_write(Path(tmp), 100_000))
     pooled = pp.preprocess(demo, plane=NAO_PLANE)
-    limit = pp.POOL_ABOVE
-    pp.POOL_ABOVE = 10**12
+    limit = path_reading.POOL_ABOVE
+    path_reading.POOL_ABOVE = 10**12
     try:
         t_exact, exact = timed(lambda: pp.preprocess(demo, plane=NAO_PLANE), 1)
     finally:
-        pp.POOL_ABOVE = limit
+        path_reading.POOL_ABOVE = limit
     ns = [r["points"] for r in rows]
     res = {
         "sizes": rows,

@@ -72,6 +72,8 @@ from pathlib import Path
 
 import numpy as np
 
+from loop_lateness import run_as_task, summary
+
 RESULTS = Path(__file__).resolve().parent / "results" / "serve.json"
 SHAPES = ["GShape", "Angle", "Sine", "Leaf_1", "CShape", "JShape", "Snake", "WShape",
           "Trapezoid", "Worm", "Spoon", "Zshape"]
@@ -91,12 +93,8 @@ def stroke(demo, n: int = 120, seconds: float = 1.3) -> list[list[float]]:
     return [[float(x), float(y), float(s)] for (x, y), s in zip(p, t)]
 
 
-def stats(values_ms: list[float]) -> dict:
-    a = np.asarray(values_ms, dtype=np.float64)
-    return {"n": int(a.size), "median": round(float(np.median(a)), 2),
-            "p90": round(float(np.percentile(a, 90)), 2),
-            "p99": round(float(np.percentile(a, 99)), 2), "max": round(float(a.max()), 2)}
-
+#: The figures of each latency and lateness summary (besides n and max).
+QUANTILES = ("median", "p90", "p99")
 
 #: The served config: the defaults, but every rewarded answer a new exemplar, no clustering.
 SERVED = {"learner": {"similarity_threshold": 0.0, "num_threshold": 1000}}
@@ -204,7 +202,7 @@ def http_benchmark(entries: int, strokes: int, teach_epochs: int) -> dict:
             client.close()
             server.terminate()
             server.wait(30)
-    return {"memory": built, "answer_ms": stats(answer_ms), "answer_ms_all":
+    return {"memory": built, "answer_ms": summary(answer_ms, *QUANTILES), "answer_ms_all":
             [round(v, 1) for v in answer_ms], "feedback": feedback, "entries_after": final}
 
 
@@ -305,20 +303,6 @@ def teaching_benchmark(seed: int = 0) -> dict:
     return out
 
 
-async def _ticker(stop: asyncio.Event, late: list[float]) -> None:
-    loop = asyncio.get_running_loop()
-    t0 = loop.time()
-    k = 0
-    while not stop.is_set():
-        k += 1
-        deadline = t0 + k / 100
-        await asyncio.sleep(max(0.0, deadline - loop.time()))
-        now = loop.time()
-        late.append((now - deadline) * 1000)
-        if now - deadline > 0.01:   # skip missed ticks, as a real control loop does
-            k = int((now - t0) * 100)
-
-
 async def _learn_with_loop(agent, demos, realtime: bool
                           ) -> tuple[list[float], float, list[str]]:
     from concurrent.futures import ThreadPoolExecutor
@@ -332,7 +316,7 @@ async def _learn_with_loop(agent, demos, realtime: bool
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
     stop = asyncio.Event()
     late: list[float] = []
-    task = asyncio.create_task(_ticker(stop, late))
+    task = asyncio.create_task(run_as_task(stop, late))
     await asyncio.sleep(0.5)
     oracle = agent.teacher
     actions = []
@@ -368,7 +352,7 @@ def loop_benchmark(epochs: int | None, realtime: bool) -> dict:
         finally:
             agent.close()
         out["worker" if worker else "thread"] = {
-            "lateness_ms": stats(late), "learn_seconds": round(seconds, 1),
+            "lateness_ms": summary(late, *QUANTILES), "learn_seconds": round(seconds, 1),
             "actions": actions}
     return {"demonstrations": len(demos), "rehearsal_epochs": epochs or "config",
             "loop_thread": "SCHED_FIFO 10" if realtime else "normal", **out}

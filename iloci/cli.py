@@ -19,7 +19,10 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
-from iloci.errors import IlociError
+from iloci._version import __version__
+from iloci.errors import IlociError, PluginError
+from iloci.plugins import get_plugin_manager, hook_results
+from iloci.progress import progress_sink
 
 __all__ = ["main"]
 
@@ -49,11 +52,9 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     Raises
     ------
     PluginError
-        A plugin's command has a name already taken.
+        A plugin's command has a name already taken, or its ``iloci_add_commands``
+        raised (naming the plugin).
     """
-    from iloci._version import __version__
-    from iloci.errors import PluginError
-    from iloci.plugins import get_plugin_manager
 
     parser = argparse.ArgumentParser(
         prog="iloci",
@@ -65,10 +66,15 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     for mod in COMMAND_MODULES:
         importlib.import_module(mod).register(sub)
     pm = plugin_manager or get_plugin_manager()
-    try:
-        pm.hook.iloci_add_commands(subparsers=sub)
-    except argparse.ArgumentError as exc:  # a name taken twice (Python >= 3.11)
-        raise PluginError(f"a plugin's command clashes with another: {exc}") from exc
+    try:  # one plugin at a time, so that a failure names the plugin
+        for _ in hook_results(pm, "iloci_add_commands", subparsers=sub):
+            pass
+    except PluginError as exc:
+        if isinstance(exc.__cause__, argparse.ArgumentError):  # a name taken twice
+            raise PluginError(f"{exc.args[0].partition('. Fix')[0]}: a plugin's command "
+                              "clashes with another command; rename it, or block the "
+                              "plugin with ILOCI_BLOCK_PLUGINS.") from exc.__cause__
+        raise
     return parser
 
 
@@ -92,9 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; return the exit code."""
     # warnings (a plugin that failed to load, a time unit) as one line each,
     # from parsing on; restored afterwards for in-process callers
-    from iloci.progress import progress_sink
-    import codecs
-    codecs.register_error("iloci-bytes", _bytes_escape)
+    import iloci.data.writes  # noqa: F401  (registers the "iloci-bytes" codec error handler)
     for stream in (sys.stdout, sys.stderr):
         # a file name the OS gives as bytes that are not UTF-8 is printed with those
         # bytes as \xNN, not a UnicodeEncodeError (see iloci.data.files.shape_name)
@@ -105,17 +109,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         warnings.showwarning = _show_warning
         _shown.clear()
         return _main(argv)
-
-
-def _bytes_escape(exc: UnicodeError) -> tuple[str, int]:
-    """Codec error handler: a byte the OS gave undecoded (a lone surrogate U+DC80-U+DCFF)
-    as ``\\xNN``, like :func:`iloci.data.files.shape_name`; anything else as a
-    backslash escape."""
-    if not isinstance(exc, UnicodeEncodeError):
-        raise exc
-    text = exc.object[exc.start:exc.end]
-    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
-                   else c.encode("ascii", "backslashreplace").decode() for c in text), exc.end
 
 
 def _show_progress(what: str, fraction: float, seconds: float) -> None:

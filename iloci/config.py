@@ -27,8 +27,10 @@ import re
 import tomllib
 from typing import Any
 
-from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError
+from iloci._version import __version__, is_newer
+from iloci.errors import ConfigError, MissingBackendError, UnknownComponentError, did_you_mean
 from iloci.interfaces import COMPONENT_KINDS
+from iloci.plugins import get_registry
 from iloci.registry import Registry, params_to_dict, validate_dataclass, validate_params
 from iloci.sections import (_PLAIN_SECTIONS, DataConfig, EvaluationConfig, LearnerConfig,
                             RobotConfig, SensorimotorConfig)
@@ -289,7 +291,6 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
     elif isinstance(source, (str, os.PathLike)):
         data = read_config_file(source)
         origin = data.source
-        from iloci._version import __version__, is_newer
         if is_newer(data.written_by):
             try:
                 return load_config(data, registry=registry, supplied=supplied)
@@ -307,13 +308,11 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
         raise ConfigError(f"supplied names no component section: {sorted(bad)}; component "
                           f"sections are {', '.join(COMPONENT_KINDS)}.")
     if registry is None and not supplied >= set(COMPONENT_KINDS):
-        from iloci.plugins import get_registry
         registry = get_registry()
 
     known = set(COMPONENT_KINDS) | set(_PLAIN_SECTIONS)
     for key, value in data.items():
         if key not in known:
-            from iloci.errors import did_you_mean
             raise ConfigError(
                 f"unknown section or key {key!r}; valid sections are "
                 f"{', '.join(sorted(known))}.{did_you_mean(key, known)}",
@@ -423,7 +422,8 @@ def memory_conflicts(saved: Mapping[str, Any], config: Config) -> list[str]:
 
 
 def check_installed(config: Config, registry: Registry | None = None) -> None:
-    """Raise unless every configured component's back-end modules can be imported.
+    """Raise unless every configured component's back-end modules can be imported,
+    and the ``[robot]`` preset (without ``urdf``) is registered.
 
     :func:`load_config` checks that each configured name is registered
     (its plugin installed and loaded); this checks what the plugin needs
@@ -434,11 +434,15 @@ def check_installed(config: Config, registry: Registry | None = None) -> None:
     Raises
     ------
     MissingBackendError
-        Naming the component, the missing modules and the install command.
+        Naming the component, the missing modules and the install command
+        (for ``panda``/``ur5`` without ``iloci-robots``: that plugin).
+    UnknownComponentError
+        No robot preset of that name (the known ones listed).
+    PluginNotLoadedError
+        The robot's plugin is installed but blocked or not loaded.
     """
     registry = registry or config._registry
     if registry is None:
-        from iloci.plugins import get_registry
         registry = get_registry()
     for sec, kind in COMPONENT_KINDS.items():
         name = getattr(config, sec).name
@@ -448,6 +452,16 @@ def check_installed(config: Config, registry: Registry | None = None) -> None:
         missing = spec.missing()
         if missing:
             raise MissingBackendError(kind.label, name, missing,
+                                      spec.install or f"pip install {' '.join(missing)}")
+    if not config.robot.urdf:  # a preset: registered, by an installed and loaded plugin
+        try:
+            spec = registry.get("robot", config.robot.name)
+        except UnknownComponentError as exc:
+            exc.args = (f"{config.source or 'config'}: [robot] name: {exc.args[0]}",)
+            raise
+        missing = spec.missing()
+        if missing:
+            raise MissingBackendError("robot", spec.name, missing,
                                       spec.install or f"pip install {' '.join(missing)}")
 
 
@@ -469,6 +483,5 @@ def to_toml(config: Config) -> str:
     except TypeError as exc:
         raise ConfigError(f"cannot write the config as TOML: {exc}", source=config.source) \
             from None
-    from iloci._version import __version__
     return (f"# iloci configuration (resolved from {config.source}), written by iloci "
             f"{__version__}\n\n{body}")

@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from iloci.agent import _upgrade_config
+from iloci.agent.persistence import upgrade_config
 from iloci.concepts.learner import ik_joint_limits, perform
 from iloci.concepts.memory import load_memory
 from iloci.config import DEFAULT_NAMES, EvaluationConfig, RobotConfig, SensorimotorConfig
@@ -33,6 +33,7 @@ from iloci.data.files import write_atomic
 from iloci.errors import (ConfigError, InvalidInputError, MemoryFileError, MissingBackendError,
                           UnknownComponentError, did_you_mean)
 from iloci.interfaces import Execution, IKSolver, PerceptualModel, Response, Simulator
+from iloci.plugins import get_registry
 from iloci.registry import validate_dataclass, validate_params
 from iloci.sensorimotor.robots import get_robot, robot_and_ik
 
@@ -329,14 +330,13 @@ def load_drawing_parts(memory_path: str | os.PathLike[str], *, registry: Any = N
 
     source = str(memory_path)
     if registry is None:
-        from iloci.plugins import get_registry
         registry = get_registry()
     memory, net_state, header = loaded if loaded is not None else load_memory(memory_path)
     saved = header.get("config")
     if not isinstance(saved, dict):
         raise MemoryFileError(f"{source} holds no config: it names no perceptual model to "
                               "regenerate its concepts with.")
-    saved = _upgrade_config(saved)
+    saved = upgrade_config(saved)
     robot_cfg = validate_dataclass(RobotConfig, dict(saved.get("robot") or {}),
                                    section="robot", source=source)
 

@@ -13,6 +13,7 @@ from typing import Any
 
 __all__ = [
     "IlociError",
+    "ProgressCallbackWarning",
     "ConfigError",
     "UnknownComponentError",
     "MissingBackendError",
@@ -279,4 +280,13 @@ class TimeUnitWarning(UserWarning):
     iloci reads time stamps in seconds; only the robot's drawing speed
     depends on them (the default path reading, ``resample = "arc_length"``,
     does not read them at all), so this is a warning, not an error.
+    """
+
+
+class ProgressCallbackWarning(UserWarning):
+    """``agent.on_progress`` raised: the report is dropped, the rehearsal goes on.
+
+    A display callback (a progress bar, a ROS topic) that fails must not
+    stop learning half-way: the demonstration is learned as it would be
+    without the callback.
     """

@@ -10,8 +10,8 @@ Three families, all prefixed ``iloci_``:
   bars, logging, figures and robot-side bookkeeping. Their return values
   are ignored; an exception raised in an observer propagates (observers
   must not fail silently).
-* **Extension hooks**: subcommands of the ``iloci`` command line, and
-  executors that run evaluation folds elsewhere (e.g. on Ray).
+* **Extension hooks**: subcommands of the ``iloci`` command line, and the
+  deprecated ``iloci_make_executor`` (executors now register like components).
 
 A plugin implements any subset::
 
@@ -102,14 +102,22 @@ def iloci_register_executors(registry: KindRegistry) -> None:
 
 
 @hookspec
-def iloci_register_robots(robots: dict) -> None:
-    """Register robot presets (config ``[robot] name``).
+def iloci_register_robots(registry: KindRegistry, robots: dict) -> None:
+    """Register robot presets (config ``[robot] name``; ``iloci robots`` lists them).
 
-    ``robots`` maps names to :class:`iloci.sensorimotor.robots.RobotPreset`;
-    add yours: ``robots["my-arm"] = RobotPreset("my-arm", make, summary, joints)``.
-    ``make()`` returns a :class:`iloci.sensorimotor.robots.Robot` (see
-    :func:`iloci.sensorimotor.robots.describe_robot`). ``iloci robots``
-    lists them.
+    ``registry.add(name, factory, summary=..., joints=J, plane="given" | "auto",
+    requires=..., install=...)``, as for components: ``factory`` (a
+    ``"module:function"`` string or a callable) returns a
+    :class:`iloci.sensorimotor.robots.Robot` (see
+    :func:`iloci.sensorimotor.robots.describe_robot`); ``joints`` is its
+    ``J``; ``plane`` ``"auto"`` when the drawing plane is placed by the search
+    when an agent is built. The kernel registers ``nao-v32-right-arm``;
+    ``iloci-robots`` registers ``panda`` and ``ur5``.
+
+    ``robots`` is the old form, deprecated (a DeprecationWarning names the
+    plugin): an implementation naming ``robots`` instead of ``registry``
+    receives an empty dict, adds ``RobotPreset`` objects to it, and each is
+    registered as by ``registry.add``.
     """
 
 

@@ -28,7 +28,7 @@ from typing import Any
 import pluggy
 
 from iloci import hookspecs
-from iloci.errors import PluginError
+from iloci.errors import IlociError, PluginError
 from iloci.interfaces import ALL_KINDS
 from iloci.registry import FIRST_PARTY, Registry
 
@@ -46,7 +46,8 @@ __all__ = [
 ]
 
 #: iloci's own plugins, registered through the same hooks as third-party ones.
-DEFAULT_PLUGINS = ("iloci.teachers", "iloci.evaluation.executors")
+DEFAULT_PLUGINS = ("iloci.teachers", "iloci.evaluation.executors",
+                   "iloci.sensorimotor.robots.presets")
 
 #: Entry-point group third-party distributions register under.
 ENTRY_POINT_GROUP = "iloci"
@@ -280,16 +281,32 @@ def hook_results(pm: pluggy.PluginManager, hook: str, **kwargs: Any
     """Call hook ``hook`` one implementation at a time, in pluggy's order (the last
     registered first); yield ``(result, plugin, distribution)`` for each non-None result.
 
-    For hooks whose result iloci uses (``iloci_make_executor``): a result of the wrong
-    type can then be refused naming the plugin and its distribution.
+    For hooks whose result iloci uses (``iloci_make_executor``) or that act
+    (``iloci_add_commands``): a result of the wrong type can then be refused naming
+    the plugin and its distribution.
+
+    Raises
+    ------
+    PluginError
+        An implementation raised anything but an iloci error: naming the plugin, its
+        distribution and the hook, and what to do (the original is the cause).
     """
     info = getattr(pm, "iloci_plugin_info", {}) or {}
     caller = getattr(pm.hook, hook)
     for impl in reversed(caller.get_hookimpls()):
-        result = impl.function(**{arg: kwargs[arg] for arg in impl.argnames})
+        pinfo = info.get(impl.plugin_name)
+        dist = getattr(pinfo, "distribution", None)
+        try:
+            result = impl.function(**{arg: kwargs[arg] for arg in impl.argnames})
+        except IlociError:
+            raise
+        except Exception as exc:
+            raise PluginError(
+                f"plugin {impl.plugin_name!r} (distribution {dist or 'none'}) failed in "
+                f"{hook}: {type(exc).__name__}: {exc}. Fix or update the plugin, or block "
+                f"it with ILOCI_BLOCK_PLUGINS={impl.plugin_name}.") from exc
         if result is not None:
-            pinfo = info.get(impl.plugin_name)
-            yield result, impl.plugin_name, getattr(pinfo, "distribution", None)
+            yield result, impl.plugin_name, dist
 
 
 def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
@@ -317,7 +334,10 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
             view = registry.view(kind.name, plugin=impl.plugin_name,
                                  distribution=pinfo.distribution, version=pinfo.version)
             try:
-                returned = impl.function(**{arg: view for arg in impl.argnames})
+                if "robots" in impl.argnames:  # the deprecated dict form
+                    returned = _register_robot_dict(impl, view, pinfo)
+                else:
+                    returned = impl.function(**{arg: view for arg in impl.argnames})
                 if returned is not None:
                     raise PluginError(
                         f"plugin {impl.plugin_name!r} (distribution "
@@ -344,3 +364,34 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
                       f"skipped: {error}")
     registry.unloaded = [i for i in info.values() if i.status != "loaded"]
     return registry
+
+
+def _register_robot_dict(impl: Any, view: Any, pinfo: PluginInfo) -> Any:
+    """Call an ``iloci_register_robots(robots)`` of the old, dict form; register what it added.
+
+    Deprecated (a :class:`DeprecationWarning` names the plugin): the dict
+    starts empty, and each value it adds must quack like a
+    :class:`~iloci.sensorimotor.robots.RobotPreset` (``make``, ``summary``,
+    ``joints``, ``plane``); it is registered as if by ``registry.add``, so
+    provenance, collisions and listings are the registry's.
+    """
+    dist = f" (distribution {pinfo.distribution})" if pinfo.distribution else ""
+    warnings.warn(
+        f"iloci plugin {impl.plugin_name!r}{dist} registers robots through "
+        "iloci_register_robots(robots), a dict: deprecated. Write "
+        "iloci_register_robots(registry) and call registry.add(name, factory, summary=..., "
+        "joints=J, plane='given' or 'auto') (docs/hooks.md).", DeprecationWarning, stacklevel=4)
+    robots: dict[str, Any] = {}
+    returned = impl.function(**{arg: robots if arg == "robots" else view
+                                for arg in impl.argnames})
+    for name, preset in robots.items():
+        if not callable(getattr(preset, "make", None)) or not isinstance(
+                getattr(preset, "joints", None), int):
+            raise PluginError(
+                f"plugin {impl.plugin_name!r}{dist}: its iloci_register_robots added "
+                f"{name!r}: {type(preset).__name__}; it must add RobotPreset objects to the "
+                "dict it receives (robots[name] = RobotPreset(...)) and return nothing. Fix "
+                f"the plugin, or block it with ILOCI_BLOCK_PLUGINS={impl.plugin_name}.")
+        view.add(name, preset.make, summary=getattr(preset, "summary", ""),
+                 joints=preset.joints, plane=getattr(preset, "plane", "given"))
+    return returned

@@ -66,12 +66,13 @@ def item_digest(item: Any) -> str:
     """
     h = hashlib.sha256()
     if isinstance(item, Demonstration):
-        h.update(b"demo\0" + item.key.encode() + b"\0" + str(item.true_concept).encode())
+        h.update(b"demo\0" + item.key.encode("utf-8", "surrogatepass") + b"\0"
+                 + str(item.true_concept).encode("utf-8", "surrogatepass"))
         h.update(np.ascontiguousarray(item.positions, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(item.times, dtype=np.float64).tobytes())
     elif isinstance(item, (str, os.PathLike)):
         key = getattr(item, "key", None) or Path(item).stem
-        h.update(b"file\0" + str(key).encode() + b"\0")
+        h.update(b"file\0" + str(key).encode("utf-8", "surrogatepass") + b"\0")
         try:
             h.update(Path(os.fspath(item)).read_bytes())
         except OSError as exc:
@@ -80,7 +81,7 @@ def item_digest(item: Any) -> str:
         try:
             arr = np.asarray(item, dtype=np.float64)
         except (TypeError, ValueError):
-            h.update(b"other\0" + repr(item).encode())
+            h.update(b"other\0" + repr(item).encode("utf-8", "surrogatepass"))
         else:
             h.update(b"array\0" + repr(arr.shape).encode() + arr.tobytes())
     return h.hexdigest()
@@ -205,6 +206,11 @@ def acquire_memory_lock(memory: str | os.PathLike[str],
         except OSError as exc:
             raise MemoryLockedError(f"cannot lock the memory {memory} ({lock_path}: "
                                     f"{exc.strerror or exc}).") from None
+        try:
+            file_lock = _lock_the_file(memory)
+        except BaseException:
+            lock.release()
+            raise
         record = {"command": command, "pid": os.getpid(), "since": time.time()}
         with contextlib.suppress(OSError):
             _holder_path(lock_path).write_text(json.dumps(record), encoding="utf-8")
@@ -217,8 +223,65 @@ def acquire_memory_lock(memory: str | os.PathLike[str],
                 return
             with contextlib.suppress(OSError):
                 _holder_path(lock_path).unlink()
+            if file_lock is not None:
+                with contextlib.suppress(OSError):
+                    os.close(file_lock)
             held[0].release()
     return release
+
+
+def _lock_the_file(memory: str | os.PathLike[str]) -> int | None:
+    """An OS lock on the memory file itself (its inode), held through an open descriptor.
+
+    ``TARGET.lock`` is one per name; a hard link is another name of the same
+    file, so two writers through two names would each hold their own
+    ``.lock``. The file's own lock is shared by all its names. (A save
+    replaces the file by a new one, so the lock stays on the file as it was
+    when the writer started: what another name of it still shows.)
+    Returns the descriptor (closed to release), or None where the file does
+    not exist yet or the platform has no ``flock``.
+
+    Raises
+    ------
+    MemoryLockedError
+        Another process holds it: the memory is taught under another name.
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        return None
+    try:
+        fd = os.open(os.path.realpath(os.fspath(memory)), os.O_RDONLY)
+    except OSError:
+        return None                                 # a new memory: nothing to share
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        st = os.fstat(fd)
+        os.close(fd)
+        raise MemoryLockedError(
+            f"the memory {memory} is being taught by another process under another name "
+            f"(a hard link to the same file): {_flock_holder(st)}. Stop that one first, or "
+            "copy the file (cp) to teach a separate memory. Nothing was changed.") from None
+    return fd
+
+
+def _flock_holder(st: os.stat_result) -> str:
+    """``"iloci serve, pid 123"``: who holds an flock on the file ``st`` (from /proc/locks)."""
+    want = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    try:
+        with open("/proc/locks", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                parts = line.split()
+                if len(parts) > 5 and parts[1] == "FLOCK" and parts[5] == want:
+                    pid = int(parts[4])
+                    cmd = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+                    words = [Path(cmd[0].decode(errors="replace")).name,
+                             *(c.decode(errors="replace") for c in cmd[1:3] if c)]
+                    return f"{' '.join(words)[:60]}, pid {pid}"
+    except (OSError, ValueError):
+        pass
+    return "another process"
 
 
 @contextlib.contextmanager

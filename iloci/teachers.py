@@ -25,7 +25,7 @@ from typing import TextIO
 import numpy as np
 
 from iloci.data.files import write_atomic
-from iloci.errors import FeedbackError
+from iloci.errors import FeedbackError, MissingBackendError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import Demonstration, Response
 
@@ -178,7 +178,6 @@ class DrawingTeacher(OracleTeacher):
         try:
             from dtaidistance import dtw_ndim
         except ImportError as exc:
-            from iloci.errors import MissingBackendError
             raise MissingBackendError("teacher", "drawing", ["dtaidistance"],
                                       "pip install 'iloci[report]'") from exc
         self._dtw = dtw_ndim.distance_fast

@@ -138,7 +138,11 @@ class WorkerModel:
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
         try:
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "iloci.worker", str(to_child_r), str(to_parent_w)],
+                # not ``-m iloci.worker``: ``import iloci`` imports this module, and
+                # runpy then warns ("found in sys.modules ... prior to execution")
+                # on every start, on the person's terminal
+                [sys.executable, "-c", "import sys; from iloci.worker import _main; "
+                 "_main(sys.argv[1:])", str(to_child_r), str(to_parent_w)],
                 pass_fds=(to_child_r, to_parent_w), env=env, stdin=subprocess.DEVNULL)
         finally:
             os.close(to_child_r)
@@ -228,6 +232,11 @@ class WorkerModel:
             pass
 
 
+def _main(argv: list[str]) -> None:  # pragma: no cover - the worker process
+    """The worker process: ``argv`` = [the fd it reads from, the fd it writes to]."""
+    _serve(_Channel(Connection(int(argv[0]), writable=False),
+                    Connection(int(argv[1]), readable=False)))
+
+
 if __name__ == "__main__":  # pragma: no cover - the worker process
-    _serve(_Channel(Connection(int(sys.argv[1]), writable=False),
-                    Connection(int(sys.argv[2]), readable=False)))
+    _main(sys.argv[1:])

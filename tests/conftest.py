@@ -76,3 +76,46 @@ def dtaidistance():
     """The DTW baselines' library, or a skip where it is absent (the bare kernel)."""
     return pytest.importorskip("dtaidistance",
                                reason="the DTW baselines need dtaidistance (iloci[report])")
+
+
+#: Epochs (training, rehearsal, recognition) of the small real agent the step-wise,
+#: page, arm and session tests build: enough to tell GShape from Angle, and fast.
+SMALL_EPOCHS = 30
+
+
+def small_config(**sections: dict) -> dict:
+    """The small real agent's settings: native-rnnpb, :data:`SMALL_EPOCHS`, seed 0.
+
+    A new dict each call; ``sections`` update its sections (``learner={...}``
+    adds to the learner's settings) or add others (``simulator={...}``).
+    Tests building it need native-rnnpb and Pinocchio (:func:`small_agent`
+    skips without them).
+    """
+    cfg: dict = {"perceptual_model": {"name": "native-rnnpb", "epochs": SMALL_EPOCHS,
+                                      "recognition_steps": SMALL_EPOCHS},
+                 "learner": {"rehearsal_epochs": SMALL_EPOCHS}, "evaluation": {"seed": 0}}
+    for name, values in sections.items():
+        cfg[name] = {**cfg.get(name, {}), **values}
+    return cfg
+
+
+@pytest.fixture(scope="session")
+def small_agent():
+    """A builder of the small real agent: ``small_agent(**sections)`` -> ``iloci.build(...)``.
+
+    Skips the test without native-rnnpb or Pinocchio.
+    """
+    pytest.importorskip("iloci_native")
+    pytest.importorskip("pinocchio")
+    import iloci
+
+    def build(**sections: dict):
+        return iloci.build(small_config(**sections))
+    return build
+
+
+@pytest.fixture(scope="module")
+def lasa():
+    """LASA's GShape and Angle demonstrations by key (``"GShape/0"``...)."""
+    from iloci.data import load_lasa
+    return {d.key: d for d in load_lasa(["GShape", "Angle"])}

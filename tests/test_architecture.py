@@ -155,12 +155,25 @@ def test_no_import_goes_up_a_layer(graph):
     assert up == []
 
 
-def test_no_forbidden_arrow(graph):
+def _forbidden(graph: dict[str, set[str]]) -> list[str]:
     rules = [(_names(r[0])[0], _names(r[1])[0]) for r in _table("forbidden")]
     assert rules, "docs/development.md lost its forbidden-arrow table"
-    bad = [f"{a} -> {b}" for a in sorted(graph) for b in sorted(graph[a])
-           for src, dst in rules if _covers(src, a) and _covers(dst, b)]
-    assert bad == []
+    return [f"{a} -> {b}" for a in sorted(graph) for b in sorted(graph[a])
+            for src, dst in rules if _covers(src, a) and _covers(dst, b)]
+
+
+def test_no_forbidden_arrow(graph):
+    assert _forbidden(graph) == []
+
+
+@pytest.mark.parametrize("target", ["iloci.concepts.memory", "iloci.concepts.learner",
+                                    "iloci.concepts.rehearsal", "iloci.sensorimotor.frames",
+                                    "iloci.rnnpb.common"])
+def test_the_web_page_uses_the_agents_public_face_only(graph, target):
+    """A new import of the robot's mind (or its perception) by the web layer fails."""
+    assert not any(_covers("iloci.web", a) and _covers(target.rsplit(".", 1)[0], b)
+                   for a in graph for b in graph[a])
+    assert _forbidden({"iloci.web.classroom": {target}}) == [f"iloci.web.classroom -> {target}"]
 
 
 def test_the_checks_catch_what_they_forbid():

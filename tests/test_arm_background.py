@@ -20,10 +20,6 @@ from iloci.sensorimotor.hardware import ArmExecutor, ArmMotion
 pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
-EPOCHS = 30
-SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
-                                 "recognition_steps": EPOCHS},
-            "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
 
 class GatedArm:
@@ -46,12 +42,10 @@ class GatedArm:
 
 
 @pytest.fixture(scope="module")
-def taught():
-    from iloci.data import load_lasa
-    demos = {d.key: d for d in load_lasa(["GShape", "Angle"])}
-    agent = iloci.build(SETTINGS)
-    agent.teach([demos["GShape/0"], demos["Angle/0"]])
-    return agent, demos
+def taught(small_agent, lasa):
+    agent = small_agent()
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    return agent, lasa
 
 
 def test_submit_returns_at_once_with_completion_events(taught):

@@ -447,7 +447,7 @@ if sys.platform == "win32":  # pragma: no cover
 
 
 def test_agent_teach_numbers_files_of_one_name_too(tmp_path):
-    from iloci.agent import _as_demonstration
+    from iloci.agent.stepwise import _as_demonstration
     from iloci.data.files import TrajectoryFile
     seen: dict = {}
     paths = []

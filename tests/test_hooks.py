@@ -149,8 +149,11 @@ class Recorder:
         self.calls["iloci_register_executors"].append(registry.kind)
 
     @hookimpl
-    def iloci_register_robots(self, robots):
-        self.calls["iloci_register_robots"].append(sorted(robots))
+    def iloci_register_robots(self, registry):
+        from iloci.sensorimotor.robots.presets import nao_v32_right_arm
+        self.calls["iloci_register_robots"].append(registry.kind)
+        registry.add("recorded-arm", nao_v32_right_arm, summary="test stand-in", joints=4,
+                     plane="given")
 
     @hookimpl
     def iloci_on_interaction(self, event):
@@ -222,10 +225,12 @@ def test_registration_hooks_register_through_a_bound_view(run):
     registry = get_registry(pm)
     for kind, name in [("perceptual_model", "mean-rnnpb"), ("clusterer", "each-alone"),
                        ("teacher", "same-shape"), ("ik", "linear"),
-                       ("simulator", "echo")]:
+                       ("simulator", "echo"), ("robot", "recorded-arm")]:
         spec = registry.get(kind, name)
         assert spec.plugin == pm.get_name(recorder) and spec.kind == kind
     assert set(recorder.calls["iloci_register_teachers"]) == {"teacher"}
+    assert set(recorder.calls["iloci_register_robots"]) == {"robot"}
+    assert dict(registry.get("robot", "recorded-arm").facts) == {"joints": 4, "plane": "given"}
 
 
 def test_observers_see_the_whole_learning_phase(run):
@@ -248,6 +253,7 @@ def test_observers_see_the_whole_learning_phase(run):
     assert done.fold == 0 and done.metrics["ccr"] == metrics["ccr_folds"][0]
 
 
+@pytest.mark.filterwarnings("ignore:iloci plugin .* implements iloci_make_executor")
 def test_extension_hooks_add_a_command_and_are_asked_for_the_executor(run):
     recorder, _, _ = run
     assert recorder.calls["iloci_make_executor"] == [("local", 1, None)]

@@ -15,6 +15,7 @@ import pytest
 from iloci.docgen import first_party
 from iloci.plugins import get_registry
 from iloci.testing import check_component, registry_factory
+from iloci.testing.robots import check_registration
 
 #: Smaller settings where the defaults would make the checks slow.
 SMALL = {
@@ -36,7 +37,8 @@ def _console(seed):
 
 def _cases():
     cases = []
-    for spec in get_registry().specs():
+    registry = get_registry()
+    for spec in [*registry.specs(), *registry.specs("robot")]:
         marks = []
         if not first_party(spec):
             marks.append(pytest.mark.skip(reason=f"third-party ({spec.distribution}): "
@@ -55,3 +57,5 @@ def test_installed_component_conforms(kind, name):
     else:
         make = registry_factory(kind, name, **SMALL.get((kind, name), {}))
     check_component(make, kind)
+    if kind == "robot":  # what its registration states is true
+        check_registration(get_registry().get(kind, name), make(0))

@@ -52,12 +52,11 @@ def test_one_table_of_component_kinds():
 
     from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, KINDS
     assert KINDS == ("perceptual_model", "clusterer", "teacher", "ik", "simulator")
-    # robot presets register through their own hook: a robot is not a component;
-    # executors register as a kind of the registry that is no config section
+    # every registration hook is a kind of the one registry; executors and robots
+    # are kinds that are no component section of a config
     assert {k.hook for k in ALL_KINDS.values()} == {
-        n for n in hookspec_names() if n.startswith("iloci_register_")} - {
-        "iloci_register_robots"}
-    assert list(ALL_KINDS) == [*KINDS, "executor"]
+        n for n in hookspec_names() if n.startswith("iloci_register_")}
+    assert list(ALL_KINDS) == [*KINDS, "executor", "robot"]
     fields = [f.name for f in dataclasses.fields(Config)]
     assert fields[:len(KINDS)] == list(KINDS)
     assert list(Config().to_dict())[:len(KINDS)] == list(KINDS)
@@ -108,7 +107,8 @@ def test_disable_autoload_env_keeps_only_iloci_own_plugins(monkeypatch):
         elif i.distribution != "iloci":
             assert i.status == "not autoloaded", (name, i)
     assert set(dict(get_plugin_manager(autoload=False).list_name_plugin())) == \
-        set(DEFAULT_PLUGINS) == {"iloci.teachers", "iloci.evaluation.executors"}
+        set(DEFAULT_PLUGINS) == {"iloci.teachers", "iloci.evaluation.executors",
+                                 "iloci.sensorimotor.robots.presets"}
 
 
 def test_disable_autoload_env_keeps_installed_back_ends(monkeypatch):

@@ -315,7 +315,22 @@ def test_arm_executor_starts_from_the_current_posture(arm_agent):
 
 
 class _ArmPlugin:
-    """Registers robot ``name`` (a copy of the Nao preset under that name)."""
+    """Registers robot ``name`` (the Nao's description under that name)."""
+
+    def __init__(self, name: str) -> None:
+        self.robot_name = name
+
+    from iloci import hookimpl
+
+    @hookimpl
+    def iloci_register_robots(self, registry):
+        from iloci.sensorimotor.robots.presets import nao_v32_right_arm
+        registry.add(self.robot_name, nao_v32_right_arm, summary="the Nao, renamed",
+                     joints=4, plane="given")
+
+
+class _OldArmPlugin:
+    """The deprecated dict form of ``iloci_register_robots``."""
 
     def __init__(self, name: str) -> None:
         self.robot_name = name
@@ -330,21 +345,97 @@ class _ArmPlugin:
                                                       name=self.robot_name)
 
 
-def test_a_robot_registered_twice_names_both_plugins_and_each_robot_its_plugin():
+BUILT_IN = "iloci.sensorimotor.robots.presets"
+
+
+def test_robots_are_a_kind_of_the_registry_with_provenance():
+    from iloci.plugins import get_plugin_manager, get_registry
+    from iloci.sensorimotor.robots import available_robots
+
+    one = _ArmPlugin("house-arm")
+    pm = get_plugin_manager(autoload=False, plugins=[one])
+    registry = get_registry(pm)
+    spec = registry.get("robot", "house-arm")
+    assert (spec.plugin, spec.distribution) == (pm.get_name(one), None)
+    assert dict(spec.facts) == {"joints": 4, "plane": "given"}
+    nao = registry.get("robot", "nao-v32-right-arm")
+    assert (nao.plugin, nao.distribution) == (BUILT_IN, "iloci")
+    found = available_robots(pm)
+    assert found["house-arm"].plugin == pm.get_name(one)
+    assert (found["nao-v32-right-arm"].plugin, found["nao-v32-right-arm"].source) == \
+        (BUILT_IN, "iloci")
+    # built through the registry: the factory's result is checked, then returned
+    assert found["house-arm"].make().joint_names == get_robot().joint_names
+    assert get_robot("house-arm", pm).describe() == get_robot().describe()
+
+
+def test_a_robot_registered_twice_names_both_plugins():
     from iloci.errors import PluginError
     from iloci.plugins import get_plugin_manager
     from iloci.sensorimotor.robots import available_robots
 
     one, two = _ArmPlugin("house-arm"), _ArmPlugin("house-arm")
-    pm = get_plugin_manager(autoload=False, plugins=[one])
-    found = available_robots(pm)
-    assert found["house-arm"].plugin == pm.get_name(one)
-    assert found["nao-v32-right-arm"].plugin == "iloci"
     pm = get_plugin_manager(autoload=False, plugins=[one, two])
     with pytest.raises(PluginError, match=r"robot 'house-arm' is registered twice: by plugin "
-                       rf"'{pm.get_name(one)}' .* and by plugin '{pm.get_name(two)}'"):
+                       rf"'{pm.get_name(one)}' and by plugin '{pm.get_name(two)}'"):
         available_robots(pm)
     pm = get_plugin_manager(autoload=False, plugins=[_ArmPlugin("nao-v32-right-arm")])
     with pytest.raises(PluginError, match=r"robot 'nao-v32-right-arm' is registered twice: "
-                       r"by plugin 'iloci'"):
-        available_robots(pm)
+                       rf"by plugin '{BUILT_IN}' \(distribution iloci\) and by plugin"):
+        get_robot("nao-v32-right-arm", pm)
+
+
+def test_a_robot_registration_must_state_its_joints_and_plane():
+    from iloci.errors import PluginError
+    from iloci.plugins import get_plugin_manager, get_registry
+
+    class Vague:
+        from iloci import hookimpl
+
+        @hookimpl
+        def iloci_register_robots(self, registry):
+            registry.add("vague-arm", "iloci.sensorimotor.robots.presets:nao_v32_right_arm")
+
+    with pytest.raises(PluginError, match=r"robot 'vague-arm' must state joints, plane"):
+        get_registry(get_plugin_manager(autoload=False, plugins=[Vague()]))
+
+
+def test_the_old_dict_hook_still_registers_with_a_deprecation_warning():
+    from iloci.errors import PluginError
+    from iloci.plugins import get_plugin_manager, get_registry
+
+    old = _OldArmPlugin("house-arm")
+    pm = get_plugin_manager(autoload=False, plugins=[old])
+    with pytest.warns(DeprecationWarning, match=rf"plugin '{pm.get_name(old)}' registers "
+                      r"robots through iloci_register_robots\(robots\), a dict: deprecated"):
+        registry = get_registry(pm)
+    spec = registry.get("robot", "house-arm")
+    assert spec.plugin == pm.get_name(old) and dict(spec.facts) == {"joints": 4,
+                                                                    "plane": "given"}
+    assert registry.build("robot", "house-arm").joint_names == get_robot().joint_names
+    # a collision through the old form is the registry's error too, naming both
+    pm = get_plugin_manager(autoload=False, plugins=[_ArmPlugin("house-arm"), old])
+    with pytest.warns(DeprecationWarning), pytest.raises(
+            PluginError, match=r"robot 'house-arm' is registered twice: by plugin '.*' "
+                               rf"and by plugin '{pm.get_name(old)}'"):
+        get_registry(pm)
+
+
+def test_iloci_plugins_and_iloci_robots_list_the_registry_robots(capsys):
+    import json
+
+    from iloci.cli import main
+
+    assert main(["plugins", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["components"]
+    robots = {r["name"]: r for r in rows if r["kind"] == "robot"}
+    assert robots["nao-v32-right-arm"]["distribution"] == "iloci"
+    assert robots["nao-v32-right-arm"]["facts"] == {"joints": 4, "plane": "given"}
+    assert main(["robots", "--json"]) == 0
+    listed = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
+    assert set(listed) == set(robots)
+    assert listed["nao-v32-right-arm"]["plugin"] == BUILT_IN
+    for name, r in listed.items():
+        assert (r["source"], r["joints"], r["plane"]) == (
+            robots[name]["distribution"], robots[name]["facts"]["joints"],
+            robots[name]["facts"]["plane"])

@@ -25,10 +25,7 @@ from iloci.commands.serve import build_classroom  # noqa: E402
 from iloci.data import load_lasa  # noqa: E402
 from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, TOKEN_HEADER, create_app  # noqa: E402
 
-EPOCHS = 30
-CONFIG = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
-                               "recognition_steps": EPOCHS},
-          "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
+from conftest import small_config  # noqa: E402
 
 
 
@@ -56,15 +53,10 @@ def stroke(demo, n: int = 120, seconds: float = 1.3) -> list[list[float]]:
     return [[float(x), float(y), float(s)] for (x, y), s in zip(p, t)]
 
 
-@pytest.fixture(scope="module")
-def lasa():
-    return {d.key: d for d in load_lasa(["GShape", "Angle"])}
-
-
 @pytest.fixture
 def served(tmp_path):
     memory = tmp_path / "memory.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
+    classroom = build_classroom(memory, small_config(), worker=False, protocol="paper")
     try:
         with page_client(classroom) as client:
             yield client, classroom, memory
@@ -148,8 +140,8 @@ def test_the_novelty_answer_and_unknown_in_the_browser_api(tmp_path):
     and "yes" founds the concept it named; recognition says ``unknown``."""
     shapes = ["GShape", "Angle", "Sine", "Leaf_1", "Snake", "Worm"]
     lasa = {d.key: d for d in load_lasa(shapes)}
-    cfg = {**CONFIG, "learner": {**CONFIG["learner"], "novelty_below": 0.8,
-                                 "unknown_below": 0.8, "confirm_rewards": True}}
+    cfg = small_config(learner={"novelty_below": 0.8, "unknown_below": 0.8,
+                                "confirm_rewards": True})
     classroom = build_classroom(tmp_path / "memory.npz", cfg, worker=False, protocol="paper")
     novel = None
     with page_client(classroom) as client:
@@ -259,7 +251,7 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
     r = client.get("/api/arm.png?turn=1&attempt=1")
     assert r.status_code == 404 and "simulator" in r.json()["error"]
     pytest.importorskip("pybullet")
-    cfg = {**CONFIG, "simulator": {"name": "pybullet"}}
+    cfg = small_config(simulator={"name": "pybullet"})
     classroom = build_classroom(tmp_path / "sim.npz", cfg, worker=False, protocol="paper")
     with page_client(classroom) as sim:
         sim.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
@@ -272,7 +264,7 @@ def test_the_arm_picture_needs_a_simulator_and_a_pending_guess(served, lasa, tmp
 
 
 def test_the_server_learns_with_its_network_in_a_worker(tmp_path, lasa):
-    classroom = build_classroom(tmp_path / "w.npz", CONFIG, protocol="paper")   # a worker
+    classroom = build_classroom(tmp_path / "w.npz", small_config(), protocol="paper")   # a worker
     try:
         assert type(classroom.agent.perceptual_model).__name__ == "WorkerModel"
         with page_client(classroom) as client:
@@ -344,7 +336,7 @@ def test_writes_need_the_token_json_and_no_foreign_origin(served, lasa):
 
 
 def test_allow_host_names_another_host(tmp_path, lasa):
-    classroom = build_classroom(tmp_path / "m.npz", CONFIG, worker=False)
+    classroom = build_classroom(tmp_path / "m.npz", small_config(), worker=False)
     try:
         with page_client(classroom, hosts=["robot.local"]) as client:
             assert client.get("/api/state", headers={"host": "robot.local:8000"}
@@ -482,7 +474,7 @@ def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
     exported = client.get("/api/export")
     assert exported.status_code == 200
     assert "attachment" in exported.headers["content-disposition"]
-    fresh = build_classroom(tmp_path / "fresh.npz", CONFIG, worker=False, protocol="paper")
+    fresh = build_classroom(tmp_path / "fresh.npz", small_config(), worker=False, protocol="paper")
     try:
         with page_client(fresh) as other:
             for bad in (b"", b"PK\x03\x04 not a zip", b"\x80\x04\x95 pickle"):
@@ -511,11 +503,11 @@ def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
     target.parent.mkdir()
     link = tmp_path / "link.npz"
     link.symlink_to(target)
-    classroom = build_classroom(link, CONFIG, worker=False, protocol="paper")
+    classroom = build_classroom(link, small_config(), worker=False, protocol="paper")
     try:
         # another writer of the same file, by any path, is refused
         with pytest.raises(MemoryLockedError, match="iloci serve, pid"):
-            build_classroom(target, CONFIG, worker=False)
+            build_classroom(target, small_config(), worker=False)
         with page_client(classroom) as client:
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
             assert link.is_symlink() and target.is_file()       # written through the link
@@ -553,7 +545,7 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
     import sys
 
     memory = tmp_path / "m.npz"
-    classroom = build_classroom(memory, CONFIG, worker=False, protocol="paper")
+    classroom = build_classroom(memory, small_config(), worker=False, protocol="paper")
     try:
         with page_client(classroom) as client:
             client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
@@ -578,22 +570,21 @@ def test_teach_and_a_library_save_are_refused_while_served(tmp_path, lasa, cli):
 def test_the_interactive_protocol_is_the_default_where_the_config_is_silent(tmp_path):
     from iloci.commands.teach import PAGE
 
-    classroom = build_classroom(tmp_path / "a.npz", CONFIG, worker=False)
+    classroom = build_classroom(tmp_path / "a.npz", small_config(), worker=False)
     try:
         learner = classroom.agent.config.learner
         assert PAGE == {"unknown_below": 0.8} and learner.unknown_below == 0.8
         assert learner.novelty_below == 0.0 and learner.confirm_rewards is False
     finally:
         classroom.close()
-    own = {**CONFIG, "learner": {**CONFIG["learner"], "unknown_below": 0.5,
-                                 "novelty_below": 0.8}}
+    own = small_config(learner={"unknown_below": 0.5, "novelty_below": 0.8})
     classroom = build_classroom(tmp_path / "b.npz", own, worker=False)
     try:
         assert classroom.agent.config.learner.unknown_below == 0.5     # the config's word
         assert classroom.agent.config.learner.novelty_below == 0.8
     finally:
         classroom.close()
-    classroom = build_classroom(tmp_path / "c.npz", CONFIG, worker=False, protocol="paper")
+    classroom = build_classroom(tmp_path / "c.npz", small_config(), worker=False, protocol="paper")
     try:
         assert classroom.agent.config.learner.unknown_below == 0.0
     finally:

@@ -8,6 +8,7 @@ must do exactly the same thing: they are one code path.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 
 import numpy as np
@@ -234,6 +235,26 @@ def test_on_progress_set_after_observe_applies_to_that_turn(lasa):
     while not turn.done:
         turn.feedback(-1, turn.answer.id)
     assert len(phases) == len(PHASES)
+
+
+def test_an_on_progress_that_raises_loses_its_reports_not_the_learning(lasa):
+    from iloci.errors import ProgressCallbackWarning
+
+    def broken(progress):
+        raise ValueError("the progress bar's bug")
+    plain, with_bug = make_agent(), make_agent()
+    with_bug.on_progress = broken
+    for key in ("GShape/0", "Angle/0"):
+        for agent in (plain, with_bug):
+            with pytest.warns(ProgressCallbackWarning, match="progress bar's bug") \
+                    if agent is with_bug else contextlib.nullcontext():
+                turn = agent.observe(lasa[key])
+                while not turn.done:
+                    turn.feedback(-1, turn.answer.id)
+    # learned as it is without the callback: the same memory, the same network
+    assert entries_equal(with_bug.memory.entries, plain.memory.entries)
+    assert with_bug.memory.demonstrations_seen == plain.memory.demonstrations_seen == 2
+    assert same_state(state(with_bug), state(plain))
 
 
 def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(lasa):

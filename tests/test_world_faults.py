@@ -108,6 +108,73 @@ def test_mimic_joint_off_the_pen_chain_is_accepted(tmp_path):
     assert robot.joint_names == ("s1", "s2", "s3")
 
 
+
+def _spoilt(tmp_path: Path, old: str, new: str, count: int = 1) -> Path:
+    f = tmp_path / "arm.urdf"
+    text = _arm(f).read_text()
+    assert old in text
+    f.write_text(text.replace(old, new, count))
+    return f
+
+
+@pytest.mark.parametrize("old, new, names", [
+    ('name="s2" type="revolute"', 'name="s2" type="planar"',
+     ["'s2' (planar)", "fixed joint", "base_frame below it"]),
+    ('name="s1" type="revolute"', 'name="s1" type="floating"', ["'s1' (floating)"]),
+    ('name="s2" type="revolute"', 'name="s2" type="revolut"',
+     ["type 'revolut'", "Did you mean 'revolute'?"]),
+    ('<link name="pen"/>', '<link name="pen"/><link name="b"/>', ["link 'b' is defined twice"]),
+    ('name="s3"', 'name="s2"', ["joint 's2' is defined twice"]),
+    ('<link name="pen"/>', '<link name="pen"/><link name="x"/><joint name="x" type="fixed">'
+     '<parent link="a"/><child link="c"/></joint>', ["link 'c' is the child of joints"]),
+    ('<limit lower="-2" upper="2"', '<limit lower="2" upper="-2"', ["[2, -2] (lower above "
+                                                                   "upper: swapped?)"]),
+    ('<limit lower="-2" upper="2"', '<limit lower="-inf" upper="2"', ["not a finite number"]),
+    ('<robot name="spoilt">', '<robot name="spoilt"><!-- caf\xe9 -->',
+     ["not valid XML", "not UTF-8 (byte 0xe9", 'encoding="ISO-8859-1"']),
+], ids=["planar", "floating", "bad-type", "dup-link", "dup-joint", "two-parents", "inverted",
+        "infinite", "latin1-undeclared"])
+@pytest.mark.usefixtures("default_back_ends")
+def test_more_urdf_faults_are_named(tmp_path, capsys, old, new, names):
+    urdf = _spoilt(tmp_path, old, new)
+    if "caf" in new:
+        urdf.write_bytes(urdf.read_text().encode("latin-1"))
+    cfg = _toml(tmp_path / "arm.toml", "arm.urdf")
+    for argv in (["config", "check", str(cfg)], ["robots", "--show", "--config", str(cfg)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert str(urdf) in err and "Traceback" not in err
+        for name in names:
+            assert name in err, (argv, name, err)
+
+
+def test_a_chain_without_a_movable_joint_says_where_one_is(tmp_path):
+    _arm(tmp_path / "arm.urdf")
+    with pytest.raises(InvalidInputError, match=r"between the base frame 'b' and the pen-tip "
+                       r"frame 'b'.*tip_frame below a movable joint \('c'\)"):
+        describe_robot(tmp_path / "arm.urdf", base_frame="b", tip_frame="b")
+    with pytest.raises(InvalidInputError, match=r"'a' does not hang below the base frame 'c'"):
+        describe_robot(tmp_path / "arm.urdf", base_frame="c", tip_frame="a")
+
+
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16", "iso-8859-1"])
+def test_a_urdf_in_any_declared_encoding_reaches_the_ik(tmp_path, encoding):
+    """Pinocchio's own parser reads UTF-8 only: it is given the text as iloci decoded it."""
+    pytest.importorskip("pinocchio")
+    from iloci.plugins import get_registry
+
+    text = _arm(tmp_path / "plain.urdf").read_text().replace(
+        '<?xml version="1.0"?>', f'<?xml version="1.0" encoding="{encoding.upper()}"?>'
+        if encoding != "utf-8-sig" else '<?xml version="1.0"?>').replace(
+        '<robot name="spoilt">', '<robot name="spoilt"><!-- caf\xe9 -->')
+    (tmp_path / "arm.urdf").write_bytes(text.encode(encoding))
+    robot = describe_robot(tmp_path / "arm.urdf", tip_frame="pen")
+    ik = get_registry().build("ik", "pinocchio", robot=robot)
+    q = np.array([0.3, -0.4, 0.5])
+    plain = get_registry().build("ik", "pinocchio",
+                                 robot=describe_robot(tmp_path / "plain.urdf", tip_frame="pen"))
+    assert np.allclose(ik.forward(q), plain.forward(q))
+
 @pytest.mark.usefixtures("default_back_ends")
 def test_relative_urdf_is_read_beside_the_config_from_any_folder(tmp_path, monkeypatch):
     (tmp_path / "robots").mkdir()
@@ -136,18 +203,18 @@ def _stroke(n: int, seed: int = 0) -> np.ndarray:
 
 
 def test_a_huge_stroke_is_read_in_linear_time_close_to_the_exact_fit(monkeypatch):
-    import iloci.sensorimotor.preprocess as pp
+    import iloci.sensorimotor.path as path
     from scipy.ndimage import gaussian_filter1d
 
-    xy = _stroke(pp.POOL_ABOVE + 10_000)
+    xy = _stroke(path.POOL_ABOVE + 10_000)
     # the path's Gaussian by FFT above FFT_ABOVE: scipy's direct convolution's result
-    sigma = pp.PRESMOOTH * len(xy)
-    assert np.allclose(pp._gaussian(xy, sigma), gaussian_filter1d(xy, sigma, axis=0,
+    sigma = path.PRESMOOTH * len(xy)
+    assert np.allclose(path._gaussian(xy, sigma), gaussian_filter1d(xy, sigma, axis=0,
                                                                   mode="nearest"),
                        rtol=0, atol=1e-12)
-    pooled = pp.resample_path(xy)
-    monkeypatch.setattr(pp, "POOL_ABOVE", 10**12)
-    exact = pp.resample_path(xy)
+    pooled = path.resample_path(xy)
+    monkeypatch.setattr(path, "POOL_ABOVE", 10**12)
+    exact = path.resample_path(xy)
     assert np.abs(pooled - exact).max() < 1e-4 * np.ptp(exact, axis=0).max()
 
 
@@ -172,7 +239,7 @@ def test_beyond_the_maximum_a_stroke_is_refused_before_any_work(tmp_path, monkey
 
 
 def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypatch):
-    import iloci.data.files as files
+    import iloci.data.csvfile as csvfile
     from iloci.data import load_trajectory
     from iloci.errors import InvalidDemonstrationError
 
@@ -180,7 +247,7 @@ def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypat
     f = tmp_path / "big.csv"
     np.savetxt(f, rows, delimiter=";", header="time_ms;pos_x;pos_y", comments="", fmt="%.7g")
     fast = load_trajectory(f)
-    monkeypatch.setattr(files, "_SAMPLE", 10**12)  # dialect from the whole file: no fast path
+    monkeypatch.setattr(csvfile, "_SAMPLE", 10**12)  # dialect from the whole file: no fast path
     slow = load_trajectory(f)
     assert np.array_equal(fast.positions, slow.positions)
     assert np.array_equal(fast.times, slow.times) and fast.times[1] == pytest.approx(1e-5)
@@ -198,6 +265,7 @@ def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypat
 
 def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
     import iloci.progress as progress
+    import iloci.sensorimotor.path as path
     import iloci.sensorimotor.preprocess as pp
     from iloci import Demonstration
     from iloci.sensorimotor.robots import NAO_PLANE
@@ -205,10 +273,10 @@ def test_a_step_over_a_second_shows_its_progress(monkeypatch, capsys):
     monkeypatch.setattr(progress, "SHOW_AFTER", 0.0)
     monkeypatch.setattr(progress, "_EVERY", 0.0)
     seen = []
-    demo = Demonstration(positions=_stroke(pp.POOL_ABOVE + 1), shape="long")
+    demo = Demonstration(positions=_stroke(path.POOL_ABOVE + 1), shape="long")
     with progress.progress_sink(lambda what, f, s: seen.append((what, f))):
         pp.preprocess(demo, plane=NAO_PLANE)
-    assert seen[0][0] == f"reading the drawing long/0 ({pp.POOL_ABOVE + 1:,} samples)"
+    assert seen[0][0] == f"reading the drawing long/0 ({path.POOL_ABOVE + 1:,} samples)"
     fractions = [f for _, f in seen]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 3
     pp.preprocess(demo, plane=NAO_PLANE)  # nobody listening: nothing shown, nothing kept
@@ -226,13 +294,14 @@ def test_a_memory_from_a_newer_iloci_names_both_versions(tmp_path, monkeypatch):
 
     saved = load_config(None).to_dict()
     saved["learner"]["forgetting_rate"] = 0.1  # a setting of a later version
-    import iloci.concepts.memory as memory_module
+    import iloci.concepts.storage as storage     # writes the version into the header
     monkeypatch.setattr(iloci._version, "__version__", "99.1.0")
-    monkeypatch.setattr(memory_module, "__version__", "99.1.0", raising=False)
+    monkeypatch.setattr(storage, "__version__", "99.1.0")
     save_memory(tmp_path / "m.npz", Memory(), {}, extra={"config": saved})
     monkeypatch.undo()
     with pytest.raises(MemoryFileError, match=r"written by iloci 99.1.0, this is iloci "
-                       rf"{iloci._version.__version__}: upgrade iloci.*forgetting_rate"):
+                       rf"{iloci._version.__version__}: upgrade iloci.*forgetting_rate"), \
+            pytest.warns(UserWarning, match="written by iloci 99.1.0"):
         Agent.load(tmp_path / "m.npz")
 
 
@@ -256,6 +325,107 @@ def test_a_config_from_a_newer_iloci_names_both_versions(tmp_path, capsys):
     assert "upgrade" not in capsys.readouterr().err
 
 
+
+def _memory_members(path: Path) -> dict[str, bytes]:
+    import zipfile
+    with zipfile.ZipFile(path) as z:
+        return {n: z.read(n) for n in z.namelist()}
+
+
+def test_a_memory_file_from_elsewhere_is_refused_before_it_is_unpacked(tmp_path, monkeypatch):
+    """Pickles (whole file, or an object array inside), a zip bomb, a lying array header and
+    a file that is no archive: each its own sentence, nothing unpickled or unpacked."""
+    import io
+    import pickle
+    import zipfile
+
+    import iloci.concepts.storage as storage
+    from iloci.concepts.memory import Memory, load_memory, save_memory
+    from iloci.errors import MemoryFileError
+
+    good = save_memory(tmp_path / "good.npz", Memory(), {"w": np.zeros(3)})
+    members = _memory_members(good)
+
+    def npz(name: str, extra: dict[str, bytes], **kw) -> Path:
+        f = tmp_path / name
+        with zipfile.ZipFile(f, "w", **kw) as z:
+            for n, b in {**members, **extra}.items():
+                z.writestr(n, b)
+        return f
+
+    def npy(a: np.ndarray) -> bytes:
+        buf = io.BytesIO()
+        np.save(buf, a, allow_pickle=True)
+        return buf.getvalue()
+
+    (tmp_path / "p.npz").write_bytes(pickle.dumps({"a": 1}))
+    with pytest.raises(MemoryFileError, match="p.npz is refused: the file is a Python pickle"):
+        load_memory(tmp_path / "p.npz")
+    f = npz("o.npz", {"mem/evil.npy": npy(np.array([{"a": 1}], dtype=object))})
+    with pytest.raises(MemoryFileError, match="'mem/evil' holds Python objects.*run any code"):
+        load_memory(f)
+    monkeypatch.setattr(storage, "MAX_UNPACKED", 10**6)
+    f = npz("bomb.npz", {"mem/z.npy": npy(np.zeros(2 * 10**5))},
+            compression=zipfile.ZIP_DEFLATED)
+    assert f.stat().st_size < 10**5
+    with pytest.raises(MemoryFileError, match="would unpack to 0.0 GiB.*up to 0 GiB.*nothing "
+                       "was unpacked"):
+        load_memory(f)
+    monkeypatch.undo()
+    header = npy(np.zeros(4)).replace(b"(4,), ", b"(999999,),")
+    f = npz("lie.npz", {"mem/lie.npy": header})
+    with pytest.raises(MemoryFileError, match=r"'mem/lie' claims shape \(999999,\).*corrupted"):
+        load_memory(f)
+    (tmp_path / "t.npz").write_text("hello")
+    with pytest.raises(MemoryFileError, match="not a complete .npz archive"):
+        load_memory(tmp_path / "t.npz")
+    assert load_memory(good)[1]["w"].shape == (3,)
+
+
+def test_a_memory_from_an_older_or_newer_iloci_names_the_versions(tmp_path, monkeypatch):
+    import iloci._version
+    from iloci.concepts.memory import Memory, load_memory, save_memory
+    from iloci.concepts.storage import read_memory_file, write_memory_file
+    from iloci.errors import MemoryFileError
+
+    save_memory(tmp_path / "m.npz", Memory(), {})
+    arrays, header = read_memory_file(tmp_path / "m.npz")
+    header = {k: v for k, v in header.items() if k not in ("checksum", "iloci")}
+    arrays.pop("mem/prototype")  # an array an older iloci did not write
+    write_memory_file(tmp_path / "old.npz", arrays, header)
+    with pytest.raises(MemoryFileError, match=r"old.npz: .*it lacks 'mem/prototype'.*written "
+                       rf"by iloci {iloci._version.__version__}; this is iloci"):
+        load_memory(tmp_path / "old.npz")
+    monkeypatch.setattr(iloci._version, "__version__", "42.0")
+    import iloci.concepts.storage as storage  # the writer names its version in the header
+    monkeypatch.setattr(storage, "__version__", "42.0", raising=False)
+    save_memory(tmp_path / "new.npz", Memory(), {})
+    monkeypatch.undo()
+    with pytest.warns(UserWarning, match="new.npz was written by iloci 42.0, this is iloci "
+                      ".*saving the memory from here drops"):
+        load_memory(tmp_path / "new.npz")
+
+
+def test_a_data_set_with_names_that_are_not_utf8_is_read_and_reported(tmp_path):
+    import os
+
+    from iloci.data.datasets import load_dataset
+    from iloci.data.files import write_text_atomic
+
+    if os.sys.getfilesystemencoding() != "utf-8":
+        pytest.skip("a UTF-8 file system encoding")
+    root = tmp_path / os.fsdecode(b"data\xe9")
+    t = np.linspace(0.0, 1.0, 40)
+    for concept, k in ((os.fsdecode(b"Sin\xe9"), 6), ("GShape", 3)):
+        for i in range(2):
+            (root / concept).mkdir(parents=True, exist_ok=True)
+            np.savetxt(root / concept / os.fsdecode(b"s%d\xff.csv" % i),
+                       np.column_stack([np.cos(k * t) + i, np.sin(k * t)]), delimiter=",")
+    ds = load_dataset(root)
+    assert sorted({d.true_concept for d in ds.demos}) == ["GShape", "Sin\\xe9"]
+    report = write_text_atomic(tmp_path / "r.md", f"data set {root}, {ds.demos[-1].key}\n")
+    assert report.read_bytes().endswith(b"data\\xe9, Sin\\xe9/1\n")
+
 @pytest.mark.usefixtures("default_back_ends")
 def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatch):
     from iloci.data.files import writable_dir
@@ -274,6 +444,10 @@ def test_output_folders_are_checked_before_any_work(tmp_path, capsys, monkeypatc
     assert learned == []
     with pytest.raises(InvalidInputError, match="is a file, not a directory"):
         writable_dir(blocker, "--out")
+    from iloci.commands.serve import build_classroom
+    with pytest.raises(InvalidInputError, match="--memory .*a-file.*is a file, not a directory"):
+        build_classroom(blocker / "m.npz", worker=False)  # before its lock is taken
+    assert not (blocker.parent / "m.npz.lock").exists()
     argv = [["evaluate", "--out", str(tmp_path / "o"), "--memories", str(blocker / "m"),
              "--no-baseline"],
             ["teach", "--memory", str(blocker / "m.npz"), "GShape/0"],
@@ -329,6 +503,17 @@ class _SloppyPlugin:
         return "an executor" if name == "sloppy" else None
 
     @hookimpl
+    def iloci_register_robots(self, registry):
+        registry.add("sloppy-arm", lambda: "panda", summary="returns a name", joints=4,
+                     plane="given")
+
+
+class _SloppyOldRobots:
+    """The deprecated dict form of ``iloci_register_robots``, adding no preset."""
+
+    from iloci import hookimpl
+
+    @hookimpl
     def iloci_register_robots(self, robots):
         robots["sloppy-arm"] = "panda"
 
@@ -345,7 +530,7 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
     from iloci.errors import PluginError
     from iloci.evaluation.executors import make_executor
     from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import available_robots
+    from iloci.sensorimotor.robots import available_robots, get_robot
 
     pm = get_plugin_manager(autoload=False, plugins=[_SloppyPlugin()])
     registry = get_registry(pm)
@@ -353,11 +538,18 @@ def test_a_hook_result_of_the_wrong_type_names_plugin_distribution_and_hook():
                        r"none\), registered through iloci_register_teachers: its factory .* "
                        r"returned dict .* lacks feedback"):
         registry.build("teacher", "sloppy")
-    with pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
+    with pytest.warns(DeprecationWarning, match="implements iloci_make_executor: deprecated"), \
+            pytest.raises(PluginError, match=r"iloci_make_executor returned str 'an executor' "
                        "for executor 'sloppy', which is not a fold executor: it lacks name, run"):
         make_executor("sloppy", 1, plugin_manager=pm)
-    with pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
-        available_robots(pm)
+    with pytest.raises(PluginError, match=r"robot 'sloppy-arm' of plugin '.*' \(distribution "
+                       r"none\), registered through iloci_register_robots: its factory .* "
+                       r"returned str 'panda', which is not a robot: it lacks .*joint_names"):
+        get_robot("sloppy-arm", pm)
+    old = get_plugin_manager(autoload=False, plugins=[_SloppyOldRobots()])
+    with pytest.warns(DeprecationWarning, match="iloci_register_robots\\(robots\\), a dict"), \
+            pytest.raises(PluginError, match=r"iloci_register_robots added 'sloppy-arm': str"):
+        available_robots(old)
     with pytest.raises(PluginError, match=r"iloci_register_clusterers returned dict .* "
                        r"returns nothing: it registers each component with registry.add"):
         get_registry(get_plugin_manager(autoload=False, plugins=[_ReturningPlugin()]))
@@ -383,3 +575,46 @@ def test_an_installed_plugin_with_a_wrong_factory_result_is_named_with_its_distr
     assert "teacher 'sloppy' of plugin 'sloppy' (distribution iloci-sloppy)" in out.stderr
     assert "iloci_register_teachers" in out.stderr and "returned str 'yes'" in out.stderr
     assert "Traceback" not in out.stderr and not (tmp_path / "m.npz").exists()
+
+
+def _installed(site: Path, name: str, code: str) -> None:
+    """A plugin distribution ``iloci-NAME`` (module NAME_plugin) found on PYTHONPATH=site."""
+    site.mkdir(exist_ok=True)
+    (site / f"{name}_plugin.py").write_text("from iloci import hookimpl\n\n" + code)
+    info = site / f"iloci_{name}-0.3.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: iloci-{name}\nVersion: 0.3\n")
+    (info / "entry_points.txt").write_text(f"[iloci]\n{name} = {name}_plugin\n")
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_an_installed_plugin_that_raises_is_named_with_what_to_do(tmp_path, cli):
+    """A factory that raises, a factory naming a module the plugin lacks, and a command
+    hook that raises: each error names the plugin, its distribution, and how to block it."""
+    site = tmp_path / "site"
+    _installed(site, "shaky", (
+        "def _broken(**kw):\n    raise RuntimeError('no teacher today')\n\n"
+        "@hookimpl\n"
+        "def iloci_register_teachers(registry):\n"
+        "    registry.add('shaky', _broken, summary='raises')\n"
+        "    registry.add('ghost', 'shaky_gone:Teacher', summary='lazy, module missing')\n"))
+    env = {"PYTHONPATH": str(site)}
+    for teacher, says in (("shaky", "its factory _broken raised RuntimeError: no teacher "
+                                    "today"),
+                          ("ghost", "its factory 'shaky_gone:Teacher' names module "
+                                    "shaky_gone, which cannot be imported")):
+        out = cli("teach", "--teacher", teacher, "--memory", str(tmp_path / "m.npz"),
+                  "GShape/0", env=env)
+        assert out.returncode == 2, out.stderr
+        assert (f"teacher {teacher!r} of plugin 'shaky' (distribution iloci-shaky)"
+                in out.stderr), out.stderr
+        assert says in out.stderr and "ILOCI_BLOCK_PLUGINS=shaky" in out.stderr
+        assert "Traceback" not in out.stderr and not (tmp_path / "m.npz").exists()
+    _installed(site, "loud", "@hookimpl\ndef iloci_add_commands(subparsers):\n"
+                             "    raise ValueError('no room')\n")
+    out = cli("plugins", env=env)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert ("plugin 'loud' (distribution iloci-loud) failed in iloci_add_commands: "
+            "ValueError: no room" in out.stderr and "ILOCI_BLOCK_PLUGINS=loud" in out.stderr)
+    out = cli("plugins", env={**env, "ILOCI_BLOCK_PLUGINS": "loud"})
+    assert out.returncode == 0, out.stderr

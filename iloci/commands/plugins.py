@@ -1,4 +1,5 @@
-"""``iloci plugins``: every registered component and whether it can be built."""
+"""``iloci plugins``: everything registered (components, fold executors, robots), who
+registered it and whether it can be built."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ def rows() -> tuple[list[dict], list[dict]]:
     pm = get_plugin_manager()
     registry = get_registry(pm)
     out = []
-    for spec in [*registry.specs(), *registry.specs("executor")]:
+    for spec in [s for kind in ALL_KINDS for s in registry.specs(kind)]:
         missing = spec.missing()
         out.append({
             "kind": ALL_KINDS[spec.kind].label, "name": spec.name,
@@ -29,6 +30,7 @@ def rows() -> tuple[list[dict], list[dict]]:
             f"missing {', '.join(missing)}: {spec.install or 'pip install ' + ' '.join(missing)}",
             "summary": spec.summary,
             "here": spec.description(),
+            **({"facts": dict(spec.facts)} if spec.facts else {}),
         })
     broken = [{"plugin": i.name, "distribution": i.distribution, "status": i.status,
                "error": i.error, "why": i.why_unloaded}

@@ -29,19 +29,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from iloci.errors import MissingBackendError
-    from iloci.sensorimotor.robots import available_robots
+    from iloci.plugins import get_registry
 
     if args.show is None:
-        presets = available_robots()
+        registry = get_registry()
         rows = []
-        for p in presets.values():
+        for spec in registry.specs("robot"):  # the registry's robots, with provenance
             status = "available"
             try:
-                p.make()
+                registry.build("robot", spec.name)
             except MissingBackendError as exc:
                 status = f"missing: {exc}"
-            rows.append({"name": p.name, "joints": p.joints, "source": p.source,
-                         "plane": p.plane, "status": status, "summary": p.summary})
+            rows.append({"name": spec.name, "joints": spec.fact("joints"),
+                         "source": spec.distribution or "none", "plane": spec.fact("plane"),
+                         "plugin": spec.plugin, "status": status, "summary": spec.summary})
         if args.json:
             print(json.dumps(rows, indent=2))
             return 0

@@ -8,6 +8,8 @@ from it. Needs the ``serve`` extra: ``pip install 'iloci[serve]'``.
 from __future__ import annotations
 
 import argparse
+import signal
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -56,11 +58,17 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
 
     Raises
     ------
+    InvalidInputError
+        ``memory`` cannot be a memory file (a symlink loop, a directory, a
+        folder where nothing can be written).
     MemoryLockedError
         Another process (``iloci teach``, another ``iloci serve``) holds
-        the memory; its holder is named.
+        the memory, under this name or another (a hard link); its holder
+        is named.
     """
+    from iloci.data.writes import check_memory_path
     from iloci.progress import acquire_memory_lock
+    check_memory_path(memory)               # a loop, a directory, a folder that takes no file
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:
         classroom = _build(memory, config, worker, protocol)
@@ -92,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         import uvicorn
 
         from iloci.web.app import create_app
+        from iloci.web.connections import uvicorn_options
     except ImportError as exc:
         raise MissingBackendError("command", "serve", ["starlette", "uvicorn"],
                                   "pip install 'iloci[serve]'") from exc
@@ -99,17 +108,46 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--port must be 1..65535, got {args.port}.")
     classroom = build_classroom(args.memory, args.config, protocol=args.protocol)
     hosts = [args.host, *args.allow_host]
-    app = create_app(classroom, hosts=hosts, on_shutdown=classroom.agent.close)
-    mem = classroom.agent.memory
-    print(f"memory {args.memory}: {mem.summary().splitlines()[0]}")
-    print(f"teach the robot at http://{_shown(args.host)}:{args.port}/ (Ctrl-C to stop)",
-          flush=True)
+    app = create_app(classroom, hosts=hosts, on_shutdown=lambda: _stop_worker(classroom))
+    # uvicorn stops gracefully on SIGTERM, then raises it again once it has
+    # stopped: with the default action the process would end before the
+    # lines below release the memory's lock; as SystemExit they run
+    previous = signal.signal(signal.SIGTERM, _exit_on_sigterm)
     try:
+        mem = classroom.agent.memory
+        print(f"memory {args.memory}: {mem.summary().splitlines()[0]}")
+        print(f"teach the robot at http://{_shown(args.host)}:{args.port}/ (Ctrl-C to stop)",
+              flush=True)
+        # a request's head must arrive within 10 s and at most 128 connections stay
+        # open (iloci.web.connections): a client that connects and sends slowly
+        # does not hold the server
         uvicorn.run(app, host=args.host, port=args.port, log_level="warning",
-                    timeout_keep_alive=5)
+                    timeout_keep_alive=5, **uvicorn_options())
     finally:
+        _stop_worker(classroom)
         classroom.close()
+        signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def _exit_on_sigterm(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _stop_worker(classroom: Any) -> None:
+    """Stop the agent's worker; one that is already gone is said in a line, not a traceback.
+
+    A signal to the whole process group (``timeout``, a service manager,
+    a closed terminal) stops the worker process before the server: its
+    network cannot be copied back then, and nothing is lost, since the
+    memory file was saved after every change.
+    """
+    from iloci.worker import WorkerError
+    try:
+        classroom.agent.close()
+    except WorkerError:
+        print(f"the network's worker process had already stopped; {classroom.memory_path} "
+              "holds every change saved before.", file=sys.stderr, flush=True)
 
 
 def _shown(host: str) -> str:

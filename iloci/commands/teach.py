@@ -168,11 +168,10 @@ def _describe(outcome) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from iloci.data.writes import check_memory_path
     from iloci.progress import teaching_lock
 
-    from iloci.data.files import writable_file
-
-    memory_path = writable_file(args.memory, "--memory")  # before anything is learned
+    memory_path = check_memory_path(args.memory)  # before anything is learned
     with teaching_lock(memory_path):
         return _teach(args, memory_path)
 

@@ -142,7 +142,8 @@ def demonstration_digest(demo: Any) -> str:
     demonstration with the same key but any sample changed is another
     demonstration; the same samples under another key are too.
     """
-    h = hashlib.sha256(b"iloci-demonstration-v1\0" + demo.key.encode() + b"\0")
+    h = hashlib.sha256(b"iloci-demonstration-v1\0" + demo.key.encode("utf-8", "surrogatepass")
+                        + b"\0")
     h.update(np.ascontiguousarray(demo.positions, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(demo.times, dtype=np.float64).tobytes())
     return h.hexdigest()[:32]

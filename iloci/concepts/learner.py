@@ -164,6 +164,20 @@ class Learner:
         return self.policies.rehearsal.epochs
 
     # -- the turn's events: sent to observers once the turn is committed -----------
+    @property
+    def queued_events(self) -> list[tuple[str, Any]]:
+        """The observer events queued for the turn under way (``(hook name, event)``).
+
+        Sent by :meth:`deliver` once the turn is committed. A front end
+        holding several turns at once (the web page: one per tab) keeps each
+        turn's list and sets it back before that turn's next step.
+        """
+        return self._pending
+
+    @queued_events.setter
+    def queued_events(self, events: list[tuple[str, Any]]) -> None:
+        self._pending = events
+
     def emit(self, event: InteractionEvent) -> None:
         """Queue an interaction for the observers (sent by :meth:`deliver`)."""
         self._pending.append(("iloci_on_interaction", event))

@@ -188,6 +188,8 @@ class Memory:
         d_cutoff : float
             The cut the clusters were taken at (NaN below two entries).
         """
+        # clustering imports scipy: loaded when a concept is first clustered, so
+        # `import iloci` stays light
         from iloci.concepts import clustering
         entries = [e.copy() for e in self.entries]
         idx = [i for i, e in enumerate(entries) if e.concept == concept]
@@ -383,7 +385,8 @@ class Memory:
             return cls(entries, encoder, int(meta["concept_count"]),
                        int(meta["demonstrations_seen"]), learned=learned)
         except (KeyError, TypeError, ValueError, IndexError, InvalidInputError) as exc:
-            raise MemoryFileError(f"memory file content is inconsistent ({exc}); it was not "
+            what = f"it lacks {exc}" if isinstance(exc, KeyError) else str(exc)
+            raise MemoryFileError(f"memory file content is inconsistent ({what}); it was not "
                                   "written by this version of iloci or was edited.") from None
 
 
@@ -441,6 +444,19 @@ def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndar
         memory, or written by a newer iloci.
     """
     arrays, header = read_memory_file(path)
-    memory = Memory.from_arrays(arrays, header.get("memory", {}))
+    try:
+        memory = Memory.from_arrays(arrays, header.get("memory", {}))
+    except MemoryFileError as exc:
+        from iloci._version import __version__
+        raise MemoryFileError(f"{path}: {exc} It says it was written by iloci "
+                              f"{header.get('iloci', '(no version)')}; this is iloci "
+                              f"{__version__}.") from None
     network_state = {k[4:]: v for k, v in arrays.items() if k.startswith("net/")}
+    from iloci._version import __version__, is_newer
+    if is_newer(header.get("iloci")):
+        import warnings
+        warnings.warn(f"{path} was written by iloci {header.get('iloci')}, this is iloci "
+                      f"{__version__}: what this version knows of it is loaded; anything "
+                      "newer in it is not, and saving the memory from here drops that "
+                      "(upgrade iloci to keep it).", UserWarning, stacklevel=2)
     return memory, network_state, header

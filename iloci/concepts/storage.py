@@ -37,6 +37,7 @@ import zlib
 
 import numpy as np
 
+from iloci._version import __version__
 from iloci.data.files import write_atomic
 from iloci.errors import MemoryFileError
 
@@ -46,6 +47,10 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "read_memory_file", "write_memory_file"]
 FORMAT = "iloci-memory"
 #: Version of the file layout this iloci writes and the newest it reads.
 FORMAT_VERSION = 1
+#: Largest memory file iloci unpacks, in bytes of arrays (the zip directory's sizes, read
+#: before anything is unpacked): 2 GiB, about 10^4 times a LASA-taught memory of every
+#: concept (~200 kB); a file claiming more is refused, as a zip bomb would be.
+MAX_UNPACKED = 2 * 2**30
 
 
 def _checksum(header: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> str:
@@ -61,6 +66,59 @@ def _checksum(header: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> st
     return h.hexdigest()
 
 
+def _check_members(path: Path) -> None:
+    """Refuse, before anything is unpacked, a memory file that is a pickle, holds an
+    object (pickled) array, or would unpack to more than :data:`MAX_UNPACKED` bytes."""
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(2)
+    except OSError as exc:
+        raise MemoryFileError(f"cannot read memory file {path}: {exc.strerror}.") from None
+    if len(head) == 2 and head[0] == 0x80 and head[1] <= 5:  # pickle protocol 2-5
+        raise MemoryFileError(_pickled(path, "the file is a Python pickle"))
+    if not zipfile.is_zipfile(path):
+        raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
+                              "or not an iloci memory (not a complete .npz archive).")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            total = sum(i.file_size for i in infos)
+            if total > MAX_UNPACKED:
+                raise MemoryFileError(
+                    f"{path} would unpack to {total / 2**30:.1f} GiB of arrays; iloci reads "
+                    f"memory files up to {MAX_UNPACKED / 2**30:.0f} GiB unpacked (a memory "
+                    "of every LASA concept is ~200 kB). It was not written by iloci or is "
+                    "damaged; nothing was unpacked.")
+            for info in infos:
+                if not info.filename.endswith(".npy"):
+                    continue
+                with zf.open(info) as member:
+                    version = np.lib.format.read_magic(member)
+                    read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                            else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = read(member, max_header_size=10_000)
+                if dtype.hasobject:
+                    raise MemoryFileError(_pickled(
+                        path, f"its array {info.filename[:-4]!r} holds Python objects"))
+                if int(np.prod(shape, dtype=np.float64)) * dtype.itemsize > info.file_size:
+                    raise MemoryFileError(
+                        f"cannot read memory file {path}: its array {info.filename[:-4]!r} "
+                        f"claims shape {shape} ({dtype}), more than the "
+                        f"{info.file_size} bytes stored: the file is corrupted.")
+    except MemoryFileError:
+        raise
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError, KeyError, zlib.error,
+            struct.error, OverflowError, NotImplementedError, RuntimeError) as exc:
+        raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
+                              f"or not an iloci memory ({type(exc).__name__}: {exc}).") from None
+
+
+def _pickled(path: Path, what: str) -> str:
+    return (f"{path} is refused: {what}, and loading pickled data can run any code. iloci "
+            "memories hold numeric arrays and a JSON header only; this file was not written "
+            "by iloci (or was altered). Nothing was loaded.")
+
+
 def write_memory_file(path: str | os.PathLike[str], arrays: dict[str, np.ndarray],
                       header: Mapping[str, Any]) -> Path:
     """Write ``arrays`` and ``header`` (with format, version and checksum) atomically.
@@ -69,7 +127,6 @@ def write_memory_file(path: str | os.PathLike[str], arrays: dict[str, np.ndarray
     Returns the path written.
     """
     path = Path(os.path.realpath(os.fspath(path)))
-    from iloci._version import __version__
     full: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                             "iloci": __version__, **dict(header)}
     full["checksum"] = _checksum(full, arrays)
@@ -92,6 +149,7 @@ def read_memory_file(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray
     if not path.is_file():
         raise MemoryFileError(f"memory file not found: {path}. Teach the robot first "
                               "(`iloci teach --memory FILE`), or check the path.")
+    _check_members(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}

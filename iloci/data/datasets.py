@@ -171,9 +171,16 @@ def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
             continue
         for f in files:
             rel = f.relative_to(d)
-            writer = rel.parts[0] if len(rel.parts) > 1 else None
-            samples.append(Sample(f.relative_to(root).as_posix(), d.name, writer))
+            writer = _text(rel.parts[0]) if len(rel.parts) > 1 else None
+            samples.append(Sample(f.relative_to(root).as_posix(), _text(d.name), writer))
     return samples, problems
+
+
+def _text(name: str) -> str:
+    """A folder name as a concept or writer name: bytes that are not UTF-8 (held by Python
+    as lone surrogates, which cannot be printed, drawn or saved) written ``\\xNN``, as
+    :func:`iloci.data.files.shape_name` writes them in a file's name."""
+    return os.fsencode(name).decode("utf-8", "backslashreplace")
 
 
 def _pick(header: Sequence[str], names: Sequence[str]) -> str | None:
@@ -336,7 +343,8 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
         unit = _position_unit(f)
         if unit:
             units.setdefault(unit, []).append(s.path)
-        h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode())
+        h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode(
+            "utf-8", "surrogatepass"))
         h.update(hashlib.sha256(f.read_bytes()).digest())
     if problems:
         raise _fail(f"data set {p}: {len(problems)} file(s) cannot be read; nothing was "
@@ -372,7 +380,7 @@ def demos_checksum(demos: Sequence[Demonstration]) -> str:
     """SHA-256 over the demonstrations' keys, true concepts, times and positions."""
     h = hashlib.sha256()
     for d in demos:
-        h.update(f"{d.key}\0{d.true_concept or ''}\0".encode())
+        h.update(f"{d.key}\0{d.true_concept or ''}\0".encode("utf-8", "surrogatepass"))
         h.update(np.ascontiguousarray(d.times, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(d.positions, dtype="<f8").tobytes())
     return h.hexdigest()

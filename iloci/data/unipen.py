@@ -366,7 +366,7 @@ def samples_checksum(samples: Iterable[UnipenSample]) -> str:
     """SHA-256 over labels, writers and points: names exactly which samples were used."""
     h = hashlib.sha256()
     for s in samples:
-        h.update(f"{s.label}\0{s.writer}\0{s.path}\0".encode())
+        h.update(f"{s.label}\0{s.writer}\0{s.path}\0".encode("utf-8", "surrogatepass"))
         for k in s.strokes:
             h.update(np.ascontiguousarray(k, dtype="<f8").tobytes())
     return h.hexdigest()

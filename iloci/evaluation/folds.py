@@ -18,6 +18,7 @@ import numpy as np
 
 from iloci.config import Config
 from iloci.data.concepts import GroundTruth
+from iloci.data.datasets import writer_folds
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
@@ -129,7 +130,6 @@ def fold_plan(demos: Sequence[Demonstration], config: Config,
     ev = config.evaluation
     truth = GroundTruth()
     if ev.split == "writers":
-        from iloci.data.datasets import writer_folds
         if samples is None:
             raise InvalidInputError(
                 "[evaluation] split = 'writers' needs a data set that names writers "

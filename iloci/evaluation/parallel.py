@@ -36,7 +36,7 @@ from iloci.errors import InvalidInputError
 from iloci.evaluation.fold import LearnedFold, learn_fold, run_fold
 from iloci.evaluation.folds import fold_memory_name
 from iloci.hookspecs import hookimpl
-from iloci.interfaces import COMPONENT_KINDS
+from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
 from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager, get_registry
 from iloci.sensorimotor.pipeline import MotionCache
 
@@ -71,7 +71,8 @@ class ResolvedComponents:
     objects and modules do not pickle), only the :class:`ComponentSpec` s
     its registry resolved the config's names to. Registered alone on a
     worker's plugin manager, this plugin makes that manager resolve the
-    same names to the same factories and schemas, and nothing else.
+    same names to the same factories and schemas, and nothing else (the
+    robot preset included: the worker's manager loads no other plugin).
     """
 
     def __init__(self, specs: Sequence[Any]) -> None:
@@ -82,7 +83,7 @@ class ResolvedComponents:
         for s in self.specs:
             if s.kind == registry.kind:
                 registry.add(s.name, s.factory, params=s.params, requires=s.requires,
-                             install=s.install, summary=s.summary)
+                             install=s.install, summary=s.summary, **dict(s.facts))
 
     @hookimpl
     def iloci_register_perceptual_models(self, registry: Any) -> None:
@@ -104,9 +105,14 @@ class ResolvedComponents:
     def iloci_register_simulators(self, registry: Any) -> None:
         self._add(registry)
 
+    @hookimpl
+    def iloci_register_robots(self, registry: Any) -> None:
+        self._add(registry)
+
 
 def resolved_specs(config: Any, pm: Any) -> list[Any]:
-    """The specs ``pm`` resolves the config's components to, checked to pickle.
+    """The specs ``pm`` resolves the config's components (and its robot preset) to,
+    checked to pickle.
 
     Raises
     ------
@@ -117,8 +123,11 @@ def resolved_specs(config: Any, pm: Any) -> list[Any]:
     """
     registry = get_registry(pm)
     specs, problems = [], []
-    for sec, kind in COMPONENT_KINDS.items():
-        name = getattr(config, sec).name
+    # the components, and the robot when the config names a preset (not a URDF)
+    wanted = [(sec, kind, getattr(config, sec).name) for sec, kind in COMPONENT_KINDS.items()]
+    if not config.robot.urdf:
+        wanted.append(("robot", ALL_KINDS["robot"], config.robot.name))
+    for sec, kind, name in wanted:
         if name == "none":
             continue
         spec = registry.get(sec, name)

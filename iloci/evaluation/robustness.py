@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from iloci.data.concepts import GroundTruth
+from iloci.evaluation.baselines import run_baselines
 from iloci.evaluation.metrics import correct_classification_rate, mean_std
 from iloci.evaluation.perturb import perturb, suite
 
@@ -67,7 +68,6 @@ def robustness_suite(agent: Any, learn: list[Any], test: list[Any], true: list[s
                                "ccr": correct_classification_rate(true, predicted)}
         if baseline:
             # dtaidistance: [report], checked first
-            from iloci.evaluation.baselines import run_baselines
             runs = run_baselines(learn, shown)
             row["baseline_predicted"] = runs["dtw_normalised"]["predicted"]
             row["baseline_ccr"] = runs["dtw_normalised"]["ccr"]

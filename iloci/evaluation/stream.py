@@ -32,6 +32,7 @@ from iloci.agent import build
 from iloci.config import Config, load_config
 from iloci.data import load_lasa
 from iloci.data.concepts import GroundTruth, majority_names
+from iloci.data.datasets import load_dataset
 from iloci.evaluation.metrics import mean_std, purity
 from iloci.plugins import get_plugin_manager, get_registry
 
@@ -111,7 +112,6 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     pm = plugin_manager or get_plugin_manager()
     config = load_config(config, registry=get_registry(pm))
     if config.data.path:  # a data set of the user's own
-        from iloci.data.datasets import load_dataset
         demos = load_dataset(config.data.path).demos
     else:
         demos = load_lasa(list(config.data.shapes) or None)

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from iloci.config import Config
+from iloci.evaluation.baselines import BASELINES, best_baseline
 from iloci.evaluation.metrics import auroc, mean_std
 from iloci.evaluation.provenance import machine, versions
 from iloci.evaluation.results import FoldResult
@@ -96,7 +97,6 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
     if all(r.get("robustness") for r in results):
         out["robustness"] = summarize_robustness(results)
     if results and all(r.get("baselines") for r in results):
-        from iloci.evaluation.baselines import BASELINES, best_baseline
         out["baselines"] = {}
         for name in results[0]["baselines"]:
             ccrs = [r["baselines"][name]["ccr"] for r in results]

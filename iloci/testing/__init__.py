@@ -18,7 +18,11 @@ they need (determinism and state round trips compare two). The checks per
 interface are in :data:`iloci.testing.checks.CHECKS`: protocol methods
 present, shapes and dtypes, seeded determinism, state round trip through a
 pickle-free file, batch-vs-single consistency, and clear iloci errors on bad
-input.
+input. Robot presets (kind ``robot``) have their own
+(:mod:`iloci.testing.robots`): the description's members, joints and limits,
+``describe()`` as JSON, two builds alike; and
+:func:`~iloci.testing.robots.check_registration` checks that what the
+registration states (``joints``, ``plane``) is true.
 """
 
 from __future__ import annotations
@@ -27,7 +31,6 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from iloci.interfaces import KINDS
 from iloci.plugins import get_registry
 from iloci.registry import validate_params
 from iloci.testing.checks import CHECKS, Factory
@@ -68,7 +71,13 @@ def _as_factory(component: Any) -> Factory:
         return lambda seed: component(seed=seed) if takes_seed else component()
     if callable(component) and not any(hasattr(component, m) for m in
                                        ("feedback", "cluster", "train", "solve", "execute")):
-        return component
+        import inspect
+        try:
+            takes_none = not inspect.signature(component).parameters
+        except (TypeError, ValueError):
+            takes_none = False
+        # a factory taking nothing (a robot preset's): the seed is not passed
+        return (lambda seed: component()) if takes_none else component
     # A ready-made instance: every "fresh" build returns the same object, so
     # determinism checks are weaker; pass a factory when you can.
     return lambda seed: component
@@ -84,7 +93,8 @@ def check_component(component: Any, kind: str, *, checks: Iterable[str] | None =
         ``make(seed) -> instance`` (preferred), or an instance.
     kind : str
         One of ``perceptual_model``, ``clusterer``, ``teacher``, ``ik``,
-        ``simulator``.
+        ``simulator``, ``robot`` (a preset: ``make()`` returns its
+        description; see also :func:`iloci.testing.robots.check_registration`).
     checks : iterable of str, optional
         Names of the checks to run (default: all of the kind).
     raise_on_failure : bool
@@ -95,7 +105,7 @@ def check_component(component: Any, kind: str, *, checks: Iterable[str] | None =
     list of CheckResult
     """
     if kind not in CHECKS:
-        raise ValueError(f"unknown kind {kind!r}; kinds are {', '.join(KINDS)}")
+        raise ValueError(f"unknown kind {kind!r}; kinds are {', '.join(CHECKS)}")
     make = _as_factory(component)
     wanted = set(checks) if checks is not None else None
     results = []

@@ -1,4 +1,4 @@
-"""Conformance checks, one list per interface.
+"""Conformance checks, one list per interface (a robot preset's in :mod:`iloci.testing.robots`).
 
 Each check is a function ``check(make) -> None`` that raises
 ``AssertionError`` (or any exception) with a message when the component
@@ -17,6 +17,7 @@ import numpy as np
 from iloci.errors import IlociError, InvalidInputError, UnreachableTargetError
 from iloci.interfaces import Demonstration, Execution, Response
 from iloci.sensorimotor.robots import get_robot
+from iloci.testing.robots import ROBOT_CHECKS
 
 Factory = Callable[[int], Any]
 #: A conformance check: raises when the component ``make`` builds misbehaves.
@@ -465,4 +466,5 @@ CHECKS: dict[str, list[Check]] = {
     "teacher": TEACHER_CHECKS,
     "ik": IK_SOLVER_CHECKS,
     "simulator": SIMULATOR_CHECKS,
+    "robot": ROBOT_CHECKS,
 }

@@ -13,26 +13,14 @@ pytest.importorskip("iloci_ros", reason="the iloci-ros plugin is not installed")
 pytest.importorskip("iloci_native")
 pytest.importorskip("pinocchio")
 
-import iloci  # noqa: E402
 from iloci.concepts.memory import entries_equal, load_memory  # noqa: E402
-from iloci.data import load_lasa  # noqa: E402
 from iloci.errors import FeedbackError, InvalidDemonstrationError  # noqa: E402
 from iloci_ros.session import Guess, Placed, StaleAnswerError, TeachingSession  # noqa: E402
 
-EPOCHS = 30
-SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
-                                 "recognition_steps": EPOCHS},
-            "learner": {"rehearsal_epochs": EPOCHS}, "evaluation": {"seed": 0}}
 
-
-@pytest.fixture(scope="module")
-def lasa():
-    return {d.key: d for d in load_lasa(["GShape", "Angle"])}
-
-
-def test_answer_ids_refuse_duplicate_late_and_unknown_feedback(lasa, tmp_path):
+def test_answer_ids_refuse_duplicate_late_and_unknown_feedback(lasa, small_agent, tmp_path):
     save = tmp_path / "m.npz"
-    session = TeachingSession(iloci.build(SETTINGS), save_to=save)
+    session = TeachingSession(small_agent(), save_to=save)
     first = session.drawing(lasa["GShape/0"].positions)
     assert isinstance(first, Placed) and first.action == "new_concept" and save.exists()
     assert session.pending is None
@@ -67,8 +55,8 @@ def test_answer_ids_refuse_duplicate_late_and_unknown_feedback(lasa, tmp_path):
     assert isinstance(out, (Guess, Placed))
 
 
-def test_a_bad_drawing_keeps_the_pending_answer(lasa):
-    session = TeachingSession(iloci.build(SETTINGS))
+def test_a_bad_drawing_keeps_the_pending_answer(lasa, small_agent):
+    session = TeachingSession(small_agent())
     session.drawing(lasa["GShape/0"].positions)
     guess = session.drawing(lasa["Angle/0"].positions)
     with pytest.raises(InvalidDemonstrationError, match="zero extent"):
@@ -77,13 +65,13 @@ def test_a_bad_drawing_keeps_the_pending_answer(lasa):
     assert isinstance(session.feedback(guess.answer_id, -1), Placed)
 
 
-def test_every_feedback_twice_and_some_late_leaves_the_memory_of_each_once(lasa):
+def test_every_feedback_twice_and_some_late_leaves_the_memory_of_each_once(lasa, small_agent):
     """A stack that delivers every yes/no twice, and replays old ones late, learns what one
     that sent each once learns: the duplicates and late ones are refused."""
     stream = [lasa[k] for k in ("GShape/0", "Angle/0", "GShape/1", "Angle/1", "GShape/2")]
 
     def teach(bouncy: bool):
-        session = TeachingSession(iloci.build(SETTINGS))
+        session = TeachingSession(small_agent())
         sent, refused, resent = [], 0, 0
         for demo in stream:
             step = session.drawing(demo.positions)

@@ -23,7 +23,7 @@ from iloci.errors import InvalidInputError
 from iloci.sensorimotor.robots.model import DrawingPlane, Robot, _vec3, describe_robot
 from iloci.sensorimotor.robots.plane import find_drawing_plane
 from iloci.sensorimotor.robots.presets import get_robot
-from iloci.sensorimotor.robots.urdf import read_urdf
+from iloci.sensorimotor.robots.urdf import read_urdf, resolved_urdf_text
 
 __all__ = ["check_robot", "place_robot", "plane_cache_dir", "robot_and_ik",
            "robot_from_config"]
@@ -80,7 +80,8 @@ def check_robot(cfg: Any, simulator: str = "none", plugin_manager: Any = None) -
 
     Reads the URDF (unexpanded xacro, limits, ``<mimic>`` couplings on the pen
     tip's chain, frames and joints; see :func:`describe_robot`) and, for the
-    ``"mujoco"`` simulator, that every moving link has a mass.
+    ``"mujoco"`` simulator, that every moving link has a mass; with a simulator, that
+    every mesh file is found (relative to the URDF, ``package://``).
 
     Parameters
     ----------
@@ -105,6 +106,8 @@ def check_robot(cfg: Any, simulator: str = "none", plugin_manager: Any = None) -
         massless = read_urdf(robot.urdf_path).massless_message()
         if massless:
             raise InvalidInputError(massless)
+    if simulator != "none":  # the simulators load the meshes: every mesh file must be found
+        resolved_urdf_text(robot.urdf_path, robot.package_dirs)
     return robot
 
 

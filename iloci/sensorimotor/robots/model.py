@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import InvalidInputError, did_you_mean
-from iloci.sensorimotor.robots.urdf import MOVABLE, limits_message, read_urdf, resolve_uri
+from iloci.sensorimotor.robots.urdf import (MOVABLE, limits_message, read_urdf, resolve_uri,
+                                            urdf_unicode)
 from iloci.validation import check_array
 
 __all__ = ["DrawingPlane", "Robot", "describe_robot"]
@@ -239,8 +240,9 @@ class Robot:
 
     @property
     def urdf_text(self) -> str:
-        """The URDF as a string."""
-        return self.urdf_path.read_text(encoding="utf-8")
+        """The URDF as a string (decoded as its file declares; see
+        :func:`~iloci.sensorimotor.robots.urdf.urdf_unicode`)."""
+        return urdf_unicode(self.urdf_path)
 
     @property
     def tip_frame(self) -> str:
@@ -347,8 +349,22 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
     else:
         names = tuple(on_chain)
     if not names:
-        raise InvalidInputError(f"no movable joint between {base!r} and {tip_frame!r} in "
-                                f"{path}.")
+        below = [j.child for j in tree.joints.values()
+                 if j.type in MOVABLE and base in _ancestors(tree, j.parent)]
+        where = ", ".join(map(repr, below[-3:])) or f"none hangs below {base!r}"
+        raise InvalidInputError(
+            f"no movable joint between the base frame {base!r} and the pen-tip frame "
+            f"{tip_frame!r} in {path}: the pen could not move. Choose a tip_frame below a "
+            f"movable joint ({where}) or a "
+            "base_frame higher up the tree.")
+    multi = [j for j in tree.chain(base, tip_frame) if j.type in ("planar", "floating")]
+    if multi:
+        raise InvalidInputError(
+            f"{path}: joint(s) {', '.join(f'{j.name!r} ({j.type})' for j in multi)} lie on "
+            f"the way from the base frame {base!r} to the pen tip {tip_frame!r}; iloci moves "
+            "one-coordinate joints (revolute, prismatic) and cannot hold a planar or "
+            "floating joint still, so the pen's place would be unknown. Make each a fixed "
+            "joint if it does not move while drawing, or choose a base_frame below it.")
     # the base must not move with the joints used: it lies above all of them
     above_base = {j.name for j in tree.chain(tree.root, base)}
     moving = [n for n in names if n in above_base]
@@ -388,6 +404,16 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
         rest=None if rest_given is None else _frozen(rest_given), package_dirs=dirs,
         base_pose=_frozen(tree.pose_of(base)),
         plane_report={"method": "placeholder" if placeholder else "given"})
+
+
+def _ancestors(tree: Any, link: str) -> set[str]:
+    """Every link above ``link`` in the tree (``link`` itself included)."""
+    out = {link}
+    j = tree.parent_joint(link)
+    while j is not None and j.parent not in out:
+        out.add(j.parent)
+        j = tree.parent_joint(j.parent)
+    return out
 
 
 def _check_mimic(tree: Any, base: str, tip: str, names: Sequence[str], path: Path) -> None:

@@ -1,17 +1,26 @@
-"""Robot presets by name: the Nao's right arm ships with iloci, plugins add more
-(``iloci_register_robots``); :func:`get_robot` makes one.
+"""Robot presets by name: the Nao's right arm ships with iloci, plugins add more.
+
+Robots are a kind of the registry (``robot``, :data:`iloci.interfaces.EXTRA_KINDS`),
+like the components: a plugin's ``iloci_register_robots(registry)`` calls
+``registry.add(name, factory, summary=..., joints=J, plane="given" | "auto")``;
+the registry records the plugin and its distribution, refuses a name
+registered twice (naming both plugins), and ``iloci plugins`` and ``iloci
+robots`` list them. This module is also the plugin that registers the Nao.
+:func:`get_robot` makes one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import partial
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from iloci.errors import PluginError, UnknownComponentError
-from iloci.plugins import get_plugin_manager
+from iloci.hookspecs import hookimpl
+from iloci.plugins import get_plugin_manager, get_registry
+from iloci.registry import KindRegistry
 from iloci.sensorimotor.robots.model import DrawingPlane, Robot, _frozen
 
 __all__ = ["NAO_PLANE", "NAO_Q_HOME", "ROBOTS", "RobotPreset", "available_robots", "get_robot"]
@@ -19,23 +28,25 @@ __all__ = ["NAO_PLANE", "NAO_Q_HOME", "ROBOTS", "RobotPreset", "available_robots
 
 @dataclass(frozen=True)
 class RobotPreset:
-    """A named robot a plugin ships: how to describe it, and a one-line summary.
+    """A named robot: how to describe it, and a one-line summary (a registry entry's view).
 
     Attributes
     ----------
     name : str
     make : callable () -> Robot
         Builds the description (may raise MissingBackendError when the
-        files it needs are not installed).
+        files it needs are not installed); for a registered robot,
+        the registry's build (its factory's result checked).
     summary : str
     joints : int
         ``J``.
     source : str
-        Distribution providing it (``"iloci"`` for the built-in one).
+        Distribution providing it (``"iloci"`` for the built-in one; the
+        registry's record of the plugin's distribution).
     plane : str
         ``"given"`` or ``"auto"`` (placed by the search when built).
     plugin : str
-        The plugin that registered it (set by :func:`available_robots`).
+        The plugin that registered it (the registry's record).
     """
 
     name: str
@@ -47,7 +58,8 @@ class RobotPreset:
     plugin: str = "iloci"
 
 
-def _nao_v32_right_arm() -> Robot:
+def nao_v32_right_arm() -> Robot:
+    """The Nao V3.2's right arm, the paper's robot: 4 joints, pen tip ``r_pen_tip``."""
     path = Path(str(resources.files("iloci.sensorimotor.robots") / "nao_v32_right_arm.urdf"))
     # limits as in the URDF (docs/method.md, "The robot"), rad
     lower = _frozen([-2.0856685, -1.6493361, -2.0856685, 0.0087266])
@@ -74,77 +86,69 @@ NAO_PLANE = DrawingPlane(x=0.165, y=-0.125, z=0.10, width=0.10, height=0.10)
 #: about (-5.2, -46.1, 0.5, 66.4) degrees.
 NAO_Q_HOME = (-0.091452, -0.804138, 0.008353, 1.159141)
 
-#: The built-in robots: name -> preset. Plugins add more (see :func:`available_robots`).
+#: The built-in robots: name -> preset (registered by :func:`iloci_register_robots`
+#: below). Plugins add more (see :func:`available_robots`).
 ROBOTS: dict[str, RobotPreset] = {
     "nao-v32-right-arm": RobotPreset(
-        "nao-v32-right-arm", _nao_v32_right_arm,
+        "nao-v32-right-arm", nao_v32_right_arm,
         "Nao V3.2 right arm (the paper's robot), primitive geometry, 10 cm plane", 4),
 }
 
 
-def available_robots(plugin_manager: Any = None) -> dict[str, RobotPreset]:
-    """Every robot preset: the built-in ones and those plugins register.
+@hookimpl
+def iloci_register_robots(registry: KindRegistry) -> None:
+    """Register the built-in robots (:data:`ROBOTS`)."""
+    for p in ROBOTS.values():
+        registry.add(p.name, p.make, summary=p.summary, joints=p.joints, plane=p.plane)
 
-    Plugins implement the ``iloci_register_robots(robots)`` hook and add
-    :class:`RobotPreset` objects to the dict it receives.
+
+def available_robots(plugin_manager: Any = None) -> dict[str, RobotPreset]:
+    """Every robot preset the registry holds: the built-in ones and those plugins register.
 
     Parameters
     ----------
     plugin_manager : pluggy.PluginManager, optional
         Default: :func:`iloci.plugins.get_plugin_manager`.
+
+    Returns
+    -------
+    dict
+        Name -> :class:`RobotPreset`, sorted by name; ``make`` builds
+        through the registry.
+
+    Raises
+    ------
+    PluginError
+        A plugin the caller passed registers a robot badly (a name taken,
+        a missing fact, not a preset); an installed plugin that does is
+        skipped with a warning instead (see :func:`iloci.plugins.get_registry`).
     """
-    pm = plugin_manager or get_plugin_manager()
-    found: dict[str, RobotPreset] = dict(ROBOTS)
-    info = getattr(pm, "iloci_plugin_info", {}) or {}
-
-    def who(plugin: str) -> str:
-        dist = getattr(info.get(plugin), "distribution", None)
-        return f"plugin {plugin!r} (distribution {dist or 'none'})"
-
-    # registration order (built-ins, installed plugins, the caller's), so a name
-    # registered twice is blamed on the later plugin, as for components
-    for impl in pm.hook.iloci_register_robots.get_hookimpls():
-        before = dict(found)
-        returned = impl.function(**{arg: found for arg in impl.argnames})
-        changed = {k: v for k, v in found.items() if before.get(k) is not v}
-        bad = {k: v for k, v in changed.items() if not isinstance(v, RobotPreset)}
-        if returned is not None or bad or len(found) < len(before):
-            what = (f"added {', '.join(f'{k!r}: {type(v).__name__}' for k, v in bad.items())}"
-                    if bad else f"returned {type(returned).__name__}" if returned is not None
-                    else "removed robots")
-            raise PluginError(
-                f"{who(impl.plugin_name)}: its iloci_register_robots {what}; it must add "
-                "RobotPreset objects to the dict it receives (robots[name] = RobotPreset(...)) "
-                f"and return nothing. Fix the plugin, or block it with "
-                f"ILOCI_BLOCK_PLUGINS={impl.plugin_name}.")
-        taken = [k for k in changed if k in before]
-        if taken:  # a later plugin must not silently replace an earlier one's robot
-            raise PluginError(
-                f"robot {taken[0]!r} is registered twice: by {who(before[taken[0]].plugin)} "
-                f"and by {who(impl.plugin_name)}. Uninstall or block one of them "
-                f"(ILOCI_BLOCK_PLUGINS={impl.plugin_name}).")
-        for k, v in changed.items():  # provenance: who registered it
-            found[k] = replace(v, plugin=impl.plugin_name)
-    return found
+    registry = get_registry(plugin_manager or get_plugin_manager())
+    return {s.name: RobotPreset(s.name, partial(registry.build, "robot", s.name), s.summary,
+                                s.fact("joints"), s.distribution or "none", s.fact("plane"),
+                                s.plugin)
+            for s in registry.specs("robot")}
 
 
 def get_robot(name: str = "nao-v32-right-arm", plugin_manager: Any = None) -> Robot:
-    """The preset robot registered under ``name``.
+    """The preset robot registered under ``name``, built through the registry.
 
     A preset whose plane is ``"auto"`` comes with its placeholder plane:
     :func:`robot_from_config` (what :func:`iloci.build` uses) places it.
+    Without ``plugin_manager`` a built-in robot (:data:`ROBOTS`) is made
+    without loading the plugins.
 
     Raises
     ------
     UnknownComponentError
         No such robot (lists the known names, did you mean).
     MissingBackendError
-        The preset's files are not installed.
+        A first-party preset whose plugin is not installed (``panda``,
+        ``ur5``: ``iloci-robots``), or whose files are not installed.
+    PluginNotLoadedError
+        Its plugin is installed but blocked or not loaded.
     """
-    presets = available_robots(plugin_manager) if plugin_manager is not None or \
-        name not in ROBOTS else ROBOTS
-    try:
-        preset = presets[name]
-    except (KeyError, TypeError):
-        raise UnknownComponentError("robot", str(name), list(presets)) from None
-    return preset.make()
+    if plugin_manager is None and isinstance(name, str) and name in ROBOTS:
+        robot: Robot = ROBOTS[name].make()
+        return robot
+    return get_registry(plugin_manager or get_plugin_manager()).build("robot", str(name))

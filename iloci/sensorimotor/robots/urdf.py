@@ -32,11 +32,13 @@ import numpy as np
 
 from iloci.errors import InvalidInputError, did_you_mean
 
-__all__ = ["MOVABLE", "UrdfJoint", "UrdfTree", "limits_message", "read_urdf", "resolve_uri",
-           "resolved_urdf_text"]
+__all__ = ["JOINT_TYPES", "MOVABLE", "UrdfJoint", "UrdfTree", "limits_message", "read_urdf",
+           "resolve_uri", "resolved_urdf_text", "urdf_unicode"]
 
 #: URDF joint types with one degree of freedom a drawing arm can use.
 MOVABLE = ("revolute", "continuous", "prismatic")
+#: Every joint type of the URDF specification (http://wiki.ros.org/urdf/XML/joint).
+JOINT_TYPES = (*MOVABLE, "fixed", "floating", "planar")
 
 
 @dataclass(frozen=True)
@@ -72,7 +74,8 @@ class UrdfJoint:
 
     def limits_fault(self) -> str:
         """What keeps iloci from moving this joint: ``"continuous"`` (no limits),
-        ``"missing"`` (no lower/upper given), ``"empty"`` (not lower < upper) or "".
+        ``"missing"`` (no lower/upper given), ``"infinite"`` (a limit is inf or nan),
+        ``"empty"`` (not lower < upper) or "".
 
         iloci keeps every joint it moves inside finite limits (margins of the
         drawing plane, IK clipping), so a joint used needs ``lower < upper``;
@@ -82,8 +85,9 @@ class UrdfJoint:
             return "continuous"
         if not self.limits_given:
             return "missing"
-        if not (np.isfinite(self.lower) and np.isfinite(self.upper)) or \
-                self.lower >= self.upper:
+        if not (np.isfinite(self.lower) and np.isfinite(self.upper)):
+            return "infinite"
+        if self.lower >= self.upper:
             return "empty"
         return ""
 
@@ -110,8 +114,16 @@ def limits_message(joints: list[UrdfJoint]) -> str:
                    "both as 0: a joint that cannot move): give each "
                    '<limit lower="..." upper="..." effort="..." velocity="..."/> with its '
                    "range (rad; m for a prismatic joint), or leave it out of [robot] joints")
+    if "infinite" in by:
+        names = ", ".join(f"{j.name!r} [{j.lower:g}, {j.upper:g}]" for j in by["infinite"])
+        out.append(f"joint(s) {names} have a limit that is not a finite number (iloci keeps "
+                   "every joint it moves inside finite limits): give the real range in "
+                   "<limit>, or leave the joint out of [robot] joints")
     if "empty" in by:
-        names = ", ".join(f"{j.name!r} [{j.lower:g}, {j.upper:g}]" for j in by["empty"])
+        def rng(j: UrdfJoint) -> str:
+            swapped = " (lower above upper: swapped?)" if j.lower > j.upper else ""
+            return f"{j.name!r} [{j.lower:g}, {j.upper:g}]{swapped}"
+        names = ", ".join(rng(j) for j in by["empty"])
         out.append(f"joint(s) {names} have limits with no range (iloci needs lower < upper "
                    "for every joint it moves): give the real range in <limit>, or leave the "
                    "joint out of [robot] joints")
@@ -278,17 +290,23 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
     except ET.ParseError as exc:
         if b"xacro:" in raw:  # an undeclared xacro: prefix is not even XML
             raise InvalidInputError(_xacro_message(p, "its xacro: tags")) from None
-        raise InvalidInputError(f"{p} is not valid XML: {exc}.") from None
+        raise InvalidInputError(f"{p} is not valid XML: {exc}.{_encoding_hint(raw)}") from None
     _check_expanded(root, p)
     if root.tag != "robot":
         raise InvalidInputError(f"{p} is not a URDF: its root element is <{root.tag}>, "
                                 "not <robot>.")
     links = tuple(el.get("name", "") for el in root.findall("link"))
+    _check_unique(links, "link", p)
+    _check_unique([el.get("name", "") for el in root.findall("joint")], "joint", p)
     massless = tuple(el.get("name", "") for el in root.findall("link") if not _has_mass(el, p))
     joints: dict[str, UrdfJoint] = {}
     for el in root.findall("joint"):
         name, kind = el.get("name", ""), el.get("type", "")
         parent, child = (_child_attr(el, tag, "link") for tag in ("parent", "child"))
+        if kind not in JOINT_TYPES:
+            raise InvalidInputError(
+                f"{p}: joint {name!r} has type {kind!r}, not a URDF joint type "
+                f"({', '.join(JOINT_TYPES)}).{did_you_mean(kind, JOINT_TYPES)}")
         for link in (parent, child):
             if link not in links:
                 raise InvalidInputError(f"{p}: joint {name!r} names link {link!r}, which the "
@@ -310,12 +328,50 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
                      _number(m.get("offset", "0"), f"joint {name!r} <mimic offset>", p))
         joints[name] = UrdfJoint(name, kind, parent, child, lo, hi,
                                  _origin(el.find("origin"), p), mimic, given)
+    parents: dict[str, list[str]] = {}
+    for j in joints.values():
+        parents.setdefault(j.child, []).append(j.name)
+    twice = {link: js for link, js in parents.items() if len(js) > 1}
+    if twice:
+        link, js = next(iter(twice.items()))
+        raise InvalidInputError(
+            f"{p}: link {link!r} is the child of joints {', '.join(map(repr, js))}; in a URDF "
+            "tree every link hangs from at most one joint (closed loops are not supported): "
+            "keep one of these joints, or give the other a new child link.")
     children = {j.child for j in joints.values()}
     roots = [link for link in links if link not in children]
     if len(roots) != 1:
         raise InvalidInputError(f"{p}: a URDF tree has exactly one root link, found "
                                 f"{roots or 'none'}.")
     return UrdfTree(p, root.get("name", p.stem), links, joints, roots[0], massless)
+
+
+def _check_unique(names: list[str] | tuple[str, ...], what: str, path: Path) -> None:
+    """Raise InvalidInputError naming the first ``what`` (link or joint) defined twice."""
+    seen: set[str] = set()
+    for n in names:
+        if not n:
+            raise InvalidInputError(f"{path}: a <{what}> has no name attribute; give each "
+                                    f"<{what} name=...> a unique name.")
+        if n in seen:
+            raise InvalidInputError(
+                f"{path}: {what} {n!r} is defined twice (every {what} name must be unique, "
+                f"as back ends look {what}s up by name): rename or remove one of them.")
+        seen.add(n)
+
+
+def _encoding_hint(raw: bytes) -> str:
+    """Why bytes that fail to parse may be in another encoding than they declare."""
+    head = raw[:200].lower()
+    if b"encoding=" in head:
+        return ""
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return (f" Its bytes are not UTF-8 (byte {raw[exc.start]:#04x} at offset {exc.start})"
+                " and it declares no encoding: save it as UTF-8, or declare its encoding on "
+                'the first line (<?xml version="1.0" encoding="ISO-8859-1"?>).')
+    return ""
 
 
 def _xacro_message(path: Path, what: str) -> str:
@@ -410,9 +466,17 @@ def resolve_uri(uri: str, urdf_dir: Path, package_dirs: tuple[Path, ...] = ()) -
         f"{name}/ to the robot's package_dirs or to ROS_PACKAGE_PATH.")
 
 
+def urdf_unicode(path: Path) -> str:
+    """The URDF's text as a str, whatever encoding its file declares (a byte-order mark,
+    UTF-16, ``encoding="ISO-8859-1"``), without the XML declaration: what back ends
+    whose own parsers read UTF-8 only are given (see :func:`resolved_urdf_text`)."""
+    return ET.tostring(ET.parse(path).getroot(), encoding="unicode")
+
+
 def resolved_urdf_text(path: Path, package_dirs: tuple[Path, ...] = (),
                        replace_suffix: dict[str, str] | None = None) -> str:
-    """The URDF's text with every mesh file name made an absolute path.
+    """The URDF's text with every mesh file name made an absolute path (a str, whatever
+    encoding the file declares; without the XML declaration).
 
     Parameters
     ----------
@@ -434,7 +498,10 @@ def resolved_urdf_text(path: Path, package_dirs: tuple[Path, ...] = (),
         uri = mesh.get("filename")
         if not uri:
             continue
-        f = resolve_uri(uri, path.parent, package_dirs)
+        try:
+            f = resolve_uri(uri, path.parent, package_dirs)
+        except InvalidInputError as exc:
+            raise InvalidInputError(f"{path}: <mesh filename={uri!r}>: {exc}") from None
         for old, new in (replace_suffix or {}).items():
             if f.suffix.lower() == old:
                 for cand in (f.with_suffix(new),

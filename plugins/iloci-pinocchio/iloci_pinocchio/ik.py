@@ -31,6 +31,7 @@ import pinocchio as pin
 
 from iloci.errors import InvalidInputError, UnreachableTargetError
 from iloci.sensorimotor.robots import Robot, get_robot
+from iloci.sensorimotor.robots.urdf import urdf_unicode
 
 __all__ = ["PinocchioIK"]
 
@@ -296,7 +297,9 @@ def _reduced_model(robot: Robot) -> tuple[pin.Model, np.ndarray | None]:
     ``q_model = q_robot[perm]``, or None when the orders agree.
     """
     try:
-        full = pin.buildModelFromUrdf(str(robot.urdf_path))
+        # the text, decoded as the file declares (urdfdom reads UTF-8 only: a UTF-16 or
+        # Latin-1 file that iloci accepts would otherwise fail here)
+        full = pin.buildModelFromXML(urdf_unicode(robot.urdf_path))
     except (RuntimeError, ValueError) as exc:
         raise InvalidInputError(f"Pinocchio cannot read the URDF of {robot.name!r} "
                                 f"({robot.urdf_path}): {exc}") from None

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from iloci import hookimpl
 from iloci.errors import MissingBackendError
+from iloci.registry import KindRegistry
 from iloci.sensorimotor.robots import Robot, RobotPreset, describe_robot
 
 __all__ = ["PRESETS", "share_dir"]
@@ -73,7 +74,7 @@ def ur5() -> Robot:
         rest=[0.0, -1.570796, 1.570796, -1.570796, -1.570796, 0.0], package_dirs=[share])
 
 
-#: The presets this plugin registers.
+#: The presets this plugin registers (each through ``registry.add``).
 PRESETS = {
     "panda": RobotPreset("panda", panda, "Franka Emika Panda (example-robot-data), pen at "
                          "the hand's TCP, plane placed automatically", 7,
@@ -84,5 +85,8 @@ PRESETS = {
 
 
 @hookimpl
-def iloci_register_robots(robots: dict) -> None:
-    robots.update(PRESETS)
+def iloci_register_robots(registry: KindRegistry) -> None:
+    for p in PRESETS.values():
+        registry.add(p.name, f"iloci_robots:{p.name}", summary=p.summary, joints=p.joints,
+                     plane=p.plane, install="pip install ./plugins/iloci-robots (or pip "
+                     "install example-robot-data)")

@@ -16,17 +16,15 @@ from dataclasses import dataclass
 import importlib
 import importlib.util
 import inspect
-import math
-import types
-import typing
-from typing import Any, Union
+from typing import Any
 
-from iloci.constraints import violations
-from iloci.errors import (ConfigError, InvalidInputError, MissingBackendError, PluginError,
-                          PluginNotLoadedError, UnknownComponentError)
+from iloci.errors import (ConfigError, IlociError, InvalidInputError, MissingBackendError,
+                          PluginError, PluginNotLoadedError, UnknownComponentError)
 from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
+from iloci.registry.params import params_to_dict, validate_dataclass
 
-__all__ = ["ComponentSpec", "Registry", "KindRegistry", "validate_params"]
+__all__ = ["ComponentSpec", "Registry", "KindRegistry", "params_to_dict", "validate_dataclass",
+           "validate_params"]
 
 #: First-party components and the plugin distribution that provides each, so
 #: a config naming one that is not installed gets the install command rather
@@ -42,6 +40,8 @@ FIRST_PARTY = {
     ("simulator", "pybullet"): "iloci-pybullet",
     ("simulator", "mujoco"): "iloci-mujoco",
     ("executor", "ray"): "iloci-ray",
+    ("robot", "panda"): "iloci-robots",
+    ("robot", "ur5"): "iloci-robots",
 }
 
 
@@ -69,7 +69,7 @@ class ComponentSpec:
     Attributes
     ----------
     kind : str
-        One of :data:`iloci.interfaces.ALL_KINDS` (the components' and ``executor``).
+        One of :data:`iloci.interfaces.ALL_KINDS` (the components', ``executor``, ``robot``).
     name : str
         The name a config uses.
     factory : str or callable
@@ -93,6 +93,10 @@ class ComponentSpec:
         ``"module:function"`` returning one line on how the component runs
         on this machine (e.g. which compute kernel), for ``iloci plugins``;
         called only when the component is available. Empty: nothing to say.
+    facts : tuple of (str, value)
+        What the registration stated for its kind's
+        :attr:`~iloci.interfaces.ComponentKind.facts` (a robot's ``joints``
+        and ``plane``); read one with :meth:`fact`.
     """
 
     kind: str
@@ -106,6 +110,11 @@ class ComponentSpec:
     distribution: str | None = None
     version: str | None = None
     describe: str = ""
+    facts: tuple[tuple[str, Any], ...] = ()
+
+    def fact(self, name: str) -> Any:
+        """The value the registration gave for fact ``name`` (KeyError: none)."""
+        return dict(self.facts)[name]
 
     def missing(self) -> list[str]:
         """Modules in :attr:`requires` that cannot be imported."""
@@ -162,8 +171,9 @@ class Registry:
             params: type | None = None, requires: Iterable[str] = (),
             install: str = "", summary: str = "", plugin: str = "",
             distribution: str | None = None, version: str | None = None,
-            describe: str = "") -> ComponentSpec:
-        """Register a component. See :class:`ComponentSpec` for the arguments."""
+            describe: str = "", **facts: Any) -> ComponentSpec:
+        """Register a component. See :class:`ComponentSpec` for the arguments;
+        ``facts`` are those the kind requires (:attr:`ComponentKind.facts`)."""
         if kind not in self._specs:
             raise PluginError(f"plugin {plugin!r} registers unknown kind {kind!r}; "
                               f"kinds are {', '.join(ALL_KINDS)}.")
@@ -188,8 +198,16 @@ class Registry:
         if describe and ":" not in describe:
             raise PluginError(f"plugin {plugin!r}: describe of {kind} {name!r} must be "
                               f"'module:function', got {describe!r}.")
+        needed = ALL_KINDS[kind].facts
+        if set(facts) != set(needed) or not all(
+                isinstance(v, (str, int, float)) for v in facts.values()):
+            raise PluginError(
+                f"plugin {plugin!r}: {_label(kind)} {name!r} must state "
+                f"{', '.join(needed) or 'no facts'} (keyword arguments of registry.add, a "
+                f"string or a number each), got {facts or 'none'}.")
         spec = ComponentSpec(kind, name, factory, params, tuple(requires),
-                             install or "", summary, plugin, distribution, version, describe)
+                             install or "", summary, plugin, distribution, version, describe,
+                             tuple((k, facts[k]) for k in needed))
         self._specs[kind][name] = spec
         return spec
 
@@ -203,7 +221,7 @@ class Registry:
         return sorted(self._specs[kind])
 
     def specs(self, kind: str | None = None) -> list[ComponentSpec]:
-        """The specs of ``kind``; without one, of every component kind (not executors)."""
+        """The specs of ``kind``; without one, of every component kind (not executors, robots)."""
         if kind is not None:
             _check_kind(kind)
         kinds = tuple(COMPONENT_KINDS) if kind is None else (kind,)
@@ -246,6 +264,15 @@ class Registry:
             module = importlib.import_module(mod_name)
         except ImportError as exc:
             missing_mod = getattr(exc, "name", None) or mod_name
+            if not _first_party(spec) and not spec.install and \
+                    (mod_name + ".").startswith(missing_mod + "."):
+                # the plugin names a module of its own that is not there: its bug
+                raise PluginError(
+                    f"{_label(spec.kind)} {spec.name!r} of plugin {spec.plugin!r} "
+                    f"(distribution {spec.distribution or 'none'}): its factory "
+                    f"{spec.factory!r} names module {mod_name}, which cannot be imported "
+                    f"({exc}). Fix or reinstall the plugin, or block it with "
+                    f"ILOCI_BLOCK_PLUGINS={spec.plugin}.") from exc
             raise MissingBackendError(
                 _label(spec.kind), spec.name, [missing_mod],
                 spec.install or f"pip install {missing_mod}") from exc
@@ -290,7 +317,25 @@ class Registry:
             except (TypeError, ValueError):
                 takes_all, accepted = True, set()
             kwargs.update({k: v for k, v in extra.items() if takes_all or k in accepted})
-        return check_built(spec, factory(**kwargs))
+        if _first_party(spec):
+            return check_built(spec, factory(**kwargs))
+        try:
+            built = factory(**kwargs)
+        except IlociError:
+            raise
+        except Exception as exc:  # a third-party factory's own failure: name who
+            raise PluginError(
+                f"{_label(spec.kind)} {spec.name!r} of plugin {spec.plugin!r} (distribution "
+                f"{spec.distribution or 'none'}): its factory {_factory_name(spec.factory)} "
+                f"raised {type(exc).__name__}: {exc}. Fix or update the plugin, or block it "
+                f"with ILOCI_BLOCK_PLUGINS={spec.plugin}.") from exc
+        return check_built(spec, built)
+
+
+def _first_party(spec: ComponentSpec) -> bool:
+    """Whether iloci or one of its own plugin distributions registered ``spec``."""
+    return spec.distribution in (None, "iloci") or \
+        spec.distribution in FIRST_PARTY.values()
 
 
 def check_built(spec: ComponentSpec, obj: Any) -> Any:
@@ -348,166 +393,17 @@ class KindRegistry:
 
     def add(self, name: str, factory: str | Callable[..., Any], *,
             params: type | None = None, requires: Iterable[str] = (),
-            install: str = "", summary: str = "", describe: str = "") -> ComponentSpec:
-        """Register component ``name`` of this kind (see :class:`ComponentSpec`)."""
+            install: str = "", summary: str = "", describe: str = "",
+            **facts: Any) -> ComponentSpec:
+        """Register component ``name`` of this kind (see :class:`ComponentSpec`);
+        ``facts``: those the kind requires (a robot's ``joints=J, plane="given"``)."""
         return self._registry.add(self.kind, name, factory, params=params,
                                   requires=requires, install=install, summary=summary,
                                   plugin=self._plugin, distribution=self._distribution,
-                                  version=self._version, describe=describe)
+                                  version=self._version, describe=describe, **facts)
 
     def names(self) -> list[str]:
         return self._registry.names(self.kind)
-
-
-# -- parameter validation ----------------------------------------------------
-
-def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
-    """Check ``value`` against a simple annotation; return (ok, coerced)."""
-    if tp is Any:
-        return True, value
-    origin = typing.get_origin(tp)
-    if origin in (Union, types.UnionType):
-        for arg in typing.get_args(tp):
-            ok, v = _type_ok(value, arg)
-            if ok:
-                return True, v
-        return False, value
-    if tp is type(None):
-        return value is None, value
-    if tp is bool:
-        return isinstance(value, bool), value
-    if tp is int:
-        return isinstance(value, int) and not isinstance(value, bool), value
-    if tp is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return True, float(value)
-        return False, value
-    if tp is str:
-        return isinstance(value, str), value
-    if origin in (tuple, list) or tp in (tuple, list):
-        if not isinstance(value, (list, tuple)):
-            return False, value
-        args = typing.get_args(tp)
-        if args and not (len(args) == 2 and args[1] is Ellipsis) and origin is tuple:
-            if len(args) != len(value):
-                return False, value
-            out = []
-            for v, a in zip(value, args):
-                ok, c = _type_ok(v, a)
-                if not ok:
-                    return False, value
-                out.append(c)
-            return True, tuple(out)
-        elem = args[0] if args else Any
-        out = []
-        for v in value:
-            ok, c = _type_ok(v, elem)
-            if not ok:
-                return False, value
-            out.append(c)
-        return True, tuple(out)
-    if isinstance(tp, type):
-        return isinstance(value, tp), value
-    return True, value
-
-
-_PLURAL = {bool: "true/false values", int: "integers", float: "numbers", str: "strings"}
-_SINGULAR = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
-
-
-def _type_name(tp: Any) -> str:
-    """A type as a TOML user reads it: ``tuple[float, ...]`` -> "a list of numbers"."""
-    if tp in _SINGULAR:
-        return _SINGULAR[tp]
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if origin is typing.Union or isinstance(tp, types.UnionType):
-        return " or ".join(_type_name(a) for a in args if a is not type(None))
-    if origin in (tuple, list) or tp in (tuple, list):
-        if args and not (len(args) == 2 and args[1] is Ellipsis) and origin is tuple:
-            if len(set(args)) == 1 and args[0] in _PLURAL:
-                return f"a list of {len(args)} {_PLURAL[args[0]]}"
-            return f"a list of {len(args)} values"
-        if args and args[0] in _PLURAL:
-            return f"a list of {_PLURAL[args[0]]}"
-        return "a list"
-    if origin is dict or tp is dict:
-        return "a table"
-    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
-
-
-def _scalar(value: Any) -> type | None:
-    """The TOML scalar type of ``value`` (bool before int: a bool is an int), or None."""
-    return next((tp for tp in _SINGULAR if isinstance(value, tp)), None)
-
-
-def _value_kind(value: Any) -> str:
-    """What a TOML value is, in :func:`_type_name`'s words."""
-    tp = _scalar(value)
-    if tp is not None:
-        return _SINGULAR[tp]
-    if isinstance(value, (list, tuple)):
-        kinds = sorted({_PLURAL.get(_scalar(v) or object, "other values") for v in value})
-        return "a list" + (f" of {' and '.join(kinds)}" if kinds else ", empty")
-    if isinstance(value, Mapping):
-        return "a table"
-    return type(value).__name__
-
-
-def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
-                       source: str | None = None) -> Any:
-    """Build dataclass ``cls`` from ``values``, checking keys and types.
-
-    Unknown keys and wrongly typed values raise :class:`ConfigError` naming
-    the key (``section.key``) and the source. After construction the
-    instance's ``validate()`` method, when it has one, may raise
-    ``ValueError`` for out-of-range values; that becomes a ConfigError too.
-    """
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    hints = typing.get_type_hints(cls)
-    kwargs = {}
-    for key, value in values.items():
-        if key not in fields:
-            from iloci.errors import did_you_mean
-            raise ConfigError(
-                f"unknown key {section + '.' + key!r}; valid keys in [{section}] are "
-                f"{', '.join(sorted(fields)) or '(none)'}.{did_you_mean(key, fields)}",
-                source=source, key=f"{section}.{key}")
-        ok, coerced = _type_ok(value, hints.get(key, Any))
-        if not ok:
-            raise ConfigError(
-                f"{section}.{key} must be {_type_name(hints.get(key))}, got "
-                f"{value!r} ({_value_kind(value)}).", source=source, key=f"{section}.{key}")
-        if not _all_finite(coerced):
-            raise ConfigError(
-                f"{section}.{key} must be a finite number, got {value!r}: TOML spells "
-                "nan and inf, but no setting of iloci means either.",
-                source=source, key=f"{section}.{key}")
-        if isinstance(coerced, int) and not -2**63 <= coerced < 2**63:
-            raise ConfigError(f"{section}.{key} is out of range: {value!r} does not fit in "
-                              "a 64-bit integer.", source=source, key=f"{section}.{key}")
-        kwargs[key] = coerced
-    try:
-        obj = cls(**kwargs)
-    except (ValueError, TypeError, OverflowError) as exc:
-        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
-    for name, message in violations(obj)[:1]:  # the declared constraints: one validator
-        raise ConfigError(f"[{section}]: {message}", source=source, key=f"{section}.{name}")
-    try:
-        check = getattr(obj, "validate", None)  # rules that tie fields together
-        if callable(check):
-            check()
-    except (ValueError, TypeError, OverflowError) as exc:
-        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
-    return obj
-
-
-def _all_finite(value: Any) -> bool:
-    """False when ``value`` is, or holds, a float nan or inf."""
-    if isinstance(value, float):
-        return math.isfinite(value)
-    if isinstance(value, (list, tuple)):
-        return all(_all_finite(v) for v in value)
-    return True
 
 
 def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,
@@ -522,17 +418,3 @@ def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,
                 f"{spec.name!r} takes no parameters.", source=source, key=f"{section}.{key}")
         return None
     return validate_dataclass(spec.params, values, section=section, source=source)
-
-
-def params_to_dict(params: Any) -> dict[str, Any]:
-    """A params dataclass (or mapping) as a plain dict (tuples kept as lists for TOML)."""
-    if params is None:
-        return {}
-    if isinstance(params, Mapping):
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}
-    out = {}
-    for f in dataclasses.fields(params):
-        v = getattr(params, f.name)
-        out[f.name] = list(v) if isinstance(v, tuple) else v
-    return out
-

@@ -1,0 +1,175 @@
+"""A person's controls over an agent's memory: undo, forget, start over, import.
+
+:class:`Controls` is a base of :class:`iloci.agent.Agent`: the web
+page (``iloci serve``) and any other front end reach the robot's memory
+and network through these methods, never through
+:mod:`iloci.concepts` (``docs/development.md``, "Architecture", forbids
+``iloci.web`` importing it). Each method holds the agent's lock, so a
+reader (another thread answering the page) sees the memory before or
+after a change, never half of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import os
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from iloci.agent.persistence import Persistence
+from iloci.concepts.memory import Memory, load_memory
+from iloci.concepts.perform import ik_joint_limits, perform
+from iloci.errors import InvalidInputError
+from iloci.sensorimotor.frames import TeacherFrame
+
+if TYPE_CHECKING:
+    from iloci.interfaces import Demonstration
+
+__all__ = ["Controls", "Snapshot"]
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The memory and the network at one moment (:meth:`Controls.snapshot`).
+
+    Attributes
+    ----------
+    what : str
+        The step that led here (``"rename c3"``, ``"drawing drawing/4"``), for the page.
+    arrays, meta
+        The memory as :meth:`Memory.to_arrays <iloci.concepts.memory.Memory.to_arrays>`
+        writes it (copies).
+    encoder : SensorimotorEncoder or None
+        The memory's encoder (shared: an encoder is never changed once fitted).
+    network : dict of str to ndarray
+        The perceptual model's ``state()`` (copies); empty before the first rehearsal.
+    """
+
+    what: str
+    arrays: dict[str, np.ndarray]
+    meta: dict[str, Any]
+    encoder: Any
+    network: dict[str, np.ndarray]
+
+
+class Controls(Persistence):
+    """Undo, forget, start over and import for :class:`~iloci.agent.Agent` (see the module)."""
+
+    def snapshot(self, what: str = "") -> Snapshot:
+        """The memory and the network now, restored exactly by :meth:`restore`.
+
+        Parameters
+        ----------
+        what : str
+            A name for the step that led here (shown by an undo).
+        """
+        with self._lock:
+            arrays, meta = self.memory.to_arrays()
+            return Snapshot(
+                what=what,
+                arrays={k: np.array(v, copy=True) for k, v in arrays.items()},
+                meta=json.loads(json.dumps(meta)),
+                encoder=self.memory.encoder,
+                network={k: np.array(v, copy=True)
+                         for k, v in self.perceptual_model.state().items()})
+
+    def restore(self, snapshot: Snapshot) -> None:
+        """Put back the memory and the network of ``snapshot`` (bit for bit).
+
+        The memory's ``revision`` still grows (a turn observed before the
+        restore sees that the memory changed).
+        """
+        with self._lock:
+            memory = Memory.from_arrays(snapshot.arrays, snapshot.meta)
+            memory.encoder = snapshot.encoder if snapshot.encoder is not None \
+                else memory.encoder
+            memory.revision = self.memory.revision + 1
+            if snapshot.network:
+                self.perceptual_model.load_state(snapshot.network)
+            self.memory = memory
+
+    def forget_concept(self, concept: str) -> None:
+        """Forget every entry of ``concept``; the network is unchanged (no rehearsal).
+
+        Raises
+        ------
+        InvalidInputError
+            The memory holds no such concept.
+        """
+        with self._lock:
+            mem = self.memory
+            keep = [e for e in mem.entries if e.concept != concept]
+            if len(keep) == len(mem.entries):
+                raise InvalidInputError(f"the memory holds no concept {concept!r}; its "
+                                        f"concepts are {', '.join(mem.concepts()) or 'none'}.")
+            mem.entries = keep           # one assignment: readers see old or new
+            mem.revision += 1
+
+    def forget_entry(self, index: int) -> None:
+        """Forget entry ``index`` of ``memory.entries`` (0-based); the network is unchanged.
+
+        Raises
+        ------
+        InvalidInputError
+            ``index`` is not an entry of the memory.
+        """
+        with self._lock:
+            mem = self.memory
+            if not 0 <= index < len(mem.entries):
+                raise InvalidInputError(f"the memory has no entry {index} (it has "
+                                        f"{len(mem.entries)}).")
+            mem.entries = [e for j, e in enumerate(mem.entries) if j != index]
+            mem.revision += 1
+
+    def start_over(self) -> None:
+        """An empty memory (no entries, no encoder); the network stays until the next rehearsal."""
+        with self._lock:
+            self.memory = Memory(revision=self.memory.revision + 1)
+
+    def replace_memory(self, path: str | os.PathLike[str]) -> None:
+        """Replace memory and network with a memory file's, checked as :meth:`load` checks it.
+
+        The network must fit this agent's perceptual model, the entries its
+        settings, the robot its arm; nothing is unpickled.
+
+        Raises
+        ------
+        MemoryFileError, MemoryConfigError
+            As :meth:`~iloci.agent.Agent.load`; the agent is then unchanged.
+        """
+        memory, net, _header = load_memory(path)
+        self.load(path, self.config)
+        with self._lock:
+            memory.revision = self.memory.revision + 1
+            if net:
+                self.perceptual_model.load_state(net)
+            self.memory = memory
+
+    def drawing_in_frame(self, demo: Demonstration, concept: str,
+                         entry: int | None = None) -> np.ndarray | None:
+        """The robot's drawing of ``concept`` in the frame of ``demo`` (the person's stroke).
+
+        Parameters
+        ----------
+        demo : Demonstration
+            The stroke whose position, size and units the drawing takes.
+        concept : str
+        entry : int, optional
+            The entry to perform (a recognition's ``entry``); default: the
+            concept's entry of lowest generation error.
+
+        Returns
+        -------
+        ndarray (T, 2) or None
+            Pen positions in ``demo``'s units; None when the performance has
+            no drawing in the teacher's frame.
+        """
+        motion = self.motion(demo)
+        frame = TeacherFrame.of(demo, motion.plane_points)
+        index = entry if isinstance(entry, int) else self.memory.performer_of(concept)
+        with self._lock:
+            response = perform(self.memory, self.perceptual_model, index,
+                               joint_limits=ik_joint_limits(self.ik_solver), frame=frame)
+        return response.teacher_drawing

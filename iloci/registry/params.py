@@ -1,0 +1,184 @@
+"""Validation of a component's or a section's settings against its dataclass schema.
+
+Types as a TOML user writes them (a list of numbers, a table), unknown keys
+with did-you-mean, finite numbers, 64-bit integers, then the declared
+constraints (:func:`iloci.constraints.violations`) and the schema's own
+``validate()``. Used by the registry (a component's section) and the config.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+import dataclasses
+import math
+import types
+import typing
+from typing import Any, Union
+
+from iloci.constraints import violations
+from iloci.errors import ConfigError
+
+__all__ = ["params_to_dict", "validate_dataclass"]
+
+
+def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
+    """Check ``value`` against a simple annotation; return (ok, coerced)."""
+    if tp is Any:
+        return True, value
+    origin = typing.get_origin(tp)
+    if origin in (Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            ok, v = _type_ok(value, arg)
+            if ok:
+                return True, v
+        return False, value
+    if tp is type(None):
+        return value is None, value
+    if tp is bool:
+        return isinstance(value, bool), value
+    if tp is int:
+        return isinstance(value, int) and not isinstance(value, bool), value
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return True, float(value)
+        return False, value
+    if tp is str:
+        return isinstance(value, str), value
+    if origin in (tuple, list) or tp in (tuple, list):
+        if not isinstance(value, (list, tuple)):
+            return False, value
+        args = typing.get_args(tp)
+        if args and not (len(args) == 2 and args[1] is Ellipsis) and origin is tuple:
+            if len(args) != len(value):
+                return False, value
+            out = []
+            for v, a in zip(value, args):
+                ok, c = _type_ok(v, a)
+                if not ok:
+                    return False, value
+                out.append(c)
+            return True, tuple(out)
+        elem = args[0] if args else Any
+        out = []
+        for v in value:
+            ok, c = _type_ok(v, elem)
+            if not ok:
+                return False, value
+            out.append(c)
+        return True, tuple(out)
+    if isinstance(tp, type):
+        return isinstance(value, tp), value
+    return True, value
+
+
+_PLURAL = {bool: "true/false values", int: "integers", float: "numbers", str: "strings"}
+_SINGULAR = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
+
+
+def _type_name(tp: Any) -> str:
+    """A type as a TOML user reads it: ``tuple[float, ...]`` -> "a list of numbers"."""
+    if tp in _SINGULAR:
+        return _SINGULAR[tp]
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is typing.Union or isinstance(tp, types.UnionType):
+        return " or ".join(_type_name(a) for a in args if a is not type(None))
+    if origin in (tuple, list) or tp in (tuple, list):
+        if args and not (len(args) == 2 and args[1] is Ellipsis) and origin is tuple:
+            if len(set(args)) == 1 and args[0] in _PLURAL:
+                return f"a list of {len(args)} {_PLURAL[args[0]]}"
+            return f"a list of {len(args)} values"
+        if args and args[0] in _PLURAL:
+            return f"a list of {_PLURAL[args[0]]}"
+        return "a list"
+    if origin is dict or tp is dict:
+        return "a table"
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _scalar(value: Any) -> type | None:
+    """The TOML scalar type of ``value`` (bool before int: a bool is an int), or None."""
+    return next((tp for tp in _SINGULAR if isinstance(value, tp)), None)
+
+
+def _value_kind(value: Any) -> str:
+    """What a TOML value is, in :func:`_type_name`'s words."""
+    tp = _scalar(value)
+    if tp is not None:
+        return _SINGULAR[tp]
+    if isinstance(value, (list, tuple)):
+        kinds = sorted({_PLURAL.get(_scalar(v) or object, "other values") for v in value})
+        return "a list" + (f" of {' and '.join(kinds)}" if kinds else ", empty")
+    if isinstance(value, Mapping):
+        return "a table"
+    return type(value).__name__
+
+
+def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
+                       source: str | None = None) -> Any:
+    """Build dataclass ``cls`` from ``values``, checking keys and types.
+
+    Unknown keys and wrongly typed values raise :class:`ConfigError` naming
+    the key (``section.key``) and the source. After construction the
+    instance's ``validate()`` method, when it has one, may raise
+    ``ValueError`` for out-of-range values; that becomes a ConfigError too.
+    """
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for key, value in values.items():
+        if key not in fields:
+            from iloci.errors import did_you_mean
+            raise ConfigError(
+                f"unknown key {section + '.' + key!r}; valid keys in [{section}] are "
+                f"{', '.join(sorted(fields)) or '(none)'}.{did_you_mean(key, fields)}",
+                source=source, key=f"{section}.{key}")
+        ok, coerced = _type_ok(value, hints.get(key, Any))
+        if not ok:
+            raise ConfigError(
+                f"{section}.{key} must be {_type_name(hints.get(key))}, got "
+                f"{value!r} ({_value_kind(value)}).", source=source, key=f"{section}.{key}")
+        if not _all_finite(coerced):
+            raise ConfigError(
+                f"{section}.{key} must be a finite number, got {value!r}: TOML spells "
+                "nan and inf, but no setting of iloci means either.",
+                source=source, key=f"{section}.{key}")
+        if isinstance(coerced, int) and not -2**63 <= coerced < 2**63:
+            raise ConfigError(f"{section}.{key} is out of range: {value!r} does not fit in "
+                              "a 64-bit integer.", source=source, key=f"{section}.{key}")
+        kwargs[key] = coerced
+    try:
+        obj = cls(**kwargs)
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
+    for name, message in violations(obj)[:1]:  # the declared constraints: one validator
+        raise ConfigError(f"[{section}]: {message}", source=source, key=f"{section}.{name}")
+    try:
+        check = getattr(obj, "validate", None)  # rules that tie fields together
+        if callable(check):
+            check()
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
+    return obj
+
+
+def _all_finite(value: Any) -> bool:
+    """False when ``value`` is, or holds, a float nan or inf."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, (list, tuple)):
+        return all(_all_finite(v) for v in value)
+    return True
+
+
+def params_to_dict(params: Any) -> dict[str, Any]:
+    """A params dataclass (or mapping) as a plain dict (tuples kept as lists for TOML)."""
+    if params is None:
+        return {}
+    if isinstance(params, Mapping):
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}
+    out = {}
+    for f in dataclasses.fields(params):
+        v = getattr(params, f.name)
+        out[f.name] = list(v) if isinstance(v, tuple) else v
+    return out
+

@@ -1,0 +1,376 @@
+"""The state of ``iloci serve``: one agent, its memory file, each client's pending turn.
+
+The learning steps of the page (observe, feedback, recognize, rename,
+undo, forget, start over, import) as async methods taking the request's
+JSON and answering JSON; one step at a time (an asyncio lock), the
+network in the agent's worker. The memory and the network are reached
+through the :class:`~iloci.agent.Agent`'s public methods only
+(:class:`~iloci.agent.controls.MemoryControls` for undo, forget, start over and
+import).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import io
+import os
+from pathlib import Path
+import tempfile
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from iloci.errors import IlociError, InvalidDemonstrationError
+from iloci.interfaces import Demonstration
+from iloci.web.history import History
+from iloci.web.schemas import (HTTPError, client_id, number, parse_feedback, parse_points,
+                               plain_words, polyline)
+
+__all__ = ["Classroom", "MAX_TURNS"]
+
+#: Pending turns kept (one per tab or client; the oldest is dropped beyond).
+MAX_TURNS = 32
+
+
+class _Turn:
+    """One client's pending turn: the learner's Turn, the drawing it answers."""
+
+    def __init__(self, turn: Any, demo: Any, points: list, client: str, memory: Any) -> None:
+        self.turn = turn
+        self.demo = demo
+        self.points = points
+        self.client = client
+        self.memory = memory
+        self.revision = memory.revision
+        self.pending: list = []      # its observer events (the learner's are per turn)
+
+
+class Classroom:
+    """The server's state: one agent, its memory file, each client's pending guess.
+
+    Parameters
+    ----------
+    agent : Agent
+        Its network should run in a worker (``agent.start_worker()``) so
+        the server answers while a rehearsal trains.
+    memory_path : path-like
+        Saved atomically after every change (a symlink is written through
+        to its target). The caller should hold its lock
+        (:func:`iloci.progress.memory_lock`) while serving.
+
+    One person teaches at a time: each learning step holds an asyncio
+    lock; state and progress are answered meanwhile. Each client (a tab)
+    has its own pending guess.
+    """
+
+    def __init__(self, agent: Any, memory_path: str | os.PathLike[str]) -> None:
+        self.agent = agent
+        self.memory_path = Path(memory_path)
+        self.turns: dict[int, _Turn] = {}
+        self.turn_id = 0
+        self.lock = asyncio.Lock()
+        self.progress: dict[str, Any] | None = None
+        self.history = History(agent, self.memory_path)
+        self._thumbs: tuple[Any, int, int, list] | None = None
+        self._thumb_lock = threading.Lock()
+        self.close_lock: Any = None                # released by close()
+        agent.on_progress = self._on_progress
+
+    @property
+    def save_error(self) -> str | None:
+        """Why the last save failed, or None."""
+        return self.history.save_error
+
+    @property
+    def turn(self) -> Any:
+        """The newest pending learner Turn (any client), or None."""
+        if not self.turns:
+            return None
+        return self.turns[max(self.turns)].turn
+
+    def close(self) -> None:
+        """Stop the agent's worker and release the memory's lock."""
+        try:
+            self.agent.close()
+        finally:
+            if self.close_lock is not None:
+                self.close_lock()
+                self.close_lock = None
+
+    # -- helpers -------------------------------------------------------------------
+    def _on_progress(self, p: Any) -> None:  # called in the rehearsing thread
+        self.progress = {"reason": p.reason, "phase": p.phase, "fraction": p.fraction,
+                         "elapsed": round(p.elapsed, 3), "patterns": p.patterns,
+                         "epochs": p.epochs, "since": time.time()}
+
+    async def _commit_async(self, what: str) -> None:
+        await asyncio.to_thread(self.history.commit, what)
+
+    def _demo(self, positions: np.ndarray, times: np.ndarray) -> Any:
+        index = self.agent.memory.demonstrations_seen
+        try:
+            return Demonstration(positions, times=times, shape="drawing", index=index)
+        except InvalidDemonstrationError as exc:
+            raise HTTPError(422, plain_words(str(exc))) from None
+
+    def _drop_client(self, client: str) -> None:
+        for k in [k for k, t in self.turns.items() if t.client == client]:
+            del self.turns[k]
+
+    def answer_json(self, answer: Any, turn_id: int | None = None) -> dict[str, Any]:
+        r = answer.response
+        tid = self.turn_id if turn_id is None else turn_id
+        confidence = number(answer.confidence)
+        rec = self.turns.get(tid)
+        # the last guess left: the robot is not "sure", it has nothing else
+        # to offer; its confidence margin says nothing then (issue 26)
+        last = False
+        if rec is not None and not r.novel:
+            concepts = set(self.agent.memory.concepts())
+            last = len(concepts - set(rec.turn.tried) - {answer.concept}) == 0
+        out = {"id": answer.id, "turn": tid, "concept": answer.concept, "novel": bool(r.novel),
+               "confidence": None if last else confidence, "last_guess": last,
+               "attempt": answer.attempt,
+               "drawing": polyline(answer.drawing), "dt": answer.dt,
+               "joint_path": [[round(float(v), 5) for v in row] for row in answer.joint_path],
+               "start_posture": [float(v) for v in answer.start_posture],
+               "executed": r.execution is not None, "arm": None}
+        if r.execution is not None and self.agent.simulator is not None:
+            out["arm"] = f"/api/arm.png?turn={tid}&attempt={answer.attempt}"
+        return out
+
+    def outcome_json(self, outcome: Any) -> dict[str, Any]:
+        return {"demo": outcome.demo, "concept": outcome.concept, "action": outcome.action,
+                "feedbacks": list(outcome.feedbacks), "clustered": outcome.clustered,
+                "rehearsal_seconds": round(sum(r.seconds for r in outcome.rehearsals), 3)}
+
+    def memory_json(self) -> dict[str, Any]:
+        """Concepts, their entries and a thumbnail (drawing-plane polyline) of each."""
+        mem = self.agent.memory
+        entries = list(mem.entries)
+        thumbs = self._thumbnails(entries)
+        concepts = []
+        for name in mem.concepts():
+            own = [i for i, e in enumerate(entries) if e.concept == name]
+            concepts.append({
+                "name": name, "num_samples": sum(entries[i].num_samples for i in own),
+                "entries": [{"index": i, "prototype": entries[i].prototype,
+                             "num_samples": entries[i].num_samples,
+                             "sources": list(entries[i].sources),
+                             "drawing": thumbs[i] if i < len(thumbs) else []}
+                            for i in own]})
+        return {"concepts": concepts, "entries": len(entries),
+                "demonstrations_seen": mem.demonstrations_seen,
+                "file": self.memory_path.name, "save_error": self.save_error,
+                "undo": self.history.last}
+
+    def _thumbnails(self, entries: list) -> list:
+        """Each entry regenerated by the network, in the drawing plane; cached per revision."""
+        mem = self.agent.memory
+        key = (id(mem), mem.revision, len(entries))
+        with self._thumb_lock:
+            if self._thumbs is not None and self._thumbs[:3] == key:
+                return self._thumbs[3]
+            out: list = [polyline(p) for p in self.agent.entry_drawings(entries)]
+            self._thumbs = (*key, out)
+            return out
+
+    def state_json(self, client: str = "") -> dict[str, Any]:
+        pending = None
+        for tid in sorted(self.turns, reverse=True):
+            rec = self.turns[tid]
+            if rec.client == client and rec.turn.answer is not None:
+                pending = {**self.answer_json(rec.turn.answer, tid), "points": rec.points}
+                break
+        return {"memory": self.memory_json(), "pending": pending,
+                "progress": self.progress, "simulator": self.agent.simulator is not None}
+
+
+    def _outcome(self, outcome: Any, what: str) -> dict[str, Any]:
+        self.history.commit(what)
+        self.progress = None
+        return {"outcome": self.outcome_json(outcome), "memory": self.memory_json()}
+
+    # -- actions (each under the lock) ------------------------------------------------
+    async def _observe(self, demo: Any, points: list, client: str) -> dict[str, Any]:
+        self._drop_client(client)                # this tab's pending guess is dropped
+        turn = await self.agent.aobserve(demo)
+        self.turn_id += 1
+        tid = self.turn_id
+        if turn.done:
+            try:
+                return await asyncio.to_thread(self._outcome, turn.outcome,
+                                               f"drawing {demo.key}")
+            finally:
+                self.progress = None
+        self.turns[tid] = _Turn(turn, demo, points, client, self.agent.memory)
+        self.turns[tid].pending = list(turn.learner.queued_events)
+        while len(self.turns) > MAX_TURNS:
+            del self.turns[min(self.turns)]
+        return {"answer": self.answer_json(turn.answer, tid)}
+
+    async def observe(self, body: Any) -> dict[str, Any]:
+        positions, times = parse_points(body)
+        client = client_id(body)
+        async with self.lock:
+            demo = self._demo(positions, times)
+            return await self._observe(demo, body["points"], client)
+
+    async def feedback(self, body: Any) -> dict[str, Any]:
+        value, turn_id, answer_id = parse_feedback(body)
+        async with self.lock:
+            rec = self.turns.get(turn_id)
+            if rec is None or rec.turn.answer is None:
+                raise HTTPError(409, "no such guess is waiting for an answer (it was answered, "
+                                     "or this tab drew something newer); draw again.")
+            if rec.memory is not self.agent.memory or rec.revision != self.agent.memory.revision:
+                # another tab taught, or an undo / rename: look at the drawing again
+                del self.turns[turn_id]
+                out = await self._observe(rec.demo, rec.points, rec.client)
+                out["notice"] = ("The memory changed since this guess (another tab taught, or "
+                                 "a concept was renamed or forgotten): the robot looked at your "
+                                 "drawing again.")
+                if "answer" in out:
+                    out["answer"]["notice"] = out["notice"]
+                return out
+            turn = rec.turn
+            learner = turn.learner
+            learner.queued_events = rec.pending   # this turn's observer events only
+
+            def step() -> Any:
+                # the feedback judges the answer it names (issue 30): a double
+                # click or a late request for an answer since replaced is refused
+                if value != "new":
+                    return turn.feedback(int(value), answer_id)
+                # something new: every guess left refused, the novelty answer taken
+                out, named = None, answer_id
+                while turn.answer is not None:
+                    novel = bool(turn.answer.response.novel)
+                    out = turn.feedback(1 if novel else -1, named)
+                    named = turn.answer.id if turn.answer is not None else named
+                return out
+
+            try:
+                result = await asyncio.to_thread(step)
+            finally:
+                rec.pending = learner.queued_events
+            if turn.done:
+                del self.turns[turn_id]
+                try:
+                    return await asyncio.to_thread(self._outcome, turn.outcome,
+                                                   f"drawing {rec.demo.key}")
+                finally:
+                    self.progress = None
+            return {"answer": self.answer_json(result, turn_id)}
+
+    async def recognize(self, body: Any) -> dict[str, Any]:
+        positions, times = parse_points(body)
+        async with self.lock:
+            demo = self._demo(positions, times)
+            r = await asyncio.to_thread(self.agent.recognize, demo)
+            drawing: list = []
+            if not r.unknown and r.concept is not None:
+                with contextlib.suppress(IlociError, ValueError, IndexError):
+                    drawing = await asyncio.to_thread(self._drawing_of, r, demo)
+        return {"concept": r.concept, "confidence": number(r.confidence),
+                "distance": number(r.distance), "entry": r.entry, "tilt": r.tilt,
+                "unknown": bool(r.unknown), "familiarity": number(r.familiarity),
+                "drawing": drawing}
+
+    def _drawing_of(self, recognition: Any, demo: Any) -> list:
+        """The robot's drawing of the recognized entry, in the frame of the person's stroke."""
+        drawing = self.agent.drawing_in_frame(demo, recognition.concept, recognition.entry)
+        return [] if drawing is None else polyline(drawing)
+
+    async def rename(self, body: Any) -> dict[str, Any]:
+        if not isinstance(body, dict) or not isinstance(body.get("concept"), str) \
+                or not isinstance(body.get("name"), str):
+            raise HTTPError(400, 'expected {"concept": "c3", "name": "circle"} (strings).')
+        async with self.lock:
+            if body["concept"] not in self.agent.memory.concepts():
+                raise HTTPError(404, f"the memory holds no concept {body['concept']!r}.")
+            self.agent.rename(body["concept"], body["name"])
+            await self._commit_async(f"rename {body['concept']}")
+            return {"memory": await asyncio.to_thread(self.memory_json)}
+
+    async def undo(self, body: Any) -> dict[str, Any]:
+        async with self.lock:
+            undone = await asyncio.to_thread(self.history.undo)
+            self.turns.clear()
+            return {"undone": undone, "memory": await asyncio.to_thread(self.memory_json)}
+
+    async def forget(self, body: Any) -> dict[str, Any]:
+        if not isinstance(body, dict) or not (isinstance(body.get("concept"), str) or (
+                isinstance(body.get("entry"), int) and not isinstance(body["entry"], bool))):
+            raise HTTPError(400, 'expected {"concept": "c3"} or {"entry": 4}.')
+        async with self.lock:
+            mem = self.agent.memory
+            if "concept" in body and isinstance(body["concept"], str):
+                if body["concept"] not in mem.concepts():
+                    raise HTTPError(404, f"the memory holds no concept {body['concept']!r}.")
+                self.agent.forget_concept(body["concept"])
+                what = f"forget {body['concept']}"
+            else:
+                i = body["entry"]
+                if not 0 <= i < len(mem.entries):
+                    raise HTTPError(404, f"the memory has no entry {i} (it has "
+                                         f"{len(mem.entries)}).")
+                self.agent.forget_entry(i)
+                what = f"forget entry {i}"
+            await self._commit_async(what)
+            return {"memory": await asyncio.to_thread(self.memory_json)}
+
+    async def reset(self, body: Any) -> dict[str, Any]:
+        async with self.lock:
+            self.agent.start_over()
+            await self._commit_async("start over")
+            self.turns.clear()
+            return {"memory": await asyncio.to_thread(self.memory_json)}
+
+    async def import_memory(self, data: bytes) -> dict[str, Any]:
+        """Replace memory and network with those of an uploaded memory file."""
+        if not data:
+            raise HTTPError(400, "the upload is empty; choose a memory file (.npz).")
+        async with self.lock:
+            def load() -> None:
+                with tempfile.TemporaryDirectory() as d:
+                    tmp = Path(d) / "upload.npz"
+                    tmp.write_bytes(data)
+                    # checked as Agent.load checks it: the network must fit this
+                    # server's model, the entries its settings, the robot its arm
+                    self.agent.replace_memory(tmp)
+            try:
+                await asyncio.to_thread(load)
+            except IlociError as exc:
+                raise HTTPError(422, f"not imported: {exc}") from None
+            await self._commit_async("import")
+            self.turns.clear()
+            return {"memory": await asyncio.to_thread(self.memory_json)}
+
+    def export_bytes(self) -> bytes:
+        """The memory file as saved (what the page shows)."""
+        path = self.memory_path
+        if not path.exists():
+            raise HTTPError(404, "nothing is saved yet: teach a first drawing.")
+        return path.read_bytes()
+
+    async def arm_png(self, turn_id: str | None, attempt: str | None) -> bytes:
+        sim = self.agent.simulator
+        if sim is None:
+            raise HTTPError(404, "no simulator is configured ([simulator] name in the config).")
+        rec = self.turns.get(int(turn_id)) if turn_id and turn_id.isdigit() \
+            and len(turn_id) < 12 else None
+        if rec is None or rec.turn.answer is None or str(rec.turn.answer.attempt) != attempt:
+            raise HTTPError(404, "no such guess is pending.")
+        execution = rec.turn.answer.response.execution
+
+        def render() -> bytes:
+            from PIL import Image  # the serve extra
+            buf = io.BytesIO()
+            image = np.ascontiguousarray(sim.render(execution, 360, 270), dtype=np.uint8)
+            Image.fromarray(image).save(buf, format="PNG")
+            return buf.getvalue()
+        return await asyncio.to_thread(render)
