@@ -267,7 +267,25 @@ def main(argv: list[str] | None = None) -> dict:
         letters = _letters(args.unipen, 0)
     load_before = os.getloadavg()
     t0 = time.perf_counter()
-    runs = []
+    runs: list[dict] = []
+
+    def write() -> dict:
+        out = {
+            "command": "python benchmarks/recognition.py " + " ".join(argv or sys.argv[1:]),
+            "decisions": {r: DECISIONS[r] for r in rows_run},
+            "familiarities": list(FAMILIARITIES),
+            "redrawn_multi_models": sorted(REDRAWN), "digit_like_letters": sorted(DIGIT_LIKE),
+            "runs": runs, "ablation": ablation(runs),
+            "wall_seconds": time.perf_counter() - t0,
+            "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+                        "load_before": load_before, "load_after": os.getloadavg()},
+        }
+        if args.note:
+            out["note"] = args.note
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+        return out
+
     for ds in args.datasets:
         seeds = (args.unipen_seeds or args.seeds) if ds.startswith("unipen") else args.seeds
         for seed in seeds:
@@ -280,19 +298,8 @@ def main(argv: list[str] | None = None) -> dict:
                 + "; " + ", ".join(f"{b} {100 * v['ccr_mean']:.2f}"
                                    for b, v in r["baselines"].items()),
                 file=sys.stderr, flush=True)
-    out = {
-        "command": "python benchmarks/recognition.py " + " ".join(argv or sys.argv[1:]),
-        "decisions": {r: DECISIONS[r] for r in rows_run}, "familiarities": list(FAMILIARITIES),
-        "redrawn_multi_models": sorted(REDRAWN), "digit_like_letters": sorted(DIGIT_LIKE),
-        "runs": runs, "ablation": ablation(runs),
-        "wall_seconds": time.perf_counter() - t0,
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                    "load_before": load_before, "load_after": os.getloadavg()},
-    }
-    if args.note:
-        out["note"] = args.note
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+            write()  # after every run, so a stopped benchmark keeps what it measured
+    out = write()
     print(f"wrote {args.out}", file=sys.stderr)
     return out
 
