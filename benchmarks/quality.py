@@ -83,6 +83,8 @@ def _with(*parts: dict[str, Any]) -> dict[str, Any]:
 
 
 NOISY_01 = {"teacher": {"name": "noisy", "p": 0.1}}
+#: The default decision (``[learner] decision``), for rows built on BASE.
+REGENERATION = {"learner": {"decision": "regeneration"}}
 
 #: row name -> changes on top of the base config.
 ROWS: dict[str, dict[str, Any]] = {
@@ -117,7 +119,24 @@ ROWS: dict[str, dict[str, Any]] = {
         BASE, {"learner": {"novelty_after": 2, "confirm_new_exemplars": True}}, NOISY_01),
     # BEST but a reward after the novelty answer asked again is confirmed once
     "confirm-once": _with(BEST, {"learner": {"confirm_twice_after_novelty": False}}),
+    # the defaults (decision "regeneration", familiarity "path", the paper's
+    # learning phase), with every baseline on the same folds
+    "default": {},
+    # the rows above with the default decision instead of the PB distance
+    "best-regeneration": _with(BEST, REGENERATION),
+    "untaught-regeneration": _with(BEST, REGENERATION, {"evaluation": {"untaught": 4},
+                                                        "learner": {"unknown_below": 0.8}}),
+    "noisy-0.1-regeneration": _with(BEST, REGENERATION, NOISY_01),
+    # the untaught row with the familiarity of the previous default
+    "untaught-reproduction": _with(BEST, {"evaluation": {"untaught": 4}, "learner": {
+        "unknown_below": 0.8, "familiarity": "reproduction"}}),
 }
+
+#: Rows whose runs also score every baseline of iloci.evaluation.baselines.
+BASELINE_ROWS = ("best", "default")
+#: Rows whose untaught concepts are scored for "unknown" (``unknown_auroc``:
+#: the first present; every one present in ``unknown_auroc_rows``).
+UNTAUGHT_ROWS = ("untaught", "untaught-regeneration", "untaught-reproduction", "paper-untaught")
 
 #: Rows run by default, in order (the cheap, decisive ones first).
 DEFAULT_ROWS = ("best", "paper", "noisy-0.1", "untaught", "paper-noisy-0.1", "noisy-0.05",
@@ -125,7 +144,8 @@ DEFAULT_ROWS = ("best", "paper", "noisy-0.1", "untaught", "paper-noisy-0.1", "no
                 "pb-confirm-exemplars-noisy-0.1", "novelty-after-2", "novelty-after-2-noisy-0.1",
                 "novelty-after-2-confirm-exemplars-noisy-0.1", "confirm-once",
                 "novelty-prediction", "novelty-only", "reproduction-decision",
-                "reproduction-only", "paper-stream")
+                "reproduction-only", "paper-stream", "default", "best-regeneration",
+                "untaught-regeneration", "noisy-0.1-regeneration", "untaught-reproduction")
 
 
 def _merge(base: dict, changes: dict) -> dict:
@@ -169,7 +189,7 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
                "feedbacks": [len(s["feedbacks"]) for s in steps]}
     else:
         from iloci.evaluation.evaluate import evaluate
-        metrics, results = evaluate(config, jobs=jobs, baseline=row == "best",
+        metrics, results = evaluate(config, jobs=jobs, baseline=row in BASELINE_ROWS,
                                     memory_dir=str(cache / f"{row}-seed{seed}-memories"))
         out = {"row": row, "seed": seed, "protocol": "folds", "metrics": {
             k: v for k, v in metrics.items() if k not in ("versions", "machine")},
@@ -305,6 +325,10 @@ def main(argv: list[str] | None = None) -> dict:
                     help="summarise the cached runs only (also those made by older code "
                     "whose config had other keys: marked in the output); run nothing")
     ap.add_argument("--out", default=str(RESULTS))
+    ap.add_argument("--keep-previous", action="store_true",
+                    help="keep the output file's previous contents under 'previous_run' "
+                    "(its rows that this run does not repeat stay readable, marked as "
+                    "measured by older code)")
     ap.add_argument("--note", help="free text recorded in the output (e.g. what shared the "
                     "machine, which code the cached runs came from)")
     args = ap.parse_args(argv)
@@ -388,10 +412,24 @@ def main(argv: list[str] | None = None) -> dict:
                            [_folds(runs["best" if p == 0 else f"noisy-{p:g}"],
                                    "interactions_per_demo") for p in ps], fig)
         out["noisy_figure"] = fig.name
-    for row in ("untaught", "paper-untaught"):
+    for row in UNTAUGHT_ROWS:
         if row in runs:
-            out["unknown_auroc"] = summarize_unknown(runs[row]) | {"row": row}
-            break
+            out.setdefault("unknown_auroc", summarize_unknown(runs[row]) | {"row": row})
+            out.setdefault("unknown_auroc_rows", {})[row] = summarize_unknown(runs[row]) | {
+                "familiarity": runs[row][0]["config"]["learner"].get("familiarity"),
+                "decision": runs[row][0]["config"]["learner"].get("decision")}
+    if "default" in runs:
+        # the defaults against every baseline on the same folds (a seed fixes them)
+        with_all = [r for r in runs["default"] if r["metrics"].get("baselines")]
+        out["default"] = {
+            "ccr": {str(r["seed"]): r["metrics"]["ccr_mean"] for r in runs["default"]},
+            "ccr_folds": {str(r["seed"]): [f["ccr"] for f in r["folds"]]
+                          for r in runs["default"]},
+            "baselines": {str(r["seed"]): {n: b["ccr_mean"] for n, b in
+                                           r["metrics"]["baselines"].items()}
+                          for r in with_all},
+            "best_baseline": {str(r["seed"]): r["metrics"].get("best_baseline")
+                              for r in with_all}}
     if "stream" in runs:
         out["stream"] = summarize_stream(runs["stream"])
     out["ablation"] = {}
@@ -402,6 +440,9 @@ def main(argv: list[str] | None = None) -> dict:
         else:
             out["ablation"][row] = summarize_folds(runs[row])
         out["ablation"][row]["changes"] = ROWS[row]
+        learner = runs[row][0]["config"]["learner"]
+        out["ablation"][row]["decision"] = learner.get("decision")
+        out["ablation"][row]["familiarity"] = learner.get("familiarity")
 
     targets: dict[str, Any] = {}
     if "ccr" in out:
@@ -473,6 +514,17 @@ def main(argv: list[str] | None = None) -> dict:
         v = s01["ccr"]["mean"]
         targets["noisy_0.1_ccr_ge_96"] = {"value": v, "seeds": s01["seeds"],
                                           "per_seed": s01["ccr"]["seeds"], "met": v >= 0.96}
+    if "default" in out and out["default"]["baselines"]:
+        d = out["default"]
+        both = sorted(d["baselines"])
+        targets["default_ccr_ge_best_baseline_every_seed"] = {
+            "value": {sd: [d["ccr"][sd], max(d["baselines"][sd].values()),
+                           d["best_baseline"][sd]] for sd in both},
+            "seeds": both,
+            "met": all(d["ccr"][sd] >= max(d["baselines"][sd].values()) for sd in both)}
+        targets["default_every_fold_ge_98.5"] = {
+            "value": min(min(v) for v in d["ccr_folds"].values()),
+            "met": min(min(v) for v in d["ccr_folds"].values()) >= 0.985}
     if "unknown_auroc" in out:
         v = out["unknown_auroc"]["auroc"]
         targets["untaught_auroc_ge_0.95"] = {"value": v, "seeds": out["unknown_auroc"]["seeds"],
@@ -484,6 +536,11 @@ def main(argv: list[str] | None = None) -> dict:
                       "cpus": os.cpu_count(), "load_average_before": load_before,
                       "load_average_after": os.getloadavg(),
                       "note": "shared with other work; wall times are not comparable"}
+    if args.keep_previous and Path(args.out).is_file():
+        previous = json.loads(Path(args.out).read_text())
+        previous.pop("previous_run", None)
+        out["previous_run"] = previous | {
+            "rows_not_repeated": [r for r in previous.get("ablation", {}) if r not in runs]}
     write_json_atomic(args.out, out)
     for name, t in targets.items():
         print(f"{name}: {t['value']} -> {'met' if t['met'] else 'MISSED'}")

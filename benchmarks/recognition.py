@@ -25,6 +25,13 @@ shapes outside the taught set:
     UNIPEN lower-case letters (single stroke, ``1c``; 10 per letter,
     seeded) against taught digits; also without the letters a digit is
     commonly written like (:data:`DIGIT_LIKE`).
+``lasa`` untaught
+    LASA concepts never taught: each fold learned again with
+    ``[evaluation] untaught = 4`` (the concepts of quality.json's
+    ``untaught`` row); its taught test drawings against the untaught
+    concepts' drawings, pooled over the 5 folds; also the share of each
+    answered "unknown" at familiarity 0.8 (the threshold of ``iloci teach``
+    and ``iloci serve``).
 
 Writes ``benchmarks/results/recognition.json``: per data set and seed,
 CCR (mean, per fold) of each decision rule and each baseline, and the
@@ -33,7 +40,8 @@ baseline. The robustness suite of each rule is measured by
 ``benchmarks/robustness.py`` (``--set learner.decision="..."``).
 
 Run: ``python benchmarks/recognition.py [--unipen PATH] [--seeds 0 1 2]
-[--unipen-seeds 0] [--datasets lasa unipen unipen-writers] [--rows a,b] [--jobs 2]``.
+[--unipen-seeds 0] [--datasets lasa unipen unipen-writers] [--rows a,b] [--jobs 2]
+[--no-untaught]``.
 """
 
 from __future__ import annotations
@@ -74,7 +82,9 @@ DEFAULT_ROWS = ("regeneration", "regeneration-displacements",
 #: ``[learner] familiarity`` settings compared (``unknown_below`` is set
 #: just above 0 so that the reproduction errors are computed; its answers
 #: are not scored here).
-FAMILIARITIES = ("reproduction", "prediction", "regeneration")
+FAMILIARITIES = ("path", "reproduction", "prediction", "regeneration")
+#: ``unknown_below`` of ``iloci teach`` / ``iloci serve`` (iloci.commands.teach.PAGE).
+UNKNOWN_BELOW = 0.8
 
 #: Multi_Models drawings that are LASA shapes drawn again (module docstring).
 REDRAWN = frozenset({"Multi_Models_1/5", *(f"Multi_Models_2/{i}" for i in range(4)),
@@ -126,7 +136,7 @@ def _auroc(known: list[float], outside: list[float]) -> float:
 
 def run_one(dataset: str, seed: int, jobs: int, data_dir: Path | None, root: Path,
             letters: list | None, rows_run: tuple[str, ...] = DEFAULT_ROWS,
-            familiarity_on: bool = True) -> dict[str, Any]:
+            familiarity_on: bool = True, untaught: bool = True) -> dict[str, Any]:
     from iloci.data.concepts import GroundTruth
     from iloci.evaluation.evaluate import evaluate
 
@@ -161,6 +171,8 @@ def run_one(dataset: str, seed: int, jobs: int, data_dir: Path | None, root: Pat
             rows[row]["seconds"] += time.perf_counter() - t1
         if familiarity_on and res.fold == 0 and dataset in ("lasa", "unipen"):
             familiarity = _unseen(dataset, path, test, letters)
+    if dataset == "lasa" and untaught and familiarity_on:
+        familiarity["untaught"] = _untaught(seed, jobs, root, demos)
     for row in rows.values():
         row["ccr_mean"] = float(np.mean(row["ccr_folds"]))
         row["ccr_min"] = float(np.min(row["ccr_folds"]))
@@ -194,7 +206,39 @@ def _unseen(dataset: str, path: Path, test: list, letters: list | None) -> dict[
     out: dict[str, Any] = {"known": n, label: len(outside), sub_label: len(subset)}
     for name, values in fam.items():
         k, o = values[:n], values[n:]
-        out[name] = {label: _auroc(k, o), sub_label: _auroc(k, [o[i] for i in subset])}
+        out[name] = {label: _auroc(k, o), sub_label: _auroc(k, [o[i] for i in subset]),
+                     f"known_unknown_below_{UNKNOWN_BELOW}": float(np.mean(
+                         np.asarray(k) < UNKNOWN_BELOW)),
+                     f"outside_unknown_below_{UNKNOWN_BELOW}": float(np.mean(
+                         np.asarray(o) < UNKNOWN_BELOW))}
+    return out
+
+
+def _untaught(seed: int, jobs: int, root: Path, demos: list) -> dict[str, Any]:
+    """Familiarity AUROCs, taught test drawings against never-taught LASA concepts (5 folds)."""
+    from iloci.evaluation.evaluate import evaluate
+    from iloci.config import load_config
+    config = load_config({"evaluation": {"seed": seed, "untaught": 4}})
+    memories = root / f"lasa-untaught-seed{seed}"
+    _, results = evaluate(config, jobs=jobs, memory_dir=str(memories))
+    by_key = {d.key: d for d in demos}
+    fam: dict[str, tuple[list[float], list[float]]] = {f: ([], []) for f in FAMILIARITIES}
+    left_out: list[list[str]] = []
+    for res in results:
+        test = [by_key[k] for k in res.test]
+        taught = list(res.taught)
+        left_out.append(sorted({d.true_concept for d, t in zip(test, taught) if not t}))
+        for name, values in _familiarity(memories / f"fold-{res.fold}.npz", test, []).items():
+            fam[name][0].extend(v for v, t in zip(values, taught) if t)
+            fam[name][1].extend(v for v, t in zip(values, taught) if not t)
+    out: dict[str, Any] = {"taught": len(fam[FAMILIARITIES[0]][0]),
+                           "untaught": len(fam[FAMILIARITIES[0]][1]), "left_out": left_out}
+    for name, (k, o) in fam.items():
+        out[name] = {"auroc": _auroc(k, o),
+                     f"taught_unknown_below_{UNKNOWN_BELOW}": float(np.mean(
+                         np.asarray(k) < UNKNOWN_BELOW)),
+                     f"untaught_unknown_below_{UNKNOWN_BELOW}": float(np.mean(
+                         np.asarray(o) < UNKNOWN_BELOW))}
     return out
 
 
@@ -245,6 +289,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--familiarity-seeds", type=int, nargs="*", default=None,
                     help="seeds whose fold 0 also measures familiarity (default: every seed)")
     ap.add_argument("--runs", default="runs/recognition", help="where fold memories go")
+    ap.add_argument("--no-untaught", action="store_true",
+                    help="skip the LASA untaught-concepts familiarity (5 more folds learned)")
     ap.add_argument("--out", default=str(RESULTS))
     ap.add_argument("--note", help="free text recorded in the output")
     args = ap.parse_args(argv)
@@ -291,7 +337,8 @@ def main(argv: list[str] | None = None) -> dict:
         for seed in seeds:
             print(f"[recognition] {ds} seed {seed} ...", file=sys.stderr, flush=True)
             fam = args.familiarity_seeds is None or seed in args.familiarity_seeds
-            r = run_one(ds, seed, args.jobs, data_dir, Path(args.runs), letters, rows_run, fam)
+            r = run_one(ds, seed, args.jobs, data_dir, Path(args.runs), letters, rows_run, fam,
+                        not args.no_untaught)
             runs.append(r)
             print(f"[recognition] {ds} seed {seed}: " + ", ".join(
                 f"{row} {100 * v['ccr_mean']:.2f}" for row, v in r["decisions"].items())

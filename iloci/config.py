@@ -167,14 +167,20 @@ def _read_text(path: Path, what: str) -> str:
                                     what == "config" else "."),
                           source=str(path)) from None
     except UnicodeDecodeError as exc:
-        raise ConfigError(f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
-                          "TOML files are UTF-8: save it as UTF-8.",
+        raise ConfigError(f"{what} is not UTF-8 text ({exc.reason} at byte {exc.start}, "
+                          f"{exc.object[exc.start:exc.start + 1]!r}); TOML files are UTF-8: "
+                          "save it as UTF-8 (from Latin-1 or Windows-1252: `iconv -f cp1252 "
+                          f"-t utf-8 {path.name} > NEW.toml`).",
                           source=str(path)) from None
     except IsADirectoryError:
         raise ConfigError(f"{what} path is a directory; pass a TOML file.",
                           source=str(path)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read {what}: {exc.strerror}.", source=str(path)) from None
+    if "\r" in text and "\n" not in text:
+        raise ConfigError(f"{what}'s lines end with a carriage return only (classic Mac OS "
+                          "text); TOML needs line feeds: save it with LF (or CRLF) line ends.",
+                          source=str(path))
     return text
 
 
@@ -197,6 +203,10 @@ def _parse_toml(text: str, path: Path) -> dict[str, Any]:
         m = _LINE_RE.search(str(exc))
         line = int(m.group(1)) if m else None
         raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
+    except RecursionError:
+        raise ConfigError("its arrays or tables are nested too deeply to read (an iloci "
+                          "config nests two levels: [section] key = value)",
+                          source=str(path)) from None
 
 
 class ConfigData(dict[str, Any]):

@@ -2,10 +2,12 @@
 
 Three families, all prefixed ``iloci_``:
 
-* **Registration hooks**, one per interface. Each receives a registry view
-  for that kind and adds named components to it; a config then picks a
-  component by name. Called once each time a plugin manager builds its
-  registry (see :func:`iloci.plugins.get_registry`).
+* **Registration hooks**, one per kind of the registry
+  (:data:`iloci.interfaces.ALL_KINDS`: the five components, fold executors,
+  robot presets). Each receives a registry view for that kind and adds named
+  entries to it; a config (or ``--executor``) then picks one by name. Called
+  once each time a plugin manager builds its registry (see
+  :func:`iloci.plugins.get_registry`).
 * **Observer hooks**, broadcast while learning and evaluating, for progress
   bars, logging, figures and robot-side bookkeeping. Their return values
   are ignored; an exception raised in an observer propagates (observers

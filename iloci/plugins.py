@@ -6,7 +6,7 @@ manager; :func:`get_registry` asks every plugin to register its components.
 Environment variables
 ---------------------
 ``ILOCI_DISABLE_PLUGIN_AUTOLOAD``
-    Any non-empty value other than ``0``: load only iloci's own plugins, the
+    Any non-empty value other than ``0``, ``false`` or ``no``: load only iloci's own plugins, the
     built-ins and the first-party back-end distributions
     (:data:`FIRST_PARTY_DISTRIBUTIONS`: ``iloci-torch``, ``iloci-scipy``,
     ...); no third-party entry point of group ``iloci`` is loaded.

@@ -36,11 +36,11 @@ class LearnerConfig:
     #: let regenerated patterns drift further from what was demonstrated
     #: (measured in docs/method.md, "Where the paper is silent").
     rehearsal_epochs: int = constrained(0, Interval(0))
-    #: Recognition answers "unknown" when its familiarity (see
-    #: ``iloci.concepts.learner.familiarity``: near 1 for a demonstration that
-    #: some memory entry's PB reproduces well, 0.5 when the best entry
-    #: reproduces it as badly as one known concept reproduces its neighbour)
-    #: is below this; 0 never does (the paper always names a concept).
+    #: Recognition answers "unknown" when its familiarity (``familiarity``
+    #: below, ``iloci.concepts.inference.familiarity``: near 1 for a
+    #: demonstration like something the memory knows, 0.5 when it lies as
+    #: far from everything known as two known concepts lie apart) is below
+    #: this; 0 never does (the paper always names a concept).
     unknown_below: float = constrained(0.0, Interval(0, 1))
     #: Novelty answer: when a demonstration's familiarity (``familiarity``
     #: below) is below this, the robot first imitates it back as something
@@ -48,22 +48,25 @@ class LearnerConfig:
     #: back to guessing. 0 never does (the paper tries every known concept
     #: before founding one).
     novelty_below: float = constrained(0.0, Interval(0, 1))
-    #: Which prediction error the novelty answer's and "unknown"'s
-    #: familiarity is taken of: ``"reproduction"`` (the lowest over memory
-    #: entries of the error with which the entry's PB reproduces the
-    #: demonstration: is it like something the robot knows?) or
+    #: What the novelty answer's and "unknown"'s familiarity measures:
+    #: ``"path"`` (the default: how far the drawing's pen path, centred and
+    #: scaled, lies from the nearest pen path the network regenerates from
+    #: a memory entry, aligned by dynamic time warping,
+    #: :func:`~iloci.concepts.inference.path_distances`, on the scale at
+    #: which two known concepts' regenerated paths lie apart,
+    #: :func:`~iloci.concepts.inference.path_scale`),
+    #: ``"reproduction"`` (the lowest over memory entries of the error with
+    #: which the entry's PB reproduces the demonstration),
     #: ``"prediction"`` (the error from PB_obs, a PB fitted freely to the
-    #: demonstration: can the network reproduce it at all? It generalises
-    #: to shapes never taught). ``"reproduction"`` asks fewer feedbacks
-    #: (measured in docs/method.md, "Beyond the paper"). ``"regeneration"``:
-    #: the lowest :func:`~iloci.concepts.learner.pattern_distances` to the
-    #: entries' regenerated patterns, on the scale at which two known
-    #: concepts' regenerated patterns lie apart
-    #: (:func:`~iloci.concepts.learner.regeneration_scale`); no closed-loop
-    #: run per entry, so it is cheaper (benchmarks/recognition.py compares
-    #: the three).
-    familiarity: str = constrained("reproduction", Options("reproduction", "prediction",
-                                                           "regeneration"))
+    #: demonstration: can the network reproduce it at all?) or
+    #: ``"regeneration"`` (the lowest
+    #: :func:`~iloci.concepts.inference.pattern_distances` to the entries'
+    #: regenerated patterns, on
+    #: :func:`~iloci.concepts.inference.regeneration_scale`). AUROC of
+    #: known test drawings against never-taught shapes, each measure:
+    #: docs/method.md, "I don't know" (benchmarks/recognition.py).
+    familiarity: str = constrained("path", Options("path", "reproduction", "prediction",
+                                                   "regeneration"))
     #: A reward that comes after a "no" for the same demonstration goes
     #: against the robot's own ranking of its concepts; with this on, the
     #: robot asks once more and keeps the reward only when the teacher

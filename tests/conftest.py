@@ -119,3 +119,20 @@ def lasa():
     """LASA's GShape and Angle demonstrations by key (``"GShape/0"``...)."""
     from iloci.data import load_lasa
     return {d.key: d for d in load_lasa(["GShape", "Angle"])}
+
+
+def agent_state(agent) -> tuple[dict, dict, dict]:
+    """An agent's memory (arrays, meta, as saved) and network state, to compare exactly."""
+    arrays, meta = agent.memory.to_arrays()
+    return arrays, meta, agent.perceptual_model.state()
+
+
+def assert_same_state(s1: tuple, s2: tuple) -> None:
+    """Two :func:`agent_state` results are equal bit for bit."""
+    import numpy as np
+    (a1, m1, n1), (a2, m2, n2) = s1, s2
+    assert m1 == m2 and a1.keys() == a2.keys() and n1.keys() == n2.keys()
+    for k in a1:
+        np.testing.assert_array_equal(a1[k], a2[k])
+    for k in n1:
+        np.testing.assert_array_equal(n1[k], n2[k])

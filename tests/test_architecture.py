@@ -184,3 +184,76 @@ def test_the_checks_catch_what_they_forbid():
     assert _layer_of("iloci.evaluation.fold", ranks) > _layer_of("iloci.hookspecs", ranks)
     assert _layer_of("iloci.data.concepts", ranks) == _layer_of("iloci.data", ranks)
     assert _layer_of("iloci.sensorimotor.robots.plane", ranks) > _layer_of("iloci.config", ranks)
+
+
+def local_imports_without_a_reason() -> list[str]:
+    """``module:line`` of each import of iloci's own modules inside a function with no comment.
+
+    The reason is a comment on a line of the import's run (consecutive import
+    statements) or on the line just above the run.
+    """
+    return sorted(f"{mod}:{line}" for mod, path in _modules().items()
+                  for line in _unexplained(path.read_text(encoding="utf-8")))
+
+
+def _unexplained(source: str) -> list[int]:
+    """Lines of ``source`` importing iloci's own modules in a function, with no comment."""
+    lines = source.splitlines()
+    tree = ast.parse(source)
+    functions = [n for n in ast.walk(tree)
+                 if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    out = set()
+    for block in (b for fn in functions for n in ast.walk(fn) for b in _bodies(n)):
+        for run in _runs(block):
+            own = [n for n in run if _imports_iloci(n)]
+            first, last = run[0].lineno, run[-1].end_lineno or run[-1].lineno
+            if own and not any("#" in line for line in lines[max(first - 2, 0):last]):
+                out.update(n.lineno for n in own)
+    return sorted(out)
+
+
+def _bodies(node: ast.AST) -> list[list[ast.stmt]]:
+    return [getattr(node, f) for f in ("body", "orelse", "finalbody")
+            if isinstance(getattr(node, f, None), list)]
+
+
+def _runs(body: list[ast.stmt]) -> list[list[ast.stmt]]:
+    """Runs of consecutive import statements in a statement list."""
+    runs: list[list[ast.stmt]] = []
+    prev: ast.stmt | None = None
+    for stmt in body:
+        if isinstance(stmt, (ast.Import, ast.ImportFrom)):
+            if runs and runs[-1][-1] is prev:
+                runs[-1].append(stmt)
+            else:
+                runs.append([stmt])
+        prev = stmt
+    return runs
+
+
+def _imports_iloci(node: ast.stmt) -> bool:
+    if isinstance(node, ast.ImportFrom):
+        return node.level > 0 or (node.module or "").split(".")[0] == "iloci"
+    return isinstance(node, ast.Import) and any(a.name.split(".")[0] == "iloci"
+                                                for a in node.names)
+
+
+def test_an_import_inside_a_function_says_why():
+    """iloci's own modules are imported at the top; one inside a function carries its reason.
+
+    A reason is a cycle that forces it, or a heavy or optional third-party
+    library the imported module loads (scipy, rich, starlette) that a
+    command or ``import iloci`` should not pay for until it is used
+    (docs/development.md, "Architecture").
+    """
+    assert local_imports_without_a_reason() == []
+
+
+def test_the_import_check_finds_a_local_import_without_a_reason():
+    code = ("def f():\n    x = 1\n    import json\n    from iloci.errors import IlociError\n"
+            "    return x\n\n"
+            "def g():\n    # the learner imports scipy: loaded when first used\n"
+            "    import json\n    from iloci.concepts import learner\n\n"
+            "def h():\n    from iloci import errors  # a cycle: errors imports h's module\n"
+            "    import numpy\n")
+    assert _unexplained(code) == [4]

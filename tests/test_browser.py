@@ -444,3 +444,49 @@ def test_the_page_fits_a_phone(server, browser, tmp_path):
                              / "phone.png"), full_page=True)
     assert pad[1] <= 390 and pad[0] >= 2 * pad[1] - 2        # high-DPI backing store
     context.close()
+
+
+def test_shortcuts_names_an_empty_export_and_a_reload_while_learning(tmp_path, browser):
+    """What a person met trying the page (issue 26's hidden checks): Ctrl+S (saving the
+    page, a habit) answered "Something new"; a 40-letter name widened a phone's page to
+    461 px; Export with nothing saved did nothing; a reload during a rehearsal showed
+    nothing of it; the favicon's 404 was a console error."""
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    expect = sync_api.expect
+    with serving(tmp_path / "m.npz") as (url, classroom):
+        page = browser.new_page(viewport={"width": 1000, "height": 900})
+        console = []
+        page.on("console", lambda m: console.append(m.text) if m.type == "error" else None)
+        page.goto(url)
+        expect(page.locator("#concepts")).to_contain_text("Empty")
+        page.locator("#export").click()
+        expect(page.locator("#error")).to_contain_text("Nothing is saved yet")
+        teach_first(page, lasa)
+        draw(page, lasa["Angle/0"], "fast")
+        expect(page.locator("#judge")).to_be_visible(timeout=WAIT)
+        for keys in ("Control+s", "Alt+y", "Meta+n"):
+            page.keyboard.press(keys)
+        page.wait_for_timeout(1500)
+        expect(page.locator("#judge")).to_be_visible()             # no answer was given
+        assert len(classroom.agent.memory.concepts()) == 1
+        form = page.locator('.concept[data-concept="c1"] form')
+        form.locator("input").fill("Sinewave" * 5)                 # 40 letters, no space
+        form.locator("button").click()
+        long_name = '.concept[data-concept="' + "Sinewave" * 5 + '"]'
+        expect(page.locator(long_name)).to_have_count(1)
+        # a reload while the robot learns: the page says so and shows the bar
+        classroom.progress = {"reason": "new_concept", "phase": "train", "fraction": 0.4,
+                              "elapsed": 1.0, "patterns": 2, "epochs": 30, "since": 0}
+        page.reload()
+        expect(page.locator("#message")).to_contain_text("still learning")
+        expect(page.locator("#progress")).to_be_visible()
+        classroom.progress = None
+        expect(page.locator("#message")).to_contain_text("has learned", timeout=WAIT)
+        expect(page.locator("#progress")).to_be_hidden()
+        assert not console, console
+        phone = browser.new_context(viewport={"width": 390, "height": 844}, has_touch=True,
+                                    device_scale_factor=3, is_mobile=True).new_page()
+        phone.goto(url)
+        expect(phone.locator(long_name)).to_have_count(1)
+        width = phone.evaluate("document.documentElement.scrollWidth")
+        assert width <= 390, f"the page is {width} px wide on a 390 px phone"

@@ -11,19 +11,7 @@ import pytest
 
 from iloci.errors import InvalidInputError, MemoryFileError
 
-
-def _state(agent):
-    arrays, meta = agent.memory.to_arrays()
-    return arrays, meta, agent.perceptual_model.state()
-
-
-def _assert_same(s1, s2):
-    (a1, m1, n1), (a2, m2, n2) = s1, s2
-    assert m1 == m2 and a1.keys() == a2.keys() and n1.keys() == n2.keys()
-    for k in a1:
-        np.testing.assert_array_equal(a1[k], a2[k])
-    for k in n1:
-        np.testing.assert_array_equal(n1[k], n2[k])
+from conftest import agent_state, assert_same_state
 
 
 @pytest.fixture
@@ -35,18 +23,18 @@ def taught(small_agent, lasa):
 
 
 def test_restore_puts_memory_and_network_back_exactly(taught, lasa):
-    before = _state(taught)
+    before = agent_state(taught)
     snap = taught.snapshot("three drawings")
     assert snap.what == "three drawings"
     taught.teach([lasa["Angle/1"]])                       # a rehearsal changes the network
     with pytest.raises(AssertionError):
-        _assert_same(before, _state(taught))
+        assert_same_state(before, agent_state(taught))
     revision = taught.memory.revision
     taught.restore(snap)
-    _assert_same(before, _state(taught))
+    assert_same_state(before, agent_state(taught))
     assert taught.memory.revision > revision             # a turn made before sees the change
     taught.restore(snap)                                 # a snapshot restores more than once
-    _assert_same(before, _state(taught))
+    assert_same_state(before, agent_state(taught))
 
 
 def test_forget_a_concept_an_entry_and_start_over(taught):
@@ -75,13 +63,13 @@ def test_replace_memory_checks_the_file_as_load_does(taught, small_agent, tmp_pa
     path = taught.save(tmp_path / "m.npz")
     other = small_agent()
     other.replace_memory(path)
-    _assert_same(_state(taught), _state(other))
+    assert_same_state(agent_state(taught), agent_state(other))
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"PK\x03\x04 not a memory file")
-    before = _state(other)
+    before = agent_state(other)
     with pytest.raises(MemoryFileError):
         other.replace_memory(bad)
-    _assert_same(before, _state(other))                  # refused: unchanged
+    assert_same_state(before, agent_state(other))      # refused: unchanged
 
 
 def test_the_drawing_in_the_frame_of_the_persons_stroke(taught, lasa):

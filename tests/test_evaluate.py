@@ -308,3 +308,31 @@ def test_a_motion_cache_shared_between_folds_changes_no_result(small_config):
     assert converted == len(demos) and cache.hits == 0  # every demonstration met once
     assert fold(1, cache) == fold(1, None)  # the second fold only looks them up
     assert cache.misses == converted and cache.hits == len(demos)
+
+
+def _timeless(value):
+    """``value`` without what a run's clock and machine decide (times, jobs, versions)."""
+    if isinstance(value, dict):
+        return {k: _timeless(v) for k, v in value.items()
+                if not str(k).endswith("seconds") and k not in ("jobs", "versions", "machine")}
+    if isinstance(value, list):
+        return [_timeless(v) for v in value]
+    return value
+
+
+def test_two_jobs_write_the_same_metrics_and_folds_as_one_bit_for_bit(tmp_path):
+    # 3 folds on 2 workers: learning, baselines and recognition are separate tasks
+    # there (iloci.evaluation.parallel.run_folds), all in one process here
+    cfg = tmp_path / "three.toml"
+    cfg.write_text(SMALL.replace("folds = 2", "folds = 3"))
+    texts = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"jobs{jobs}"
+        assert main(["evaluate", "--config", str(cfg), "--out", str(out), "--jobs", str(jobs),
+                     "--quiet"]) == 0
+        texts[jobs] = [json.dumps(_timeless(json.loads((out / name).read_text())),
+                                  sort_keys=True, allow_nan=True)
+                       for name in ("metrics.json", "folds.json")]
+    folds = json.loads(texts[1][1])
+    assert len(folds) == 3 and all(f["baselines"] for f in folds)  # the baselines ran
+    assert texts[2] == texts[1]

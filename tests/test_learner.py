@@ -20,7 +20,8 @@ import iloci
 from iloci import hookimpl
 from iloci.agent import SkippedDemonstrationWarning
 from iloci.concepts import rehearsal
-from iloci.concepts.inference import as_positions
+from iloci.concepts.inference import (PATH_WARP, as_positions, path_distances, path_scale,
+                                      pen_path)
 from iloci.concepts.learner import (novelty_scale, pattern_distances,
                                     regenerated_patterns, regeneration_scale)
 from iloci.concepts.memory import entries_equal
@@ -421,21 +422,26 @@ def test_novelty_answer_founds_a_concept_in_one_interaction_or_goes_back_to_gues
     assert fourth.first_guess_correct is False and third.first_guess_correct is True
 
 
-@pytest.mark.parametrize("kind", ["reproduction", "prediction"])
+@pytest.mark.parametrize("kind", ["path", "reproduction", "prediction"])
 def test_novelty_answer_asks_the_configured_familiarity(lasa, kind):
-    # "reproduction" (default): how well the best known entry's PB reproduces
-    # the demonstration; "prediction": the error from its own PB_obs
+    # "path" (default): the pen path against the nearest regenerated pen path;
+    # "reproduction": how well the best known entry's PB reproduces the
+    # demonstration; "prediction": the error from its own PB_obs
     agent = make_agent(novelty_below=1.0, familiarity=kind)
     teacher = ScriptedTeacher([-1, 1])
     agent.teacher = teacher
     agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
     seq = agent.memory.encoder.encode(agent.motion(lasa["Sine/0"]))[0]
     learner = agent.learner
-    if kind == "reproduction":
+    scale = novelty_scale(learner.model, agent.memory)
+    if kind == "path":
+        patterns = regenerated_patterns(learner.model, agent.memory)
+        error = path_distances([seq], patterns).min()
+        scale = path_scale(patterns, agent.memory.concept_labels)
+    elif kind == "reproduction":
         error = learner.entry_errors([seq]).min()
     else:
         error = learner.model.prediction_error([seq], learner.recognize_pbs([seq]))[0]
-    scale = novelty_scale(learner.model, agent.memory)
     agent.learn(lasa["Sine/0"])
     novel = teacher.responses[-1]
     assert novel.novel
@@ -443,14 +449,14 @@ def test_novelty_answer_asks_the_configured_familiarity(lasa, kind):
 
 
 def test_familiarity_setting_is_checked():
-    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be one of "
+    with pytest.raises(iloci.errors.ConfigError, match="familiarity must be one of 'path', "
                                                        "'reproduction', 'prediction', "
                                                        "'regeneration', got 'pb'"):
         iloci.build(small_config(familiarity="pb"))
 
 
 def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
-    agent = make_agent(unknown_below=0.999)
+    agent = make_agent(unknown_below=0.999, familiarity="reproduction")
     agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
     recs = agent.recognize([lasa["GShape/1"], lasa["Sine/0"]])
     for r in recs:
@@ -467,6 +473,48 @@ def test_recognition_answers_unknown_below_its_familiarity_threshold(lasa):
     off.teach([lasa["GShape/0"], lasa["Angle/0"]])
     plain = off.recognize([lasa["Sine/0"]])[0]
     assert not plain.unknown and np.isnan(plain.reproduction_error)
+
+
+def test_recognition_familiarity_by_default_is_the_pen_paths_distance(lasa):
+    """``familiarity = "path"`` (default): the drawing's pen path against the
+    pen paths the network regenerates from the entries, on the memory's scale."""
+    agent = make_agent(unknown_below=0.9, tilts=())
+    assert agent.config.learner.familiarity == "path"
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    demos = [lasa["GShape/1"], lasa["Sine/2"], lasa["Angle/3"]]
+    seqs = [agent.memory.encoder.encode(agent.motion(d))[0] for d in demos]
+    patterns = regenerated_patterns(agent.perceptual_model, agent.memory)
+    nearest = path_distances(seqs, patterns).min(axis=1)
+    scale = path_scale(patterns, agent.memory.concept_labels)
+    assert np.isfinite(scale) and scale > 0
+    recs = agent.recognize(demos)
+    np.testing.assert_allclose([r.familiarity for r in recs], scale / (scale + nearest),
+                               rtol=1e-9)
+    assert [r.unknown for r in recs] == [r.familiarity < 0.9 for r in recs]
+    # no closed-loop run per entry for it
+    assert all(np.isnan(r.reproduction_error) for r in recs)
+
+
+def test_pen_path_and_path_distances():
+    rng = np.random.default_rng(0)
+    seq = rng.normal(size=(12, 6))
+    p = pen_path(seq)
+    assert p.shape == (13, 2)
+    np.testing.assert_allclose(p.mean(axis=0), 0.0, atol=1e-12)
+    assert np.sqrt((p ** 2).sum(axis=1).mean()) == pytest.approx(1.0)
+    # where and how large a shape is drawn does not count; the joints do not either
+    bigger = seq * 3.0
+    bigger[:, 2:] = rng.normal(size=(12, 4))
+    np.testing.assert_allclose(pen_path(bigger), p, atol=1e-12)
+    assert np.all(pen_path(np.zeros((4, 6))) == 0)
+    other = rng.normal(size=(12, 6))
+    d = path_distances([seq, other], [bigger, other])
+    np.testing.assert_allclose(np.diag(d), 0.0, atol=1e-12)
+    assert d[0, 1] == pytest.approx(pattern_distances([p], [pen_path(other)], PATH_WARP)[0, 0])
+    assert d[0, 1] > 0
+    assert path_scale([seq, bigger, other], ["a", "a", "b"]) == pytest.approx(
+        np.median([d[0, 1], d[0, 1], d[1, 0]]))
+    assert np.isnan(path_scale([seq, other], ["a", "a"]))
 
 
 @pytest.mark.parametrize("confirmation", [-1, 1])

@@ -439,3 +439,25 @@ def test_iloci_plugins_and_iloci_robots_list_the_registry_robots(capsys):
         assert (r["source"], r["joints"], r["plane"]) == (
             robots[name]["distribution"], robots[name]["facts"]["joints"],
             robots[name]["facts"]["plane"])
+
+
+def test_config_check_looks_the_robot_preset_up_in_the_registry():
+    from iloci.config import check_installed, load_config
+    from iloci.errors import MissingBackendError, PluginNotLoadedError, UnknownComponentError
+    from iloci.interfaces import KINDS
+    from iloci.plugins import get_plugin_manager, get_registry
+
+    def config(robot):  # the components stand supplied: only the robot is looked up
+        return load_config({"robot": robot}, supplied=KINDS)
+
+    # iloci-robots blocked where it is installed, absent elsewhere
+    registry = get_registry(get_plugin_manager(block=["robots"]))
+    with pytest.raises(UnknownComponentError, match=r"\[robot\] name: unknown robot "
+                       r"'nao-v32-rigt-arm'.* Did you mean 'nao-v32-right-arm'\?"):
+        check_installed(config({"name": "nao-v32-rigt-arm"}), registry)
+    # a first-party preset whose plugin is not loaded: what to install or unblock
+    with pytest.raises((MissingBackendError, PluginNotLoadedError), match="iloci-robots"):
+        check_installed(config({"name": "panda"}), registry)
+    # a URDF of one's own needs no preset
+    check_installed(config({"name": "panda", "urdf": str(get_robot().urdf_path),
+                            "tip_frame": "r_pen_tip"}), registry)

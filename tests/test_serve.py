@@ -25,7 +25,7 @@ from iloci.commands.serve import build_classroom  # noqa: E402
 from iloci.data import load_lasa  # noqa: E402
 from iloci.web.app import MAX_BODY, MAX_POINTS, STATIC, TOKEN_HEADER, create_app  # noqa: E402
 
-from conftest import small_config  # noqa: E402
+from conftest import agent_state, assert_same_state, small_config  # noqa: E402
 
 
 
@@ -403,6 +403,82 @@ def test_each_client_has_its_own_turn(served, lasa):
     assert judge(client, a2, 1).status_code == 409
 
 
+def test_another_tabs_undo_start_over_or_import_keeps_this_tabs_guess(served, lasa, tmp_path):
+    """Tab A's guess waits while tab B undoes, starts over or imports: A's answer is
+    not refused with a wrong reason; A's drawing is looked at again and A is told why."""
+    client, classroom, memory = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"]), "client": "b"})
+    a = client.post("/api/observe", json={"points": stroke(lasa["GShape/1"]),
+                                          "client": "a"}).json()["answer"]
+    exported = memory.read_bytes()
+    for path, body in [("/api/undo", {}), ("/api/reset", {}), ("/api/import", exported)]:
+        if path == "/api/import":
+            r = client.post(path, content=body,
+                            headers={"Content-Type": "application/octet-stream"})
+        else:
+            r = client.post(path, json=body)
+        assert r.status_code == 200, (path, r.text)
+        out = judge(client, a, 1)
+        assert out.status_code == 200, (path, out.text)
+        out = out.json()
+        assert "looked at your drawing again" in out["notice"], path
+        if "answer" not in out:               # an empty memory: the drawing founds c1
+            assert out["outcome"]["action"] == "new_concept"
+            fresh = lasa[f"GShape/{3 + len(path) % 3}"]        # not the drawing just learned
+            r = client.post("/api/observe", json={"points": stroke(fresh),
+                                                  "client": "a"}).json()
+            assert "answer" in r, (path, r.get("outcome"), r.get("error"))
+            a = r["answer"]
+        else:
+            a = out["answer"]
+    # a guess that no longer waits says why
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/2"]), "client": "a"})
+    r = judge(client, a, 1)
+    assert r.status_code == 409 and "this tab drew something newer" in r.json()["error"]
+    b = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"]),
+                                          "client": "b"}).json()["answer"]
+    assert judge(client, b, "new").status_code == 200
+    r = judge(client, b, "new")
+    assert r.status_code == 409 and "answered already" in r.json()["error"]
+
+
+def test_names_ports_origins_and_routes_are_checked_strictly(served, lasa):
+    client, classroom, memory = served
+    for host in ("[::1]:8000", "LOCALHOST:8000", "127.0.0.1:9000", "localhost"):
+        assert client.get("/api/state", headers={"host": host}).status_code == 200, host
+    for host in ("[::1]evil.test:8000", "127.0.0.1:8000 evil", "127.0.0.1:evil",
+                 "localhost.:8000", "evil.test:8000", "127.0.0.1:8000:1", ""):
+        r = client.get("/api/state", headers={"host": host})
+        assert r.status_code == 403 and "--allow-host" in r.json()["error"], host
+    # the origin's scheme counts: the server speaks http
+    r = client.post("/api/rename", json={"concept": "c1", "name": "x"},
+                    headers={"origin": "https://127.0.0.1:8000"})
+    assert r.status_code == 403 and "another page" in r.json()["error"]
+    # routes and methods that do not exist answer JSON with a message
+    r = client.put("/api/rename", json={})
+    assert r.status_code == 405 and "takes POST" in r.json()["error"]
+    r = client.get("/api/nothing")
+    assert r.status_code == 404 and "nothing at /api/nothing" in r.json()["error"]
+
+
+def test_errors_are_in_a_persons_words(served, lasa):
+    client, classroom, memory = served
+    r = client.post("/api/recognize", json={"points": stroke(lasa["GShape/0"])})
+    assert r.status_code == 409
+    assert "teach it a first drawing (Teach mode)" in r.json()["error"]
+    assert "Agent.learn" not in r.json()["error"]
+    r = client.post("/api/import", content=b"PK\x03\x04" + bytes(100),
+                    headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code == 422 and "not imported" in r.json()["error"]
+    assert "upload.npz" not in r.json()["error"] and "/tmp" not in r.json()["error"]
+    r = client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])},
+                    headers={TOKEN_HEADER: "a token of an earlier start"})
+    assert r.status_code == 403 and "Reload the page" in r.json()["error"]
+    assert client.get("/api/state").json()["memory"]["saved"] is False
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+    assert client.get("/api/state").json()["memory"]["saved"] is True
+
+
 def test_something_new_founds_a_concept_in_one_click(served, lasa):
     client, _, _ = served
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
@@ -414,35 +490,21 @@ def test_something_new_founds_a_concept_in_one_click(served, lasa):
 
 
 # -- a person's controls -----------------------------------------------------------------
-def _state(agent):
-    arrays, meta = agent.memory.to_arrays()
-    return arrays, meta, agent.perceptual_model.state()
-
-
-def _same(s1, s2):
-    (a1, m1, n1), (a2, m2, n2) = s1, s2
-    assert m1 == m2 and a1.keys() == a2.keys() and n1.keys() == n2.keys()
-    for k in a1:
-        np.testing.assert_array_equal(a1[k], a2[k])
-    for k in n1:
-        np.testing.assert_array_equal(n1[k], n2[k])
-
-
 def test_undo_puts_memory_and_network_back_exactly(served, lasa):
     client, classroom, memory = served
     assert client.post("/api/undo", json={}).status_code == 409       # nothing yet
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
-    before, file_before = _state(classroom.agent), memory.read_bytes()
+    before, file_before = agent_state(classroom.agent), memory.read_bytes()
     a = client.post("/api/observe", json={"points": stroke(lasa["GShape/1"])}).json()["answer"]
     out = judge(client, a, 1).json()
     assert out["memory"]["undo"].startswith("drawing")
     with pytest.raises(AssertionError):
-        _same(before, _state(classroom.agent))                       # the step changed it
+        assert_same_state(before, agent_state(classroom.agent))       # the step changed it
     r = client.post("/api/undo", json={})
     assert r.status_code == 200, r.text
-    _same(before, _state(classroom.agent))
+    assert_same_state(before, agent_state(classroom.agent))
     saved = iloci.Agent.load(memory)
-    _same(before, _state(saved))
+    assert_same_state(before, agent_state(saved))
     assert memory.read_bytes() != b"" and len(memory.read_bytes()) == len(file_before)
     # forget, rename, start over: each undone the same way
     for path, body in [("/api/rename", {"concept": "c1", "name": "G"}),
@@ -450,7 +512,7 @@ def test_undo_puts_memory_and_network_back_exactly(served, lasa):
         r = client.post(path, json=body)
         assert r.status_code == 200, (path, r.text)
         client.post("/api/undo", json={})
-        _same(before, _state(classroom.agent))
+        assert_same_state(before, agent_state(classroom.agent))
 
 
 def test_forget_an_entry_and_a_concept(served, lasa):
@@ -488,7 +550,7 @@ def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
                            headers={"content-type": "application/octet-stream"})
             assert r.status_code == 200, r.text
             assert [c["name"] for c in r.json()["memory"]["concepts"]] == ["c1"]
-            _same(_state(classroom.agent), _state(fresh.agent))
+            assert_same_state(agent_state(classroom.agent), agent_state(fresh.agent))
             assert iloci.Agent.load(tmp_path / "fresh.npz").memory.concepts() == ["c1"]
             assert other.post("/api/undo", json={}).json()["memory"]["concepts"] == []
     finally:

@@ -207,6 +207,34 @@ def test_a_demonstration_taught_twice_is_learned_once(lasa, tmp_path):
     assert agent.memory.demonstrations_seen == counts[1] + 1
 
 
+def test_the_same_stroke_sent_again_in_float32_or_restamped_is_learned_once(lasa):
+    """What a stack sends again is rarely bit for bit the same: a transport in float32
+    (ROS's Point32), new time stamps (a replay), float noise far below float32's
+    precision. Each is the same demonstration (same key): learned once."""
+    agent = make_agent()
+    agent.teach([lasa[k] for k in ("GShape/0", "Angle/0")])
+    counts, net = counters(agent), state(agent)
+    g = lasa["GShape/0"]
+    variants = [g.positions.astype(np.float32).astype(np.float64),
+                g.positions, g.positions]
+    times = [g.times, g.times + 1.7e9, g.times * 1.5]
+    for pos, t in zip(variants, times):
+        again = iloci.Demonstration(pos, times=t, shape="GShape", index=0,
+                                    true_concept="GShape")
+        assert agent.learn(again).action == "already_learned"
+    noisy = iloci.Demonstration(np.nextafter(g.positions, np.inf), times=g.times,
+                                shape="GShape", index=0,     # one float64 step away
+                                true_concept="GShape")
+    assert agent.learn(noisy).action == "already_learned"
+    assert counters(agent) == counts and same_state(state(agent), net)
+    assert sum(e.sources.count("GShape/0") for e in agent.memory.entries) == 1
+    # a memory saved with the earlier digest (key, positions and times bit for bit)
+    from iloci.concepts.entry import _digest_v1
+    old = agent.memory.copy()
+    old.learned = {_digest_v1(lasa[k]) for k in ("GShape/0", "Angle/0")}
+    assert old.learned_concept(lasa["Angle/0"]) == agent.memory.learned_concept(lasa["Angle/0"])
+
+
 def test_the_first_demonstration_ends_its_turn_at_once(lasa):
     agent = make_agent()
     phases = []

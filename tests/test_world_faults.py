@@ -238,6 +238,31 @@ def test_beyond_the_maximum_a_stroke_is_refused_before_any_work(tmp_path, monkey
         load_trajectory(f)
 
 
+
+def test_a_big_or_pickled_npy_and_deep_json_or_toml_are_refused_before_reading(
+        tmp_path, monkeypatch):
+    import iloci.validation as validation
+    from iloci.config import ConfigError, read_config_file
+    from iloci.data import load_trajectory
+    from iloci.data.datasets import load_dataset
+    from iloci.errors import InvalidDemonstrationError
+
+    monkeypatch.setattr(validation, "MAX_POINTS", 500)
+    np.save(tmp_path / "long.npy", _stroke(600))
+    with pytest.raises(InvalidDemonstrationError, match=r"long.npy \(a \(600, 2\) array\) has "
+                       "600 samples; iloci reads at most 500"):
+        load_trajectory(tmp_path / "long.npy")
+    monkeypatch.undo()
+    np.save(tmp_path / "obj.npy", np.array([{"x": 1}], dtype=object), allow_pickle=True)
+    with pytest.raises(InvalidInputError, match="obj.npy' is refused: it holds pickled"):
+        load_trajectory(tmp_path / "obj.npy")
+    (tmp_path / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(InvalidInputError, match="deep.json: its JSON is nested too deeply"):
+        load_dataset(tmp_path / "deep.json")
+    (tmp_path / "deep.toml").write_text("a = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(ConfigError, match="nested too deeply"):
+        read_config_file(tmp_path / "deep.toml")
+
 def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypatch):
     import iloci.data.csvfile as csvfile
     from iloci.data import load_trajectory
@@ -618,3 +643,15 @@ def test_an_installed_plugin_that_raises_is_named_with_what_to_do(tmp_path, cli)
             "ValueError: no room" in out.stderr and "ILOCI_BLOCK_PLUGINS=loud" in out.stderr)
     out = cli("plugins", env={**env, "ILOCI_BLOCK_PLUGINS": "loud"})
     assert out.returncode == 0, out.stderr
+
+
+def test_links_without_inertials_are_said_once_by_pybullet(tmp_path):
+    """PyBullet accepts them (1 kg each): one warning naming the links."""
+    pytest.importorskip("iloci_pybullet")
+    from iloci.plugins import get_registry
+
+    robot = describe_robot(_arm(tmp_path / "arm.urdf", mass=""), tip_frame="pen")
+    with pytest.warns(UserWarning, match=r"'a', 'b', 'c' move with a joint but have no "
+                      r"<inertial>; PyBullet gives each 1 kg"):
+        sim = get_registry().build("simulator", "pybullet", robot=robot)
+    sim.close()

@@ -23,7 +23,7 @@ import pluggy
 from iloci.concepts.memory import Memory
 from iloci.concepts.perform import ik_joint_limits
 from iloci.config import Config
-from iloci.errors import InvalidInputError, NotFittedError
+from iloci.errors import InvalidInputError, NotFittedError, ProgressCallbackWarning
 from iloci.interfaces import COMPONENT_KINDS, Demonstration
 from iloci.registry import Registry
 from iloci.sensorimotor.encoding import SensorimotorEncoder
@@ -113,7 +113,6 @@ class AgentBase:
             except Exception as exc:
                 import warnings
 
-                from iloci.errors import ProgressCallbackWarning
                 warnings.warn(ProgressCallbackWarning(
                     f"agent.on_progress raised {type(exc).__name__}: {exc} (at the "
                     f"{getattr(progress, 'phase', '?')!r} phase); the report was dropped and the "

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from iloci.agent import size_network
 from iloci.config import check_installed, load_config, to_toml
+from iloci.sensorimotor.robots import check_robot
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,8 +28,6 @@ def run_show(args: argparse.Namespace) -> int:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from iloci.agent import size_network
-    from iloci.sensorimotor.robots import check_robot
     cfg = load_config(args.file)
     check_installed(cfg)
     size_network(cfg, check_robot(cfg.robot, cfg.simulator.name))

@@ -14,7 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from iloci.concepts.memory import load_memory
+from iloci.data.files import writable_file
 from iloci.errors import InvalidInputError
+from iloci.plugins import get_registry
 
 __all__ = ["register", "run"]
 
@@ -65,10 +68,9 @@ def _simulator_name(args: argparse.Namespace, saved: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.concepts.memory import load_memory
+    # drawing imports the learner, hence scipy: loaded when the command runs
     from iloci.drawing import (draw, gif_frames, load_drawing_parts, resolve_concept,
                                saved_section, write_gif, write_png)
-    from iloci.plugins import get_registry
 
     width, height = _parse_size(args.size)
     out = Path(args.out)
@@ -78,7 +80,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.gif and suffix != ".png":
         raise InvalidInputError(f"--out must be a .png file (or use --gif with a .gif), got "
                                 f"{out}.")
-    from iloci.data.files import writable_file
     writable_file(out, "--out")
     loaded = load_memory(args.memory)
     header = loaded[2]

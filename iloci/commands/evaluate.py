@@ -5,9 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from iloci.config import load_config
+from iloci.data.datasets import check_protocol, load_dataset
+from iloci.data.files import writable_dir
+
 
 def _jobs(args: argparse.Namespace, config) -> str:
     """The folds run at once, as evaluate() will resolve them, for the banner."""
+    # the evaluation's modules are loaded when a command runs, not on every `iloci` start
     from iloci.evaluation.evaluate import default_jobs
     if args.jobs is not None:
         return str(args.jobs)
@@ -61,7 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.config import load_config
+    # the evaluation's modules and rich: loaded when the command runs, not on every `iloci` start
     from iloci.evaluation.evaluate import evaluate
     from iloci.evaluation.report import check_report_extras, headline, write_outputs
     from iloci.display import FoldProgress
@@ -83,7 +88,6 @@ def run(args: argparse.Namespace) -> int:
     # fail now, not after the first fold: the report's libraries, a writable --out
     check_report_extras(baseline=not args.no_baseline
                         and config.evaluation.protocol != "stream")
-    from iloci.data.files import writable_dir
     writable_dir(args.out, "--out")
     if args.memories:
         writable_dir(args.memories, "--memories")
@@ -91,7 +95,6 @@ def run(args: argparse.Namespace) -> int:
         return _run_stream(args, config)
     if config.data.path and config.evaluation.protocol == "folds":
         # read and checked before anything runs (evaluate() checks again, cheaply)
-        from iloci.data.datasets import check_protocol, load_dataset
         dataset = load_dataset(config.data.path)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
@@ -127,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
     report = write_outputs(args.out, metrics, results)
     print(headline(metrics))
     if metrics.get("robustness"):
+        # loaded when the command runs (see run's imports)
         from iloci.evaluation.report import robustness_table
         print("\n" + "\n".join(robustness_table(metrics["robustness"])))
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
@@ -134,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_stream(args: argparse.Namespace, config) -> int:
+    # loaded when the command runs (see run's imports)
     from iloci.evaluation.report import stream_headline, write_stream_outputs
     from iloci.evaluation.stream import run_stream
 

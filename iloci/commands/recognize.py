@@ -6,6 +6,10 @@ import argparse
 import json
 import sys
 
+from iloci.agent import Agent
+from iloci.data.files import TrajectoryFile
+from iloci.data.streams import resolve_demos, shared_stem_notes
+
 __all__ = ["register", "run"]
 
 
@@ -25,10 +29,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.agent import Agent
-    from iloci.data.files import TrajectoryFile
-    from iloci.data.streams import resolve_demos, shared_stem_notes
-
     # recognition never clusters nor asks a teacher: their plugins need not be installed
     agent = Agent.load(args.memory, purpose="recognize")
     items = resolve_demos(args.files)

@@ -14,6 +14,11 @@ import json
 
 import numpy as np
 
+from iloci.config import load_config
+from iloci.errors import MissingBackendError
+from iloci.plugins import get_plugin_manager, get_registry
+from iloci.sensorimotor.robots import check_robot, robot_and_ik
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("robots", help="list the robots available (presets) or describe one",
@@ -28,9 +33,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.errors import MissingBackendError
-    from iloci.plugins import get_registry
-
     if args.show is None:
         registry = get_registry()
         rows = []
@@ -82,9 +84,6 @@ def run(args: argparse.Namespace) -> int:
 
 def describe(name: str | None, config: str | None) -> dict:
     """The description of robot ``name`` (or the config's), its plane placed."""
-    from iloci.config import load_config
-    from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import check_robot, robot_and_ik
 
     pm = get_plugin_manager()
     registry = get_registry(pm)

@@ -13,8 +13,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from iloci.agent import Agent, build
 from iloci.commands.teach import DEFAULT_MEMORY, PAGE, add_protocol_argument, command_config
+from iloci.concepts.memory import load_memory
+from iloci.data.writes import check_memory_path
 from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.progress import acquire_memory_lock
+from iloci.worker import WorkerError
 
 __all__ = ["register", "run", "build_classroom"]
 
@@ -66,8 +71,6 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
         the memory, under this name or another (a hard link); its holder
         is named.
     """
-    from iloci.data.writes import check_memory_path
-    from iloci.progress import acquire_memory_lock
     check_memory_path(memory)               # a loop, a directory, a folder that takes no file
     release = acquire_memory_lock(memory, "iloci serve") if lock else None
     try:
@@ -81,8 +84,7 @@ def build_classroom(memory: str | Path, config: Any = None, *, worker: bool = Tr
 
 
 def _build(memory: str | Path, config: Any, worker: bool, protocol: str):
-    from iloci.agent import Agent, build
-    from iloci.concepts.memory import load_memory
+    # the web page needs the serve extra (starlette): loaded when the command runs
     from iloci.web.app import Classroom
 
     path = Path(memory)
@@ -99,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         import uvicorn
 
+        # the web page needs the serve extra (starlette): loaded when the command runs
         from iloci.web.app import create_app
         from iloci.web.connections import uvicorn_options
     except ImportError as exc:
@@ -142,7 +145,6 @@ def _stop_worker(classroom: Any) -> None:
     network cannot be copied back then, and nothing is lost, since the
     memory file was saved after every change.
     """
-    from iloci.worker import WorkerError
     try:
         classroom.agent.close()
     except WorkerError:

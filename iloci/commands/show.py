@@ -16,8 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from iloci.data.files import write_atomic
+from iloci.concepts.memory import load_memory
+from iloci.config import load_config
+from iloci.data.files import writable_file, write_atomic
+from iloci.data.lasa import DEMOS_PER_SHAPE
+from iloci.data.streams import resolve_demo
 from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.plugins import get_plugin_manager, get_registry
+from iloci.sensorimotor.pipeline import to_motion
+from iloci.sensorimotor.robots import get_robot, robot_and_ik
 
 __all__ = ["plot_motion", "register", "run"]
 
@@ -45,8 +52,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _load_demo(token: str, demo: int | None):
     """The demonstration ``SHAPE/INDEX``, ``SHAPE`` with ``--demo`` (default 0), or a file."""
-    from iloci.data.lasa import DEMOS_PER_SHAPE
-    from iloci.data.streams import resolve_demo
 
     if demo is None:
         return resolve_demo(token)
@@ -64,9 +69,6 @@ def _load_demo(token: str, demo: int | None):
 
 def _components(config_file: str | None):
     """The configured IK solver, sensorimotor settings and robot (plane placed)."""
-    from iloci.config import load_config
-    from iloci.plugins import get_plugin_manager, get_registry
-    from iloci.sensorimotor.robots import robot_and_ik
 
     pm = get_plugin_manager()
     registry = get_registry(pm)
@@ -77,12 +79,8 @@ def _components(config_file: str | None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.sensorimotor.pipeline import to_motion
-
     if Path(args.shape).suffix.lower() == ".npz":
         return _show_memory(args)
-
-    from iloci.data.files import writable_file
 
     demo = _load_demo(args.shape, args.demo)
     out = writable_file(args.out if args.out else f"{demo.shape}-{demo.index}.png", "--out")
@@ -101,8 +99,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _show_memory(args: argparse.Namespace) -> int:
-    from iloci.concepts.memory import load_memory
-
     if args.demo is not None or args.out or args.config:
         raise InvalidInputError("--demo, --out and --config apply to a demonstration, not to "
                                 f"a memory file ({args.shape}).")
@@ -143,8 +139,6 @@ def plot_motion(demo, motion, reached: np.ndarray, robot: Any, out: str | Path) 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
-
-    from iloci.sensorimotor.robots import get_robot
 
     if isinstance(robot, str):
         robot = get_robot(robot)

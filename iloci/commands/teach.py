@@ -19,6 +19,16 @@ import sys
 from typing import Any
 import warnings
 
+from iloci.agent import Agent, SkippedDemonstrationWarning, build
+from iloci.concepts.memory import load_memory
+from iloci.config import load_config
+from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
+from iloci.data.writes import check_memory_path
+from iloci.errors import IlociError, MemoryFileError
+from iloci.interfaces import Demonstration
+from iloci.progress import (PROGRESS_KEY, item_digest, progress_record,
+                            resume_point, teaching_lock, why_not_saved)
+
 __all__ = ["register", "run"]
 
 #: Memory file used when ``--memory`` is not given.
@@ -32,8 +42,9 @@ DEFAULT_MEMORY = "iloci-memory.npz"
 #: CCR as the paper's protocol on the same folds, 1.88 instead of 7.14
 #: feedbacks per demonstration; with a teacher wrong 10 % of the time 99.2 %
 #: instead of 52.5 %) and row ``untaught`` (91 % of never-taught shapes
-#: answered unknown, 1.8 % of taught ones). ``iloci evaluate`` keeps the
-#: paper's protocol (the config's own defaults).
+#: answered unknown, 1.8 % of taught ones, with the familiarity of then,
+#: ``"reproduction"``; the default ``"path"``: benchmarks/familiarity.py).
+#: ``iloci evaluate`` keeps the paper's protocol (the config's own defaults).
 INTERACTIVE = {"novelty_below": 0.8, "novelty_after": 2, "confirm_rewards": True,
                "confirm_new_exemplars": True, "confirm_twice_after_novelty": True,
                "unknown_below": 0.8}
@@ -67,7 +78,6 @@ def command_config(config: Any, header: dict | None, protocol: str = "interactiv
     keys ``--config`` does not set (a memory's saved config is used as saved:
     it is what the memory was taught with).
     """
-    from iloci.config import load_config
     if config:
         cfg = load_config(config)
         if isinstance(config, Mapping):
@@ -121,7 +131,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--again", action="store_true",
                    help="go through every demonstration given, not only those after where an "
                         "interrupted earlier run of the same stream stopped; one the memory "
-                        "already learned (same key and samples) is not learned again")
+                        "already learned (same key and pen positions) is not learned again")
     p.set_defaults(func=run)
 
 
@@ -133,9 +143,8 @@ def _show_earlier(agent, items) -> None:
     One that cannot be read or has no concept the teacher knows is left out
     (it was skipped or refused when it was taught).
     """
+    # the learner imports scipy: loaded when the command runs
     from iloci.concepts.learner import show_to_teacher
-    from iloci.errors import IlociError
-    from iloci.interfaces import Demonstration
     for item in items:
         try:
             demo = item.load() if hasattr(item, "load") else item
@@ -168,20 +177,14 @@ def _describe(outcome) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from iloci.data.writes import check_memory_path
-    from iloci.progress import teaching_lock
-
     memory_path = check_memory_path(args.memory)  # before anything is learned
     with teaching_lock(memory_path):
         return _teach(args, memory_path)
 
 
 def _teach(args: argparse.Namespace, memory_path: Path) -> int:
-    from iloci.agent import Agent, SkippedDemonstrationWarning, build
-    from iloci.concepts.memory import load_memory
-    from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
+    # rich: loaded when the command runs
     from iloci.display import Bars
-    from iloci.progress import PROGRESS_KEY, item_digest, progress_record, resume_point
 
     header = load_memory(memory_path)[2] if memory_path.exists() else None
     cfg = command_config(args.config, header, getattr(args, "protocol", "interactive"))
@@ -231,8 +234,6 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
         try:
             agent.save(memory_path, extra={PROGRESS_KEY: progress_record(digests, position[0])})
         except OSError as exc:
-            from iloci.errors import MemoryFileError
-            from iloci.progress import why_not_saved
             before = "no memory yet" if not memory_path.exists() else \
                 "the memory as it was before it"
             raise MemoryFileError(
@@ -260,7 +261,7 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     known = report.already_learned
     learned = len(report.outcomes) - len(known)
     if known:
-        print(f"already learned, not learned again (the same key and samples): "
+        print(f"already learned, not learned again (the same key and pen positions): "
               f"{', '.join(known)}")
     print(f"learned {learned} demonstration(s) in {report.seconds:.1f} s, "
           + (f"{len(known)} already learned, " if known else "")

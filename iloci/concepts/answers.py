@@ -37,7 +37,7 @@ class LearnOutcome:
     action : str
         The final action: ``"strengthen"``, ``"new_exemplar"`` or
         ``"new_concept"``; ``"already_learned"`` when this very
-        demonstration (the same key and samples,
+        demonstration (the same key and pen positions,
         :func:`~iloci.concepts.memory.demonstration_digest`) was learned
         before: nothing was asked and the memory is unchanged.
     feedbacks : tuple of int

@@ -136,12 +136,35 @@ def entries_equal(a: Iterable[Entry], b: Iterable[Entry]) -> bool:
 def demonstration_digest(demo: Any) -> str:
     """What makes two demonstrations "the same" for idempotent teaching (hex, 32 digits).
 
-    SHA-256 of the demonstration's key (``"SHAPE/INDEX"``), its positions
-    and its time stamps (float64, bit for bit), first 128 bits. Nothing
-    else counts: not the true concept, not where the samples came from. A
-    demonstration with the same key but any sample changed is another
-    demonstration; the same samples under another key are too.
+    SHA-256 of the demonstration's key (``"SHAPE/INDEX"``) and its pen
+    positions rounded to float32 (about 7 significant digits), first 128
+    bits. The same key with the same positions is the same demonstration
+    when it comes again:
+
+    - carried in float32 on the way (ROS's ``geometry_msgs/Point32``) or
+      with float noise far below float32's precision (noise can still move
+      a value across a float32 rounding step, rarely: then it is another
+      demonstration);
+    - with other time stamps: a replay is stamped anew (a ROS header, a
+      logger's clock), and the default path reading (``resample =
+      "arc_length"``) does not read them.
+
+    Nothing else counts: not the true concept, not where the samples came
+    from. The same key with any position changed beyond float32 precision
+    is another demonstration; the same positions under another key are too.
+    (Memories saved before this definition hold :func:`_digest_v1` digests:
+    :meth:`Memory.learned_concept <iloci.concepts.memory.Memory.learned_concept>`
+    knows both.)
     """
+    h = hashlib.sha256(b"iloci-demonstration-v2\0" + demo.key.encode("utf-8", "surrogatepass")
+                        + b"\0")
+    h.update(np.ascontiguousarray(demo.positions, dtype=np.float64)
+             .astype(np.float32).tobytes())
+    return h.hexdigest()[:32]
+
+
+def _digest_v1(demo: Any) -> str:
+    """The digest of iloci before float32 positions: key, positions and times bit for bit."""
     h = hashlib.sha256(b"iloci-demonstration-v1\0" + demo.key.encode("utf-8", "surrogatepass")
                         + b"\0")
     h.update(np.ascontiguousarray(demo.positions, dtype=np.float64).tobytes())

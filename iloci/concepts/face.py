@@ -40,6 +40,14 @@ class LearnerFace(Protocol):
                                patterns: Sequence[np.ndarray] | None = None
                                ) -> np.ndarray: ...
 
+    def familiarity_scale(self, patterns: Sequence[np.ndarray] | None = None) -> float: ...
+
+    def familiarities(self, sequences: Sequence[np.ndarray], scale: float, *,
+                      patterns: Sequence[np.ndarray] | None = None,
+                      regeneration: np.ndarray | None = None,
+                      reproduction: np.ndarray | None = None,
+                      pb_obs: np.ndarray | None = None) -> np.ndarray: ...
+
     def respond(self, index: int, attempt: int = 1,
                 frame: TeacherFrame | None = None) -> Response: ...
 

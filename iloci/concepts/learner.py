@@ -30,8 +30,9 @@ from scipy.spatial.distance import cdist
 from iloci.concepts import rehearsal
 from iloci.concepts.answers import ACTIONS, Answer, LearnOutcome
 from iloci.concepts.inference import (TILT_MARGIN, Recognition, confidence, familiarity,
-                                      novelty_scale, pattern_distances,
-                                      regenerated_patterns, regeneration_scale)
+                                      novelty_scale, path_distances, path_scale,
+                                      pattern_distances, regenerated_patterns,
+                                      regeneration_scale)
 from iloci.concepts.memory import Entry, Memory
 from iloci.concepts.perform import ik_joint_limits, perform, perform_novel
 from iloci.concepts.policies import Policies
@@ -428,8 +429,12 @@ class Learner:
             With ``tilt``, the angle of the reading recognized.
         """
         # the memory's calibration, once for the readings as drawn and turned
-        scale = novelty_scale(self.model, self.memory)
-        out = self._recognize(sequences, keys, scale)
+        policies = self.policies
+        patterns = (regenerated_patterns(self.model, self.memory)
+                    if policies.rank_by_regeneration or policies.familiar_by_regeneration
+                    or policies.familiar_by_path else None)
+        scale = self.familiarity_scale(patterns)
+        out = self._recognize(sequences, keys, scale, patterns)
         if tilted is None or not self.policies.inference.tilts:
             return out
         ask = [b for b, r in enumerate(out) if r.distance > self.policies.inference.tilt_beyond]
@@ -452,15 +457,69 @@ class Learner:
         if not chosen:
             return out
         recs = self._recognize([turned[j] for j in chosen],
-                               [out[owners[j][0]].demo for j in chosen], scale)
+                               [out[owners[j][0]].demo for j in chosen], scale, patterns)
         for j, r in zip(chosen, recs):
             out[owners[j][0]] = replace(r, tilt=owners[j][1])
         return out
 
+    def familiarity_scale(self, patterns: Sequence[np.ndarray] | None = None) -> float:
+        """The memory's own scale of what ``[learner] familiarity`` measures.
+
+        :func:`~iloci.concepts.inference.path_scale` (``"path"``),
+        :func:`~iloci.concepts.inference.regeneration_scale`
+        (``"regeneration"``) or :func:`~iloci.concepts.inference.novelty_scale`
+        (``"reproduction"``, ``"prediction"``); ``patterns``: the memory's
+        :func:`~iloci.concepts.inference.regenerated_patterns` when already
+        computed. NaN with fewer than two concepts.
+        """
+        policies = self.policies
+        if policies.familiar_by_path or policies.familiar_by_regeneration:
+            pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
+            labels = self.memory.concept_labels
+            return (path_scale(pats, labels) if policies.familiar_by_path
+                    else regeneration_scale(pats, labels, policies.warp, policies.compare))
+        return novelty_scale(self.model, self.memory)
+
+    def familiarities(self, sequences: Sequence[np.ndarray], scale: float, *,
+                      patterns: Sequence[np.ndarray] | None = None,
+                      regeneration: np.ndarray | None = None,
+                      reproduction: np.ndarray | None = None,
+                      pb_obs: np.ndarray | None = None) -> np.ndarray:
+        """Each sequence's familiarity by ``[learner] familiarity``, shape (B,).
+
+        :func:`~iloci.concepts.inference.familiarity` on ``scale``
+        (:meth:`familiarity_scale`) of: the lowest
+        :func:`~iloci.concepts.inference.path_distances` (``"path"``), the
+        lowest :meth:`regeneration_distances` (``"regeneration"``), the
+        lowest :meth:`entry_errors` (``"reproduction"``) or the prediction
+        error from PB_obs (``"prediction"``). What the caller already
+        computed is passed in (``patterns``; ``regeneration``,
+        ``reproduction``: (B, M) distances / errors; ``pb_obs``: (B, P)).
+        """
+        seqs = list(sequences)
+        policies = self.policies
+        if policies.familiar_by_path or policies.familiar_by_regeneration:
+            pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
+            if policies.familiar_by_path:
+                nearest = path_distances(seqs, pats).min(axis=1)
+            else:
+                d = (self.regeneration_distances(seqs, pats) if regeneration is None
+                     else regeneration)
+                nearest = d.min(axis=1)
+        elif policies.familiar_by_reproduction:
+            nearest = (self.entry_errors(seqs) if reproduction is None
+                       else reproduction).min(axis=1)
+        else:
+            pbs = self.recognize_pbs(seqs) if pb_obs is None else pb_obs
+            nearest = np.asarray(self.model.prediction_error(seqs, pbs), dtype=np.float64)
+        return familiarity(nearest, scale)
+
     def _recognize(self, sequences: Sequence[np.ndarray], keys: Sequence[str] | None,
-                   scale: float) -> list[Recognition]:
+                   scale: float, patterns: Sequence[np.ndarray] | None = None
+                   ) -> list[Recognition]:
         """:meth:`recognize` of each sequence as given (no tilt search);
-        ``scale``: :func:`novelty_scale` of the memory."""
+        ``scale``: :meth:`familiarity_scale` of the memory, ``patterns`` its
+        regenerated patterns (when the policies use them)."""
         seqs = list(sequences)
         keys = list(keys) if keys is not None else [f"#{i}" for i in range(len(seqs))]
         if not seqs:
@@ -476,25 +535,24 @@ class Learner:
         entry_errors = (self.entry_errors(seqs) if policies.rank_by_reproduction
                         or (below > 0 and reproduction) else None)
         regen = None
-        if policies.rank_by_regeneration or policies.familiar_by_regeneration:
-            patterns = regenerated_patterns(self.model, self.memory)
+        if policies.rank_by_regeneration:
+            if patterns is None:
+                patterns = regenerated_patterns(self.model, self.memory)
             regen = self.regeneration_distances(seqs, patterns)
-            if policies.familiar_by_regeneration:
-                scale = regeneration_scale(patterns, labels, policies.warp, policies.compare)
         ranking = (entry_errors if policies.rank_by_reproduction
                    else regen if policies.rank_by_regeneration else dist)
         nearest, conf = confidence(dist if ranking is None else ranking, labels)
-        # "unknown" asks whether anything the robot knows reproduces the
-        # demonstration (its best entry's error), on the scale at which one
-        # known concept reproduces its neighbour (novelty_scale): the same
-        # quantity on both sides. PB_obs's own error measures how well the
-        # network reproduces it with a free PB, which generalises to shapes
-        # it never learned.
+        # "unknown" asks whether the demonstration is like anything the robot
+        # knows (by default: the form of its pen path against the forms the
+        # network regenerates from its entries), on the scale at which two
+        # known concepts lie apart: the same quantity on both sides.
         rep = (entry_errors.min(axis=1) if entry_errors is not None
                else np.full(len(seqs), np.nan))
-        if regen is not None and policies.familiar_by_regeneration:
-            fam = familiarity(regen.min(axis=1), scale)
+        if policies.familiar_by_path or policies.familiar_by_regeneration:
+            fam = self.familiarities(seqs, scale, patterns=patterns, regeneration=regen)
         else:
+            # the reproduction errors are a closed-loop run per (drawing,
+            # entry): taken only when "unknown" is asked; else the PB_obs error
             fam = familiarity(rep if entry_errors is not None and reproduction else errors,
                               scale)
         out = []

@@ -21,7 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from iloci.concepts.entry import Entry, _pattern, _stack, demonstration_digest, entries_equal
+from iloci._version import __version__, is_newer
+from iloci.concepts.entry import (Entry, _digest_v1, _pattern, _stack, demonstration_digest,
+                                  entries_equal)
 from iloci.concepts.storage import FORMAT, FORMAT_VERSION, read_memory_file, write_memory_file
 from iloci.errors import InvalidInputError, MemoryFileError
 from iloci.sensorimotor.encoding import SensorimotorEncoder
@@ -48,7 +50,7 @@ class Memory:
         learning stream).
     learned : set of str
         :func:`demonstration_digest` of every demonstration learned from:
-        one shown again (the same key and the same samples) is recognized
+        one shown again (the same key and pen positions) is recognized
         and not learned twice (:meth:`learned_concept`). Saved with the
         memory; a file written before it was kept has none.
     revision : int
@@ -223,12 +225,14 @@ class Memory:
     def learned_concept(self, demo: Any) -> str | None:
         """The concept ``demo`` was learned into, if this very demonstration was learned.
 
-        "This very demonstration": the same key and the same samples
-        (:func:`demonstration_digest`); one with the same key but other
-        samples is another demonstration. ``None`` when it was not learned
+        "This very demonstration": the same key and the same pen positions
+        to float32 precision (:func:`demonstration_digest`; time stamps do
+        not count); one with the same key but other positions is another
+        demonstration. ``None`` when it was not learned
         (or the entry that stood for it is gone).
         """
-        if demonstration_digest(demo) not in self.learned:
+        if demonstration_digest(demo) not in self.learned \
+                and _digest_v1(demo) not in self.learned:       # a memory saved before v2
             return None
         key = demo.key
         return next((e.concept for e in self.entries if key in e.sources), None)
@@ -447,12 +451,10 @@ def load_memory(path: str | os.PathLike[str]) -> tuple[Memory, dict[str, np.ndar
     try:
         memory = Memory.from_arrays(arrays, header.get("memory", {}))
     except MemoryFileError as exc:
-        from iloci._version import __version__
         raise MemoryFileError(f"{path}: {exc} It says it was written by iloci "
                               f"{header.get('iloci', '(no version)')}; this is iloci "
                               f"{__version__}.") from None
     network_state = {k[4:]: v for k, v in arrays.items() if k.startswith("net/")}
-    from iloci._version import __version__, is_newer
     if is_newer(header.get("iloci")):
         import warnings
         warnings.warn(f"{path} was written by iloci {header.get('iloci')}, this is iloci "

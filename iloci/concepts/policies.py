@@ -10,8 +10,8 @@ policy         chooses                                 paper's protocol
 =============  ======================================  =================================
 ranking        what orders the concepts (guesses,      PB distance to the nearest PB_rec
                recognition): ``decision``
-familiarity    which error "is it known?" is taken     (the paper has none; default
-               of: ``familiarity``                     ``"reproduction"``)
+familiarity    what "is it known?" is measured by:     (the paper has none; default
+               ``familiarity``                         ``"path"``)
 confirmation   how many "yes" a reward needs:          every reward is final (0)
                ``confirm_rewards``,
                ``confirm_new_exemplars``,
@@ -160,8 +160,8 @@ class Policies:
         ``"reproduction"``: what orders the concepts for a demonstration
         (``decision``).
     familiarity : str
-        ``"reproduction"``, ``"prediction"`` or ``"regeneration"`` (see
-        :func:`~iloci.concepts.inference.familiarity`).
+        ``"path"``, ``"reproduction"``, ``"prediction"`` or
+        ``"regeneration"`` (see :func:`~iloci.concepts.inference.familiarity`).
     warp : int
         DTW band (steps) of the regeneration distances (``warp``).
     compare : str
@@ -175,7 +175,7 @@ class Policies:
     """
 
     ranking: str = "regeneration"
-    familiarity: str = "reproduction"
+    familiarity: str = "path"
     warp: int = 8
     compare: str = "both"
     confirmation: Confirmation = Confirmation()
@@ -217,6 +217,11 @@ class Policies:
     def familiar_by_regeneration(self) -> bool:
         """Familiarity is taken of the distance to the nearest regenerated pattern."""
         return self.familiarity == "regeneration"
+
+    @property
+    def familiar_by_path(self) -> bool:
+        """Familiarity is taken of the pen path's distance to the nearest regenerated pen path."""
+        return self.familiarity == "path"
 
     @property
     def familiar_by_reproduction(self) -> bool:

@@ -71,8 +71,7 @@ import numpy as np
 
 from iloci.concepts.answers import Answer, LearnOutcome, check_answer_id
 from iloci.concepts.face import LearnerFace
-from iloci.concepts.inference import (familiarity, novelty_scale, regenerated_patterns,
-                                      regeneration_scale)
+from iloci.concepts.inference import regenerated_patterns
 from iloci.concepts.memory import Entry, demonstration_digest
 from iloci.errors import InvalidInputError
 from iloci.events import InteractionEvent, RehearsalEvent
@@ -199,21 +198,15 @@ class Turn:
     def familiarity(self) -> float:
         """The demonstration's familiarity (policy "familiarity"), computed once."""
         learner, seq = self.learner, self.sequence
-        # is it like an entry the robot knows (reproduction), or can the
-        # network reproduce it at all (prediction)
-        if learner.policies.familiar_by_regeneration:
-            patterns = regenerated_patterns(learner.model, learner.memory)
-            return float(familiarity(
-                float(np.min(learner.regeneration_distances([seq], patterns)[0])),
-                regeneration_scale(patterns, learner.memory.concept_labels,
-                                   learner.policies.warp, learner.policies.compare)))
-        if learner.policies.familiar_by_reproduction:
-            error = float(np.min(self.ranking if learner.policies.rank_by_reproduction
-                                 else learner.entry_errors([seq])[0]))
-        else:
-            error = float(np.asarray(learner.model.prediction_error(
-                [seq], self.pb_obs[None]))[0])
-        return float(familiarity(error, novelty_scale(learner.model, learner.memory)))
+        policies = learner.policies
+        # is it like what the robot knows (path, regeneration, reproduction),
+        # or can the network reproduce it at all (prediction)
+        patterns = (regenerated_patterns(learner.model, learner.memory)
+                    if policies.familiar_by_path or policies.familiar_by_regeneration else None)
+        return float(learner.familiarities(
+            [seq], learner.familiarity_scale(patterns), patterns=patterns,
+            reproduction=(self.ranking[None] if policies.rank_by_reproduction else None),
+            pb_obs=self.pb_obs[None])[0])
 
     @property
     def refused_in_a_row(self) -> int:

@@ -207,6 +207,11 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
         except json.JSONDecodeError as exc:
             raise InvalidInputError(f"manifest {path} is not valid JSON: {exc.msg} at line "
                                     f"{exc.lineno}, column {exc.colno}.") from None
+        except RecursionError:
+            raise InvalidInputError(
+                f"manifest {path}: its JSON is nested too deeply to read (a manifest is a "
+                'list of objects [{"file": "a.csv", "concept": "circle"}, ...], two '
+                "levels).") from None
         if isinstance(data, dict) and isinstance(data.get("samples"), list):
             data = data["samples"]
         if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iloci import validation
 from iloci.data.csvfile import check_times, read_csv
 from iloci.data.writes import writable_dir, writable_file, write_atomic, write_text_atomic
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
@@ -102,11 +103,18 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
 
 
 def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    try:
-        arr = np.load(p, allow_pickle=False)
+    try:  # mapped, not read: the header's shape is checked before any data is loaded
+        arr = np.load(p, allow_pickle=False, mmap_mode="r")
     except (OSError, ValueError, EOFError) as exc:
+        if "pickle" in str(exc) or "Python objects" in str(exc):
+            raise InvalidInputError(
+                f"{str(p)!r} is refused: it holds pickled Python objects, and loading "
+                "pickled data can run any code. A trajectory is a plain numeric array: "
+                "save it with numpy.save(path, array) of floats.") from None
         raise InvalidInputError(f"cannot read {str(p)!r} as a numpy array: {exc}. "
                                 "Save it with numpy.save(path, array).") from None
+    if isinstance(arr, np.ndarray) and arr.ndim >= 1:
+        validation.check_size(len(arr), f"{p.name} (a {arr.shape} array)")
     if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "biuf":
         raise InvalidDemonstrationError(
             f"{p.name}: the array is not numeric (dtype "

@@ -25,7 +25,7 @@ from typing import Any
 from iloci.errors import InvalidInputError, PluginError, UnknownComponentError
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import FoldExecutor, unmet_members
-from iloci.plugins import get_plugin_manager, get_registry, hook_results
+from iloci.plugins import get_plugin_manager, get_registry, hook_results, plugin_infos
 
 __all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "local_executor",
            "make_executor"]
@@ -133,7 +133,6 @@ class InProcessExecutor:
     manager (and its observers) can be handed to them, as nothing needs to
     pickle.
     """
-
     name = "local"
     jobs = 1
 
@@ -197,7 +196,6 @@ def _warn_old_hook(pm: Any) -> None:
     """A DeprecationWarning for each plugin implementing ``iloci_make_executor``."""
     import warnings
 
-    from iloci.plugins import plugin_infos
     info = plugin_infos(pm)
     for impl in pm.hook.iloci_make_executor.get_hookimpls():
         dist = getattr(info.get(impl.plugin_name), "distribution", None)

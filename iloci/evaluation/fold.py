@@ -3,7 +3,8 @@
 :func:`learn_fold` teaches (and runs the baselines and the robustness
 suite); :meth:`LearnedFold.complete` scores the recognitions of the test
 set. :func:`run_fold` is the two in one process; a parallel evaluation runs
-them as two tasks (:mod:`iloci.evaluation.parallel`), with the same results.
+the learning, the baselines (:func:`fold_baselines`) and the recognition as
+three tasks (:mod:`iloci.evaluation.parallel`), with the same results.
 A demonstration's true concept comes from :class:`~iloci.data.concepts.GroundTruth`.
 """
 
@@ -29,7 +30,7 @@ from iloci.evaluation.robustness import robustness_suite
 from iloci.hookspecs import hookimpl
 from iloci.plugins import get_plugin_manager, get_registry
 
-__all__ = ["LearnedFold", "learn_fold", "run_fold"]
+__all__ = ["LearnedFold", "fold_baselines", "learn_fold", "run_fold"]
 
 
 class _ProgressObserver:
@@ -142,6 +143,19 @@ class LearnedFold:
     truth: GroundTruth
     details: bool
 
+    def with_baselines(self, baselines: dict[str, dict[str, Any]]) -> LearnedFold:
+        """This fold with the baselines' results (:func:`fold_baselines`; empty: none ran).
+
+        The answers' baseline is the strongest, DTW 1-NN on normalised paths.
+        """
+        if not baselines:
+            return self
+        best = baselines["dtw_normalised"]
+        res = dataclasses.replace(self.result, baselines=baselines,
+                                  baseline_seconds=float(best["seconds"]))
+        return dataclasses.replace(self, result=res,
+                                   baseline_predicted=list(best["predicted"]))
+
     def complete(self, recs: Sequence[Any], seconds: float) -> FoldResult:
         """The fold's result with ``recs`` (one Recognition per test demonstration, in order).
 
@@ -189,10 +203,13 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
                memory_dir: str | None = None,
                overrides: dict[str, Any] | None = None,
                robustness: bool | None = None,
-               motion_cache: Any = None) -> tuple[LearnedFold, Agent]:
+               motion_cache: Any = None,
+               defer_baselines: bool = False) -> tuple[LearnedFold, Agent]:
     """:func:`run_fold` up to the recognition of ``test``: the learned fold and its agent.
 
-    Parameters as for :func:`run_fold`. The baselines and the robustness
+    Parameters as for :func:`run_fold`. The baselines (unless
+    ``defer_baselines``: the caller runs :func:`fold_baselines` and passes
+    its result to :meth:`LearnedFold.with_baselines`) and the robustness
     suite (which recognizes perturbed copies of ``test``) run here.
     Recognizing ``test`` with the returned agent (or with one loaded from
     its saved file: the same answers) and passing the recognitions to
@@ -237,16 +254,6 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
                 continue
             # what the robot drew: executed in the simulator when one is configured
             shapes[name] = np.asarray(agent.respond(label).drawing).tolist()
-    baseline_predicted, baseline_seconds = None, float("nan")
-    baselines: dict[str, dict[str, Any]] = {}
-    if baseline:
-        # dtaidistance: [report], checked first
-        from iloci.evaluation.baselines import run_baselines
-        baselines = run_baselines(list(learn), list(test)) if len(test) else {}
-        if baselines:
-            # the answers' baseline: the strongest, DTW 1-NN on normalised paths
-            baseline_predicted = list(baselines["dtw_normalised"]["predicted"])
-            baseline_seconds = float(baselines["dtw_normalised"]["seconds"])
     rob: dict[str, dict[str, Any]] = {}
     if config.evaluation.robustness if robustness is None else robustness:
         rob = robustness_suite(agent, list(learn), list(test), true, truth,
@@ -269,16 +276,35 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
         named_concepts=len({n for n in majority.values() if n is not None}),
         memory_other_distance=_other_concept_distances(mem),
         memory_generation_error=[float(e.generation_error) for e in entries],
-        baseline_seconds=baseline_seconds,
-        baselines=baselines,
         pb_points=pb_points, pb_concepts=pb_concepts, pb_kinds=pb_kinds, shapes=shapes,
         robustness=rob,
     )
     learned = LearnedFold(res, test=[d.key for d in test], true=true,
                           taught=[t in learned_concepts for t in true],
-                          baseline_predicted=baseline_predicted, majority=majority,
+                          baseline_predicted=None, majority=majority,
                           matched=matched, truth=truth, details=details)
+    if baseline and not defer_baselines:
+        learned = learned.with_baselines(fold_baselines(learn, test))
     return learned, agent
+
+
+def fold_baselines(learn: Sequence[Any], test: Sequence[Any]) -> dict[str, dict[str, Any]]:
+    """The baselines of :mod:`iloci.evaluation.baselines` on one fold (empty: no test set).
+
+    What :func:`learn_fold` runs after the learning; a parallel evaluation
+    runs it as a task of its own and hands the result to
+    :meth:`LearnedFold.with_baselines` (the same result: the baselines see
+    only the demonstrations).
+
+    Raises
+    ------
+    MissingBackendError
+        dtaidistance is not installed (``pip install 'iloci[report]'``).
+    """
+    if not len(test):
+        return {}
+    from iloci.evaluation.baselines import run_baselines  # dtaidistance: [report]
+    return run_baselines(list(learn), list(test))
 
 
 def _other_concept_distances(mem: Any) -> list[float]:

@@ -10,12 +10,16 @@ modules do not pickle); when the caller has one, the worker gets the
 registry entries it resolved the config's component names to
 (:func:`resolved_specs`) and registers them alone (:class:`ResolvedComponents`).
 
-On the local pool a fold is two tasks: its learning
+On the local pool a fold is up to three tasks: its learning
 (:func:`~iloci.evaluation.fold.learn_fold`, which saves the learned
-agent) and, queued when that ends, the recognition of its test set by the
-saved agent in whichever worker is free; results are those of
-:func:`~iloci.evaluation.fold.run_fold`. A worker converts each
-demonstration (preprocessing + IK) once for all the folds it runs
+agent), its baselines (:func:`~iloci.evaluation.fold.fold_baselines`) and,
+queued when the learning ends, the recognition of its test set by the
+saved agent, each in whichever worker is free; results are those of
+:func:`~iloci.evaluation.fold.run_fold`, bit for bit. Learning is the long,
+sequential part, so every learning task is queued first and the short
+tasks fill the workers that would otherwise wait for the last learning
+(:func:`run_folds`). A worker converts each demonstration (preprocessing +
+IK) once for all the tasks it runs
 (:class:`~iloci.sensorimotor.pipeline.MotionCache`).
 """
 
@@ -33,7 +37,7 @@ from typing import Any
 from iloci.agent import Agent
 from iloci.data import load_lasa
 from iloci.errors import InvalidInputError
-from iloci.evaluation.fold import LearnedFold, learn_fold, run_fold
+from iloci.evaluation.fold import LearnedFold, fold_baselines, learn_fold, run_fold
 from iloci.evaluation.folds import fold_memory_name
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
@@ -226,16 +230,33 @@ def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], 
 
     ``agent_path`` is the fold's file in ``task.memory_dir`` when the
     evaluation keeps memories (:func:`~iloci.evaluation.folds.fold_memory_name`),
-    else one in a temporary directory: the agent is saved once, there.
+    else one in a temporary directory: the agent is saved once, there. The
+    baselines are not run here (:func:`_baselines_in_worker`); ``baseline``
+    still applies to the robustness suite, which needs the learned agent.
     """
     demos, pm = _worker_context(config_dict, shapes, specs)
     send = _fold_started(task, queue)
     learned, agent = learn_fold(config_dict, task.fold, [demos[i] for i in task.learn],
                                 [demos[i] for i in task.test], send=send, baseline=baseline,
                                 plugin_manager=pm, memory_dir=None,
-                                motion_cache=_motion_cache(config_dict, specs))
+                                motion_cache=_motion_cache(config_dict, specs),
+                                defer_baselines=True)
     agent.save(agent_path)
     return learned
+
+
+@dataclass(frozen=True)
+class _Baselines:
+    fold: int
+    baselines: dict[str, dict[str, Any]]
+
+
+def _baselines_in_worker(config_dict: dict, task: FoldTask, shapes: list[str],
+                         specs: Sequence[Any] | LocalContext | None, queue: Any) -> Any:
+    """A fold's baselines in a worker (they need its demonstrations only)."""
+    demos, _ = _worker_context(config_dict, shapes, specs)
+    return _Baselines(task.fold, fold_baselines([demos[i] for i in task.learn],
+                                                [demos[i] for i in task.test]))
 
 
 @dataclass(frozen=True)
@@ -299,16 +320,21 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
         for res in runner.run(_run_fold_in_worker, calls, emit):
             on_result(res)
         return
-    # Learning a fold is sequential; recognizing its test set is a task of
-    # its own, queued when the learning ends, behind the learning tasks not
-    # yet started: with 5 folds on 2 workers, the worker with 2 folds
-    # recognizes the others' test sets while the other learns its third.
+    # Learning a fold is sequential and by far its longest part: every
+    # learning task is queued first (the pool takes tasks in the order they
+    # were queued), then the baselines, and the recognition of a fold's test
+    # set when its learning ends. With 5 folds on 2 workers, one worker
+    # learns 3 folds and the other 2; the other runs the short tasks
+    # meanwhile, and the last learning is followed by its fold's
+    # recognition alone.
     with tempfile.TemporaryDirectory(prefix="iloci-evaluate-") as tmp:
         def agent_path(task: FoldTask) -> str:
             return os.path.join(task.memory_dir or tmp, fold_memory_name(task.fold))
 
         by_fold = {task.fold: task for task in tasks}
         learned: dict[int, LearnedFold] = {}
+        baselines: dict[int, dict[str, dict[str, Any]]] = {}
+        recognized: dict[int, _Recognized] = {}
 
         def then(res: Any) -> list[tuple[Callable[..., Any], tuple]]:
             if not isinstance(res, LearnedFold):
@@ -317,13 +343,26 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
             return [(_recognize_in_worker, (config_dict, task.fold, task.test, shapes, specs,
                                             agent_path(task)))]
 
-        first = [(_learn_fold_in_worker, (config_dict, task, shapes, baseline, specs,
-                                          agent_path(task))) for task in tasks]
+        first: list[tuple[Callable[..., Any], tuple]] = [
+            (_learn_fold_in_worker, (config_dict, task, shapes, baseline, specs,
+                                     agent_path(task))) for task in tasks]
+        if baseline:
+            first += [(_baselines_in_worker, (config_dict, task, shapes, specs))
+                      for task in tasks]
         for res in runner.run_then(first, emit, then):
             if isinstance(res, LearnedFold):
                 learned[res.result.fold] = res
+                k = res.result.fold
+            elif isinstance(res, _Baselines):
+                baselines[res.fold] = res.baselines
+                k = res.fold
             else:
-                on_result(learned.pop(res.fold).complete(res.recognitions, res.seconds))
+                recognized[res.fold] = res
+                k = res.fold
+            if k in learned and k in recognized and (not baseline or k in baselines):
+                fold = learned.pop(k).with_baselines(baselines.pop(k, {}))
+                rec = recognized.pop(k)
+                on_result(fold.complete(rec.recognitions, rec.seconds))
 
 
 #: The name :func:`run_folds` had before serial runs took the same path.

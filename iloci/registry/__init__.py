@@ -19,8 +19,8 @@ import inspect
 from typing import Any
 
 from iloci.errors import (ConfigError, IlociError, InvalidInputError, MissingBackendError,
-                          PluginError, PluginNotLoadedError, UnknownComponentError)
-from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
+                          PluginError, PluginNotLoadedError, UnknownComponentError, did_you_mean)
+from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, unmet_members
 from iloci.registry.params import params_to_dict, validate_dataclass
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "params_to_dict", "validate_dataclass",
@@ -52,7 +52,6 @@ def _label(kind: str) -> str:
 
 def _check_kind(kind: str) -> None:
     if kind not in ALL_KINDS:
-        from iloci.errors import did_you_mean
         raise InvalidInputError(f"unknown component kind {kind!r}; kinds are "
                                 f"{', '.join(ALL_KINDS)}.{did_you_mean(str(kind), ALL_KINDS)}")
 
@@ -348,8 +347,6 @@ def check_built(spec: ComponentSpec, obj: Any) -> Any:
         naming the plugin, its distribution, the registration hook and the
         factory, not an AttributeError when the member is first used.
     """
-    from iloci.errors import PluginError
-    from iloci.interfaces import unmet_members
     kind = ALL_KINDS[spec.kind]
     unmet = ["(it is a class, not an instance)"] if isinstance(obj, type) else \
         unmet_members(obj, kind.protocol)

@@ -16,7 +16,7 @@ import typing
 from typing import Any, Union
 
 from iloci.constraints import violations
-from iloci.errors import ConfigError
+from iloci.errors import ConfigError, did_you_mean
 
 __all__ = ["params_to_dict", "validate_dataclass"]
 
@@ -127,7 +127,6 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
     kwargs = {}
     for key, value in values.items():
         if key not in fields:
-            from iloci.errors import did_you_mean
             raise ConfigError(
                 f"unknown key {section + '.' + key!r}; valid keys in [{section}] are "
                 f"{', '.join(sorted(fields)) or '(none)'}.{did_you_mean(key, fields)}",

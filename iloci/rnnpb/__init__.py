@@ -1,11 +1,13 @@
 """The RNNPB that every back end computes: definition, checks, state, numpy reference.
 
-* :mod:`iloci.rnnpb.common`: the model's definition (its docstring), the
-  shared front end :class:`RNNPBBase`, input checks, padding, the PB
-  reparametrisation and the state format;
+* :mod:`iloci.rnnpb.common`: the model's definition (its docstring) and the
+  shared front end :class:`RNNPBBase`; with :mod:`iloci.rnnpb.inputs` (input
+  checks, padding) and :mod:`iloci.rnnpb.state` (the weights' layout, the PB
+  reparametrisation, the state format), whose names it re-exports;
 * :mod:`iloci.rnnpb.reference`: the forward pass and the whole training
   step (BPTT, clipping, schedule, Adam) in plain numpy, what the back ends'
-  kernels are tested against.
+  kernels are tested against; its float32 mode, :mod:`iloci.rnnpb.float32`,
+  states native-rnnpb's float32 arithmetic (the same bits as its C kernel).
 
 Numpy only: back ends (``torch-rnnpb``, ``jax-rnnpb``) are plugins.
 """

@@ -1,5 +1,11 @@
 """What the RNNPB back ends share: the model's definition, input checks, state format.
 
+This module holds the definition (below), the parameters and initial
+weights, and the shared front end :class:`RNNPBBase`; the input checks and
+padding are in :mod:`iloci.rnnpb.inputs`, the weights' layout, the PB
+reparametrisation and the state format in :mod:`iloci.rnnpb.state`, all
+importable from here too.
+
 Numpy only; the torch and JAX back ends (plugins ``iloci-torch`` and
 ``iloci-jax``) compute with their own libraries but agree on everything
 here, so a state saved by one loads into the other and both give the same
@@ -37,51 +43,26 @@ unconstrained ``u`` and ``pb = pb_bound * tanh(u)``, so every PB lies in
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, fields
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
 
 from iloci.errors import IlociError, InvalidInputError
 from iloci.params import RNNPBParams
+# input checks and padding, the weights' layout and the state: their own
+# modules, re-exported here (``from iloci.rnnpb.common import ...`` keeps working)
+from iloci.rnnpb.inputs import (bucket, check_generate_args, check_pbs, check_sequences,
+                                pad_sequences)
+from iloci.rnnpb.state import (FORMAT, FORMAT_VERSION, WEIGHT_NAMES, make_state, pb_to_u,
+                               read_state, u_to_pb, weight_shapes)
 
 __all__ = [
-    "FORMAT",
-    "FORMAT_VERSION",
-    "WEIGHT_NAMES",
-    "make_params",
-    "weight_shapes",
-    "init_weights",
-    "check_sequences",
-    "pad_sequences",
-    "bucket",
-    "check_pbs",
-    "check_generate_args",
-    "pb_to_u",
-    "u_to_pb",
-    "make_state",
-    "read_state",
-    "best_starts",
-    "diverged_error",
-    "RNNPBBase",
-    "LM_DOWN",
-    "LM_UP",
-    "LM_MIN",
-    "LM_MAX",
-    "LM_TINY",
-    "LM_U_MAX",
+    "FORMAT", "FORMAT_VERSION", "WEIGHT_NAMES", "make_params", "weight_shapes", "init_weights",
+    "check_sequences", "pad_sequences", "bucket", "check_pbs", "check_generate_args",
+    "pb_to_u", "u_to_pb", "make_state", "read_state", "best_starts", "diverged_error",
+    "RNNPBBase", "LM_DOWN", "LM_UP", "LM_MIN", "LM_MAX", "LM_TINY", "LM_U_MAX",
 ]
-
-#: Value of ``state()["format"]``.
-FORMAT = "iloci-rnnpb"
-#: Version of the state layout; bumped when keys or their meaning change.
-#: 2: ``recognition_method`` (Levenberg-Marquardt by default); a version-1
-#: state recognized by Adam, so it loads with ``recognition_method="adam"``.
-FORMAT_VERSION = 2
-#: Weight arrays of a state, in this order.
-WEIGHT_NAMES = ("w_in", "b_hidden", "w_out", "b_out")
-#: Hyper-parameters that must match for a state to be loadable (sizes).
-_SIZE_KEYS = ("input_size", "hidden", "context", "pb")
 
 
 def make_params(**kwargs: Any) -> RNNPBParams:
@@ -105,20 +86,6 @@ def make_params(**kwargs: Any) -> RNNPBParams:
     return params
 
 
-def weight_shapes(input_size: int, hidden: int, context: int, pb: int) -> dict[str, tuple]:
-    """Shapes of the weight arrays.
-
-    Returns
-    -------
-    dict
-        ``w_in`` (D + C + P, H) with rows ordered [input, context, PB];
-        ``b_hidden`` (H,); ``w_out`` (H, D + C) with columns ordered
-        [output, next context]; ``b_out`` (D + C,).
-    """
-    d, h, c, p = input_size, hidden, context, pb
-    return {"w_in": (d + c + p, h), "b_hidden": (h,), "w_out": (h, d + c), "b_out": (d + c,)}
-
-
 def init_weights(params: RNNPBParams, seed: int) -> dict[str, np.ndarray]:
     """Fresh weights, the same for every back end given the same seed.
 
@@ -138,291 +105,6 @@ def init_weights(params: RNNPBParams, seed: int) -> dict[str, np.ndarray]:
         k = params.init_scale / np.sqrt(fan_in[name])
         out[name] = rng.uniform(-k, k, size=shapes[name])
     return out
-
-
-# -- inputs ------------------------------------------------------------------
-
-def check_sequences(sequences: Any, input_size: int, what: str = "sequences",
-                    min_length: int = 2) -> list[np.ndarray]:
-    """Validate a list of sequences and return them as float64 arrays.
-
-    Parameters
-    ----------
-    sequences : sequence of array_like, each (T_i, D)
-    input_size : int
-        ``D``.
-    min_length : int
-        Fewest rows a sequence may have (2: one step to predict).
-
-    Returns
-    -------
-    list of ndarray, each (T_i, D) float64
-
-    Raises
-    ------
-    InvalidInputError
-        Not a list, empty, a sequence not 2-D, of the wrong width, too short,
-        or containing NaN or inf; the message names the sequence.
-    """
-    if isinstance(sequences, np.ndarray) and sequences.ndim == 2:
-        raise InvalidInputError(
-            f"{what} must be a list of (T, {input_size}) arrays, got one 2-D array of shape "
-            f"{sequences.shape}; wrap a single sequence in a list: [sequence].")
-    try:
-        items = list(sequences)
-    except TypeError:
-        raise InvalidInputError(f"{what} must be a list of (T, {input_size}) arrays, got "
-                                f"{type(sequences).__name__}.") from None
-    if not items:
-        raise InvalidInputError(f"{what} is empty; pass at least one (T, {input_size}) "
-                                "sequence.")
-    out = []
-    for i, s in enumerate(items):
-        try:
-            a = np.asarray(s, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"{what}[{i}] is not a numeric array.") from None
-        if a.ndim != 2 or a.shape[1] != input_size:
-            raise InvalidInputError(
-                f"{what}[{i}] has shape {a.shape}; every sequence must have shape "
-                f"(T, {input_size}): one row per step, {input_size} features (the model's "
-                "input_size).")
-        if len(a) < min_length:
-            raise InvalidInputError(
-                f"{what}[{i}] has {len(a)} step(s); at least {min_length} are needed (the "
-                "network predicts each step from the previous one).")
-        if not np.all(np.isfinite(a)):
-            row = int(np.argwhere(~np.isfinite(a))[0, 0])
-            raise InvalidInputError(f"{what}[{i}] contains NaN or inf (first at row {row}); "
-                                    "remove or interpolate missing samples.")
-        out.append(a)
-    return out
-
-
-def pad_sequences(sequences: Sequence[np.ndarray], rows: int | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Stack sequences of different lengths, time-major, with a mask.
-
-    Parameters
-    ----------
-    sequences : list of ndarray, each (T_i, D)
-        Checked sequences.
-    rows : int, optional
-        Batch size to pad to (``>= B``); extra rows are all-zero sequences
-        with an all-zero mask, which contribute nothing to any loss.
-
-    Returns
-    -------
-    X : ndarray, shape (T_max, rows, D)
-        Zero after the end of each sequence.
-    mask : ndarray, shape (T_max - 1, rows)
-        1.0 where step ``t + 1`` of the sequence exists (a prediction to
-        score), else 0.0.
-    """
-    b = len(sequences)
-    rows = b if rows is None else rows
-    t_max = max(len(s) for s in sequences)
-    d = sequences[0].shape[1]
-    X = np.zeros((t_max, rows, d))
-    mask = np.zeros((t_max - 1, rows))
-    for i, s in enumerate(sequences):
-        X[:len(s), i] = s
-        mask[:len(s) - 1, i] = 1.0
-    return X, mask
-
-
-def bucket(n: int, multiple: int = 4, geometric: bool = False) -> int:
-    """Rows to pad ``n`` sequences to, so compiled back ends reuse their kernels.
-
-    ``n`` rounded up to a multiple of ``multiple``; with ``geometric``, to
-    ``multiple`` times a power of two (a memory growing one entry at a time
-    then needs a new kernel only each time it doubles).
-    """
-    n = max(1, int(n))
-    if geometric:
-        rows = multiple
-        while rows < n:
-            rows *= 2
-        return rows
-    return -(-n // multiple) * multiple
-
-
-def check_pbs(pbs: Any, rows: int | None, pb_size: int, what: str = "pbs") -> np.ndarray:
-    """Validate PB vectors.
-
-    Parameters
-    ----------
-    pbs : array_like, shape (B, P)
-    rows : int or None
-        Required ``B`` (None: any, including 0).
-
-    Returns
-    -------
-    ndarray, shape (B, P) float64
-    """
-    try:
-        a = np.asarray(pbs, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{what} must be a numeric array of shape (B, {pb_size}).") \
-            from None
-    if a.ndim == 1 and a.shape == (pb_size,) and rows in (None, 1):
-        a = a[None]
-    if a.ndim != 2 or a.shape[1] != pb_size or (rows is not None and len(a) != rows):
-        want = f"({rows if rows is not None else 'K'}, {pb_size})"
-        raise InvalidInputError(f"{what} must have shape {want}, got {a.shape}: one PB "
-                                "vector per sequence.")
-    if not np.all(np.isfinite(a)):
-        raise InvalidInputError(f"{what} contains NaN or inf.")
-    return a
-
-
-def check_generate_args(pbs: Any, initial_inputs: Any, lengths: Any, input_size: int,
-                        pb_size: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """Validate the arguments of ``generate``.
-
-    Returns
-    -------
-    pbs : ndarray, shape (B, P)
-    initial_inputs : ndarray, shape (B, D)
-    lengths : list of int, length B, each >= 1
-    """
-    p = check_pbs(pbs, None, pb_size)
-    if len(p) == 0:
-        raise InvalidInputError("generate needs at least one PB vector.")
-    try:
-        x0 = np.asarray(initial_inputs, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError("initial_inputs must be numeric, shape (B, D).") from None
-    if x0.ndim == 1 and len(p) == 1:
-        x0 = x0[None]
-    if x0.shape != (len(p), input_size):
-        raise InvalidInputError(f"initial_inputs must have shape ({len(p)}, {input_size}) "
-                                f"(one first step per PB), got {x0.shape}.")
-    if not np.all(np.isfinite(x0)):
-        raise InvalidInputError("initial_inputs contains NaN or inf.")
-    try:
-        lens = [int(n) for n in np.atleast_1d(np.asarray(lengths))]
-        if not np.all(np.asarray(lengths) == np.asarray(lens).reshape(np.shape(lengths))):
-            raise ValueError
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"lengths must be {len(p)} whole numbers.") from None
-    if len(lens) != len(p) or min(lens) < 1:
-        raise InvalidInputError(f"lengths must be {len(p)} integers >= 1 (steps to produce "
-                                f"per PB, the first being the initial input), got {lens}.")
-    return p, x0, lens
-
-
-# -- PB reparametrisation ----------------------------------------------------
-
-def pb_to_u(pbs: np.ndarray, bound: float) -> np.ndarray:
-    """Unconstrained parameters of PB vectors (inverse of :func:`u_to_pb`).
-
-    PBs at or beyond the bound are pulled just inside it, where ``atanh`` is
-    finite.
-    """
-    r = np.clip(np.asarray(pbs, dtype=np.float64) / bound, -0.999, 0.999)
-    return np.arctanh(r)
-
-
-def u_to_pb(u: np.ndarray, bound: float) -> np.ndarray:
-    """``pb = bound * tanh(u)``: every PB inside ``(-bound, bound)``."""
-    return bound * np.tanh(np.asarray(u, dtype=np.float64))
-
-
-# -- state ---------------------------------------------------------------------
-
-def make_state(params: RNNPBParams, weights: Mapping[str, np.ndarray], pbs: np.ndarray,
-               backend: str) -> dict[str, np.ndarray]:
-    """The state dict of a model: weights, stored PBs, settings, format tag.
-
-    Every value is a numpy array (strings as 0-d unicode arrays), so the
-    dict saves with ``np.savez`` and loads with ``allow_pickle=False``.
-
-    Returns
-    -------
-    dict of str to ndarray
-        ``format``, ``version``, ``backend``; the weights (float64);
-        ``pbs`` (K, P), the PBs learned by the last training (the default
-        starts of recognition); ``param.NAME`` for every hyper-parameter.
-    """
-    out: dict[str, np.ndarray] = {
-        "format": np.array(FORMAT),
-        "version": np.array(FORMAT_VERSION),
-        "backend": np.array(backend),
-        "pbs": np.array(pbs, dtype=np.float64).reshape(-1, params.pb),
-    }
-    for name in WEIGHT_NAMES:
-        out[name] = np.array(weights[name], dtype=np.float64)
-    for key, value in asdict(params).items():
-        out[f"param.{key}"] = np.array(value)
-    return out
-
-
-def read_state(state: Mapping[str, Any], params: RNNPBParams
-               ) -> tuple[dict[str, np.ndarray], np.ndarray, RNNPBParams]:
-    """Check a state dict and take it apart.
-
-    The sizes (``input_size``, ``hidden``, ``context``, ``pb``) of the state
-    replace those of ``params``; so do the other stored hyper-parameters,
-    so a loaded model trains and recognizes as the saved one did. ``dtype``
-    and ``kernel`` stay the loading model's (a float64 state runs in float32
-    and back; a torch state loads into jax-rnnpb).
-
-    Returns
-    -------
-    weights : dict of str to ndarray (float64)
-    pbs : ndarray, shape (K, P)
-    params : RNNPBParams
-
-    Raises
-    ------
-    InvalidInputError
-        Not a mapping, not an RNNPB state, a newer format version, missing
-        keys, or arrays whose shapes do not match the stored sizes.
-    """
-    if not isinstance(state, Mapping):
-        raise InvalidInputError(f"state must be a dict of arrays as returned by state(), got "
-                                f"{type(state).__name__}.")
-    fmt = str(np.asarray(state.get("format", "")))
-    if fmt != FORMAT:
-        raise InvalidInputError(f"not an RNNPB state (format {fmt!r}, expected {FORMAT!r}); "
-                                "pass the dict returned by state() of torch-rnnpb or "
-                                "jax-rnnpb.")
-    try:
-        version = int(np.asarray(state["version"]))
-    except (KeyError, TypeError, ValueError):
-        raise InvalidInputError("RNNPB state has no integer 'version'.") from None
-    if version > FORMAT_VERSION:
-        raise InvalidInputError(f"RNNPB state version {version} is newer than this iloci "
-                                f"reads ({FORMAT_VERSION}); upgrade iloci.")
-    values = asdict(params)
-    if version < 2:
-        values["recognition_method"] = "adam"
-    for f in fields(RNNPBParams):
-        key = f"param.{f.name}"
-        if key in state and f.name not in ("dtype", "kernel"):
-            v = np.asarray(state[key])
-            values[f.name] = type(values[f.name])(v.item() if v.ndim == 0 else v)
-    try:
-        new = RNNPBParams(**values)
-        new.validate()
-    except (TypeError, ValueError) as exc:
-        raise InvalidInputError(f"RNNPB state holds invalid settings: {exc}.") from None
-    shapes = weight_shapes(new.input_size, new.hidden, new.context, new.pb)
-    weights = {}
-    for name in WEIGHT_NAMES:
-        if name not in state:
-            raise InvalidInputError(f"RNNPB state lacks {name!r}.")
-        a = np.array(state[name], dtype=np.float64)
-        if a.shape != shapes[name]:
-            raise InvalidInputError(f"RNNPB state {name!r} has shape {a.shape}, expected "
-                                    f"{shapes[name]} for sizes input_size={new.input_size}, "
-                                    f"hidden={new.hidden}, context={new.context}, pb={new.pb}.")
-        if not np.all(np.isfinite(a)):
-            raise InvalidInputError(f"RNNPB state {name!r} contains NaN or inf.")
-        weights[name] = a
-    pbs = check_pbs(state.get("pbs", np.zeros((0, new.pb))), None, new.pb, "state 'pbs'")
-    return weights, pbs, new
 
 
 # -- recognition -------------------------------------------------------------

@@ -7,8 +7,10 @@ learning-rate schedule (warm-up, decay) and Adam on the weights and the PBs.
 The torch operations and the native C kernel of ``torch-rnnpb`` and the XLA
 program of ``jax-rnnpb`` compute exactly this, step by step, in their own
 arithmetic; the tests train each of them and :func:`train` from the same
-start and compare (float64 to 1e-10, float32 to 1e-4 after 5 epochs). A
-change to the recipe starts here.
+start and compare (float64 to 1e-10, float32 to 1e-4 after 5 epochs).
+``native-rnnpb``'s float32 kernel is compared bit for bit with
+``train(..., dtype="float32")``, which states its order of operations
+(:mod:`iloci.rnnpb.float32`). A change to the recipe starts here.
 
 One training epoch (full batch, ``t = 1 .. epochs``)::
 
@@ -37,8 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from iloci.errors import InvalidInputError
 from iloci.params import RNNPBParams
 from iloci.rnnpb.common import WEIGHT_NAMES, pad_sequences
+from iloci.rnnpb.float32 import train as train_float32
 
 __all__ = [
     "ADAM_BETA1",
@@ -234,12 +238,15 @@ class TrainResult:
 
 
 def train(weights: Mapping[str, np.ndarray], u: np.ndarray, X: np.ndarray, mw: np.ndarray,
-          params: RNNPBParams, epochs: int) -> TrainResult:
-    """Full-batch training, the recipe of the module docstring (float64).
+          params: RNNPBParams, epochs: int, dtype: str = "float64") -> TrainResult:
+    """Full-batch training, the recipe of the module docstring (float64, or float32).
 
     What a back end's ``_train_kernel`` computes: the same arguments (``mw``
     is its ``mask * weight``), the same order of updates. The inputs are not
-    modified.
+    modified. ``dtype="float32"``: the recipe in float32 in the order of
+    operations of native-rnnpb's C kernel (:mod:`iloci.rnnpb.float32`, the
+    specification of that arithmetic): the same bits as the kernel on every
+    instruction set; the arrays returned are float32.
 
     Parameters
     ----------
@@ -255,7 +262,17 @@ def train(weights: Mapping[str, np.ndarray], u: np.ndarray, X: np.ndarray, mw: n
     Returns
     -------
     TrainResult
+
+    Raises
+    ------
+    InvalidInputError
+        ``dtype`` is neither ``"float64"`` nor ``"float32"``.
     """
+    if dtype == "float32":
+        w32, u32, loss32, losses32 = train_float32(weights, u, X, mw, params, epochs)
+        return TrainResult(w32, u32, loss32, losses32)
+    if dtype != "float64":
+        raise InvalidInputError(f"dtype must be 'float64' or 'float32', got {dtype!r}.")
     w = {k: np.array(weights[k], dtype=np.float64) for k in WEIGHT_NAMES}
     u = np.array(u, dtype=np.float64)
     mom = {k: (np.zeros_like(w[k]), np.zeros_like(w[k])) for k in WEIGHT_NAMES}

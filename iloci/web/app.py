@@ -120,7 +120,7 @@ def create_app(classroom: Classroom, *, token: str | None = None,
 
     def guarded(handler: Any, write: bool = True, body: str = "json") -> Any:
         async def endpoint(request: Request) -> Any:
-            why = foreign(request.headers)
+            why = foreign(request.headers, request.url.scheme)
             if why is not None:
                 return refuse(403, f"refused {why}: only the iloci page itself may use "
                                    "this server.")
@@ -192,6 +192,18 @@ def create_app(classroom: Classroom, *, token: str | None = None,
         Route("/api/import", guarded(import_, body="file"), methods=["POST"]),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
-    inner = Starlette(routes=routes, lifespan=lifespan)
+    async def not_here(request: Request, exc: Exception) -> Any:
+        # the API's errors are JSON with a message, these too (not Starlette's plain text)
+        status = getattr(exc, "status_code", 404)
+        if status == 405:
+            allowed = getattr(exc, "headers", None) or {}
+            return JSONResponse({"error": f"{request.url.path} does not take {request.method} "
+                                          f"(it takes {allowed.get('Allow', 'GET')})."},
+                                status_code=405, headers=dict(allowed))
+        return JSONResponse({"error": f"there is nothing at {request.url.path[:80]}; the page "
+                                      "is at /."}, status_code=status)
+
+    inner = Starlette(routes=routes, lifespan=lifespan,
+                      exception_handlers={404: not_here, 405: not_here})
     inner.state.token = token
     return HostGuard(inner, hosts)

@@ -71,6 +71,9 @@ class Classroom:
         self.memory_path = Path(memory_path)
         self.turns: dict[int, _Turn] = {}
         self.turn_id = 0
+        # why a turn no longer waits (answered, replaced, let go): its feedback is
+        # refused with the reason, not a guess at it (the last 256)
+        self.gone: dict[int, str] = {}
         self.lock = asyncio.Lock()
         self.progress: dict[str, Any] | None = None
         self.history = History(agent, self.memory_path)
@@ -118,7 +121,13 @@ class Classroom:
 
     def _drop_client(self, client: str) -> None:
         for k in [k for k, t in self.turns.items() if t.client == client]:
-            del self.turns[k]
+            self._end_turn(k, "this tab drew something newer")
+
+    def _end_turn(self, turn_id: int, why: str) -> None:
+        self.turns.pop(turn_id, None)
+        self.gone[turn_id] = why
+        while len(self.gone) > 256:
+            del self.gone[min(self.gone)]
 
     def answer_json(self, answer: Any, turn_id: int | None = None) -> dict[str, Any]:
         r = answer.response
@@ -164,7 +173,8 @@ class Classroom:
                             for i in own]})
         return {"concepts": concepts, "entries": len(entries),
                 "demonstrations_seen": mem.demonstrations_seen,
-                "file": self.memory_path.name, "save_error": self.save_error,
+                "file": self.memory_path.name, "saved": self.memory_path.exists(),
+                "save_error": self.save_error,
                 "undo": self.history.last}
 
     def _thumbnails(self, entries: list) -> list:
@@ -209,7 +219,8 @@ class Classroom:
         self.turns[tid] = _Turn(turn, demo, points, client, self.agent.memory)
         self.turns[tid].pending = list(turn.learner.queued_events)
         while len(self.turns) > MAX_TURNS:
-            del self.turns[min(self.turns)]
+            self._end_turn(min(self.turns), f"more than {MAX_TURNS} tabs had a guess waiting; "
+                                            "the oldest was let go")
         return {"answer": self.answer_json(turn.answer, tid)}
 
     async def observe(self, body: Any) -> dict[str, Any]:
@@ -224,15 +235,18 @@ class Classroom:
         async with self.lock:
             rec = self.turns.get(turn_id)
             if rec is None or rec.turn.answer is None:
-                raise HTTPError(409, "no such guess is waiting for an answer (it was answered, "
-                                     "or this tab drew something newer); draw again.")
+                why = self.gone.get(turn_id, "it is not one of this server's")
+                raise HTTPError(409, f"no such guess is waiting for an answer ({why}); "
+                                     "draw again.")
             if rec.memory is not self.agent.memory or rec.revision != self.agent.memory.revision:
-                # another tab taught, or an undo / rename: look at the drawing again
-                del self.turns[turn_id]
+                # another tab taught, or an undo, a rename, a forget, a start over or an
+                # import: look at the drawing again
+                self._end_turn(turn_id, "the memory changed and the drawing was looked at "
+                                        "again")
                 out = await self._observe(rec.demo, rec.points, rec.client)
-                out["notice"] = ("The memory changed since this guess (another tab taught, or "
-                                 "a concept was renamed or forgotten): the robot looked at your "
-                                 "drawing again.")
+                out["notice"] = ("The memory changed since this guess (another tab taught, "
+                                 "undid, renamed, forgot, started over or imported): the robot "
+                                 "looked at your drawing again.")
                 if "answer" in out:
                     out["answer"]["notice"] = out["notice"]
                 return out
@@ -258,7 +272,7 @@ class Classroom:
             finally:
                 rec.pending = learner.queued_events
             if turn.done:
-                del self.turns[turn_id]
+                self._end_turn(turn_id, "it was answered already")
                 try:
                     return await asyncio.to_thread(self._outcome, turn.outcome,
                                                    f"drawing {rec.demo.key}")
@@ -299,7 +313,6 @@ class Classroom:
     async def undo(self, body: Any) -> dict[str, Any]:
         async with self.lock:
             undone = await asyncio.to_thread(self.history.undo)
-            self.turns.clear()
             return {"undone": undone, "memory": await asyncio.to_thread(self.memory_json)}
 
     async def forget(self, body: Any) -> dict[str, Any]:
@@ -327,7 +340,6 @@ class Classroom:
         async with self.lock:
             self.agent.start_over()
             await self._commit_async("start over")
-            self.turns.clear()
             return {"memory": await asyncio.to_thread(self.memory_json)}
 
     async def import_memory(self, data: bytes) -> dict[str, Any]:
@@ -335,9 +347,12 @@ class Classroom:
         if not data:
             raise HTTPError(400, "the upload is empty; choose a memory file (.npz).")
         async with self.lock:
+            where: list[str] = []
+
             def load() -> None:
                 with tempfile.TemporaryDirectory() as d:
                     tmp = Path(d) / "upload.npz"
+                    where.append(str(tmp))
                     tmp.write_bytes(data)
                     # checked as Agent.load checks it: the network must fit this
                     # server's model, the entries its settings, the robot its arm
@@ -345,9 +360,10 @@ class Classroom:
             try:
                 await asyncio.to_thread(load)
             except IlociError as exc:
-                raise HTTPError(422, f"not imported: {exc}") from None
+                # the message names the server's temporary copy: the person chose a file
+                why = str(exc).replace(where[0], "the file") if where else str(exc)
+                raise HTTPError(422, f"not imported: {why}") from None
             await self._commit_async("import")
-            self.turns.clear()
             return {"memory": await asyncio.to_thread(self.memory_json)}
 
     def export_bytes(self) -> bytes:

@@ -147,6 +147,9 @@ def plain_words(message: str) -> str:
         return "The stroke does not move: draw a shape, not a dot."
     if "unreachable" in low or "cannot reach" in low:
         return "The robot's arm cannot draw that: draw it smaller or nearer the middle."
+    if "learned nothing yet" in low:
+        return ("The robot has learned nothing yet: teach it a first drawing (Teach mode), "
+                "then it can recognize.")
     return message
 
 

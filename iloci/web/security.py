@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hmac
 import json
+import re
 from typing import Any
 
 __all__ = ["TOKEN_HEADER", "LOCAL_HOSTS", "SAFETY_HEADERS", "host_name", "foreign",
@@ -32,25 +33,41 @@ SAFETY_HEADERS = [
     (b"referrer-policy", b"no-referrer")]
 
 
+#: A Host header: a name or IPv4 address, or an IPv6 address in brackets, then an optional port.
+_HOST = re.compile(r"(\[[0-9a-f:.]+\]|[a-z0-9._-]+)(:[0-9]{1,5})?")
+
+
 def host_name(host: str) -> str:
-    """``"127.0.0.1:8000"`` -> ``"127.0.0.1"``, ``"[::1]:8000"`` -> ``"::1"`` (lower case)."""
+    """``"127.0.0.1:8000"`` -> ``"127.0.0.1"``, ``"[::1]:8000"`` -> ``"::1"`` (lower case).
+
+    Anything else than a name (or address) and an optional port, such as
+    ``"[::1]evil.test"`` or ``"127.0.0.1:8000 evil"``, gives ``""``, which
+    no server accepts unless every name is (``--allow-host '*'``). The port
+    is not compared: a port forward (``ssh -L 9000:127.0.0.1:8000``)
+    reaches the server under another one, and a DNS-rebinding page always
+    sends its own name.
+    """
     host = host.strip().lower()
-    if host.startswith("["):
-        return host[1:host.find("]")] if "]" in host else host
-    if host.count(":") == 1:
-        return host.split(":", 1)[0]
-    return host
+    m = _HOST.fullmatch(host)
+    if m is None:
+        return ""
+    name = m.group(1)
+    return name[1:-1] if name.startswith("[") else name
 
 
-def foreign(headers: Any) -> str | None:
-    """Why a request with these headers comes from another site, or None."""
+def foreign(headers: Any, scheme: str = "http") -> str | None:
+    """Why a request with these headers comes from another site, or None.
+
+    ``scheme``: the request's (``http``; ``https`` behind a proxy that says
+    so): an ``Origin`` must be this scheme, this host and this port.
+    """
     site = headers.get("sec-fetch-site")
     if site is not None and site not in ("same-origin", "none"):
         return f"a request from another site (Sec-Fetch-Site: {site[:20]})"
     origin = headers.get("origin")
     if origin is not None:
         host = headers.get("host", "")
-        if origin.lower() not in (f"http://{host}".lower(), f"https://{host}".lower()):
+        if origin.lower() != f"{scheme}://{host}".lower():
             return f"a request from another page (Origin {origin[:80]})"
     return None
 
@@ -68,10 +85,11 @@ def write_refusal(headers: Any, token: str, body: str = "json") -> tuple[int, st
         The body the route takes: ``application/json`` or ``application/octet-stream``.
     """
     given = headers.get(TOKEN_HEADER.lower(), "")
-    if not hmac.compare_digest(given.encode(), token.encode()):
-        return 403, (f"refused: a write needs the server's token in the {TOKEN_HEADER} "
-                     "header (the page has it; reload the page after a restart of iloci "
-                     "serve).")
+    if not hmac.compare_digest(given.encode("utf-8", "replace"), token.encode()):
+        return 403, ("refused: this page is out of date (iloci serve was started again since "
+                     "it was loaded) or the request does not come from it. Reload the page; "
+                     "the memory is safe. (A script sends the token of the page's <meta "
+                     f"name=\"iloci-token\"> in the {TOKEN_HEADER} header.)")
     ctype = headers.get("content-type", "").split(";")[0].strip().lower()
     want = "application/json" if body == "json" else "application/octet-stream"
     if ctype != want:
@@ -92,14 +110,23 @@ class HostGuard:
     def __init__(self, inner: Any, hosts: Any = ()) -> None:
         self.inner = inner
         self.state = inner.state
-        self.allowed = set(LOCAL_HOSTS) | {host_name(h) for h in hosts if h}
-        self.any_host = "*" in self.allowed
+        names = [h.strip() for h in hosts if h and h.strip()]
+        self.any_host = "*" in names
+        self.allowed = set(LOCAL_HOSTS) | {host_name(h) for h in names if h != "*"}
+        self.allowed.discard("")
 
     async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
-        if scope["type"] != "http":
+        if scope["type"] not in ("http", "websocket"):
             await self.inner(scope, receive, send)
             return
         host = dict(scope.get("headers") or []).get(b"host", b"").decode("latin-1")
+        if scope["type"] == "websocket":
+            # the page uses none; a socket to it under another name is closed unanswered
+            if not self.any_host and host_name(host) not in self.allowed:
+                await send({"type": "websocket.close", "code": 1008})
+                return
+            await self.inner(scope, receive, send)
+            return
         if not self.any_host and host_name(host) not in self.allowed:
             body = json.dumps({"error": (
                 f"refused: the Host {host[:80]!r} is not an address this server "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,14 @@ def write(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
     ("epochs = 3", '"learner.k_cutoff" = [1.0]', "unknown key"),
     ("", '"learner.k_cutoff" = [-1.0]', "k_cutoff must be >= 0"),
     ("", '"learner.no_such_key" = [1]', "no_such_key"),
+    ("", '"learner.k_cutoff" = ["a"]', r"setting \{'learner.k_cutoff': 'a'\}: learner.k_cutoff "
+     "must be a number"),
+    ("", '"learner.k_cutoff" = [nan]', "must be a finite number"),
+    ("", '"learner.k_cutoff" = [[0.1, 0.2]]', "must be a number, got \\[0.1, 0.2\\]"),
+    ("", '"learner.k_cutoff" = 0.5', "give a list of values"),
+    ("", f'"learner.k_cutoff" = {list(range(50))}\n"learner.num_threshold" = '
+         f'{list(range(1, 51))}', "2,500 settings .50 x 50. x 1 seed.s.; a sweep spec names "
+                                 "at most 2,000"),
 ])
 def test_a_bad_spec_is_one_config_error_naming_what_is_wrong(tmp_path, top, values, match):
     text = top + "\n" + SMALL + ("[values]\n" + values + "\n" if values else "")
@@ -246,6 +255,28 @@ def test_a_killed_worker_is_retried_and_the_sweep_leaves_no_ray_process(tmp_path
 
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_a_killed_raylet_is_restarted_and_every_run_is_stored(tmp_path):
+    import os
+    import signal
+    import time
+
+    # 4 runs, 2 at once: the last 2 need the raylet after it was killed
+    d = _sweep(tmp_path, '"learner.k_cutoff" = [0.5, 1.0]')
+    _first_worker(d.pid)
+    raylet = next(int(line.split(" ", 1)[0]) for line in _session(d.pid)
+                  if "/raylet/raylet " in line)
+    os.kill(raylet, signal.SIGKILL)  # the node's manager gone: no run is to blame
+    log = d.communicate(timeout=900)[0]
+    assert d.returncode == 0, log
+    assert len(list((tmp_path / "out" / "runs").glob("*.json"))) == 4
+    summary = log.split("4 runs:")[1]
+    assert summary.startswith(" 4 stored") and "0 failed" in summary
+    time.sleep(1)
+    assert _session(d.pid) == []
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
 def test_ray_left_by_a_driver_killed_with_sigkill_is_stopped_by_the_next_start(tmp_path):
     import os
     import signal
@@ -293,3 +324,41 @@ def test_a_base_config_with_a_byte_order_mark_passes_check_and_sweep(tmp_path, c
                                      '"learner.num_threshold" = [3]\n'))
     assert spec.base["learner"]["k_cutoff"] == 0.5
     assert plan_runs(spec)[0].config["learner"]["k_cutoff"] == 0.5
+
+
+@pytest.mark.parametrize("encoded, match", [
+    ("\ufeff[learner]\r\nk_cutoff = 0.5\r\n".encode(), None),   # BOM and CRLF: read
+    ("# caf\xe9\n[learner]\nk_cutoff = 0.5\n".encode("latin-1"),
+     "not UTF-8 text .*iconv -f cp1252"),
+    (b"[learner]\rk_cutoff = 0.5\r", "carriage return only"),
+], ids=["bom-crlf", "latin-1", "cr"])
+def test_a_base_config_in_another_encoding_reads_as_config_check_reads_it(
+        tmp_path, capsys, encoded, match):
+    from iloci.cli import main
+
+    base = tmp_path / "base.toml"
+    base.write_bytes(encoded)
+    spec = write(tmp_path, 'base = "base.toml"\n[values]\n"learner.num_threshold" = [3]\n')
+    if match is None:
+        assert main(["config", "check", str(base)]) == 0
+        assert plan_runs(load_spec(spec))[0].config["learner"]["k_cutoff"] == 0.5
+        return
+    assert main(["config", "check", str(base)]) == 2
+    assert re.search(match, capsys.readouterr().err)
+    with pytest.raises(ConfigError, match=match):
+        load_spec(spec)
+
+
+def test_ray_that_does_not_import_is_named_with_how_to_install(tmp_path, monkeypatch):
+    import sys
+
+    from iloci.errors import MissingBackendError
+    from iloci_ray.lifecycle import import_ray
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` meets without Ray
+    with pytest.raises(MissingBackendError, match=r"command 'iloci sweep' needs ray "
+                       r"\(ModuleNotFoundError.*pip install 'ray>=2.9'"):
+        import_ray()
+    spec = load_spec(write(tmp_path, SMALL + '[values]\n"learner.k_cutoff" = [1.0]\n'))
+    with pytest.raises(MissingBackendError, match="iloci sweep' needs ray"):
+        run_sweep(spec, tmp_path / "out")

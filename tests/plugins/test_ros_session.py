@@ -96,3 +96,30 @@ def test_every_feedback_twice_and_some_late_leaves_the_memory_of_each_once(lasa,
     assert entries_equal(once.entries, twice.entries)
     assert (once.demonstrations_seen, once.concepts()) == (twice.demonstrations_seen,
                                                           twice.concepts())
+
+
+def test_a_drawing_delivered_twice_or_late_is_not_learned_twice(lasa, small_agent):
+    """A message delivered twice while its guess waits keeps that guess (its id stays the
+    one to judge); delivered again after it was learned, with its key (the node's: the
+    message's stamp), in float32 (a Point32) or re-stamped, it changes nothing."""
+    session = TeachingSession(small_agent())
+    session.drawing(lasa["GShape/0"].positions, key="drawing/1001")
+    angle = lasa["Angle/0"]
+    guess = session.drawing(angle.positions, angle.times, key="drawing/1002")
+    again = session.drawing(angle.positions, angle.times, key="drawing/1002")
+    assert again is guess and session.pending is guess
+    placed = session.feedback(guess.answer_id, -1)
+    assert placed.action == "new_concept"
+    memory = session.agent.memory
+    counts = (len(memory.entries), memory.demonstrations_seen,
+              [e.num_samples for e in memory.entries])
+    for positions, times in [(angle.positions, angle.times),
+                             (angle.positions.astype(np.float32), angle.times),
+                             (angle.positions, angle.times + 1.7e9)]:
+        late = session.drawing(positions, times, key="drawing/1002")
+        assert isinstance(late, Placed) and late.action == "already_learned"
+        assert session.pending is None
+    memory = session.agent.memory
+    assert (len(memory.entries), memory.demonstrations_seen,
+            [e.num_samples for e in memory.entries]) == counts
+    assert sum(e.sources.count("drawing/1002") for e in memory.entries) == 1

@@ -96,7 +96,8 @@ function addPoint(e) {
 // capture ends the stroke without sending it
 pad.addEventListener("pointerdown", (e) => {
   e.preventDefault();
-  if (busy || drawing) return;               // another pointer is drawing: ignored
+  if (drawing) return;                       // another pointer is drawing: ignored
+  if (busy) { say("Wait a moment: the robot is still learning (the bar shows how far)."); return; }
   if (e.pointerType === "mouse" && e.button !== 0) return;
   pointer = e.pointerId;
   try { pad.setPointerCapture(e.pointerId); } catch (err) { /* not capturable */ }
@@ -214,6 +215,7 @@ function describe(outcome) {
     strengthen: `an example of "${outcome.concept}" it knew well (strengthened)`,
     new_exemplar: `a new example of "${outcome.concept}"`,
     new_concept: `a new concept, "${outcome.concept}"`,
+    already_learned: `nothing new: this very drawing is already in "${outcome.concept}"`,
   }[outcome.action] || outcome.action;
   const secs = outcome.rehearsal_seconds ? ` (rehearsal ${outcome.rehearsal_seconds.toFixed(1)} s)` : "";
   return `Learned: ${what}${secs}. Draw the next one.`;
@@ -243,7 +245,7 @@ function learned(data) {
   // the turn is over: no guess stays on screen
   pending = null;
   clearAnswer();
-  say(describe(data.outcome));
+  say((data.notice ? data.notice + " " : "") + describe(data.outcome));
   renderMemory(data.memory);
 }
 
@@ -290,7 +292,11 @@ $("no").addEventListener("click", () => judge(-1));
 $("new").addEventListener("click", () => judge("new"));
 $("clear").addEventListener("click", () => { clearPad(); showError(""); });
 document.addEventListener("keydown", (e) => {
-  if (e.target.tagName === "INPUT") return;
+  // typing a name, or a browser shortcut (Ctrl+S saves the page, Alt+N ...), is no answer
+  if (e.ctrlKey || e.metaKey || e.altKey || e.repeat) return;
+  const t = e.target;
+  if (t && (t.tagName === "INPUT" || t.tagName === "TEXTAREA" || t.tagName === "SELECT" ||
+            t.isContentEditable)) return;
   if (e.key === "y") judge(1);
   else if (e.key === "n") judge(-1);
   else if (e.key === "s" && pending && !pending.novel) judge("new");
@@ -328,13 +334,14 @@ async function control(path, body, done) {
   try {
     const data = await api(path, body);
     renderMemory(data.memory);
-    pending = null; clearAnswer();
     say(done(data));
-  } catch (err) { showError(err.message); }
+  } catch (err) { say(""); showError(err.message); }
 }
 
+let saved = false;       // whether the memory file exists (Export has something to give)
 function renderMemory(memory) {
   if (!memory) return;
+  saved = !!memory.saved;
   $("memsummary").textContent = `${memory.concepts.length} concept(s), ${memory.entries} entries, ` +
     `${memory.demonstrations_seen} drawing(s) learned; saved in ${memory.file}`;
   $("undo").disabled = !memory.undo;
@@ -366,8 +373,7 @@ function renderMemory(memory) {
         const data = await api("/api/rename", {concept: concept.name, name: input.value});
         renderMemory(data.memory);
         say(`Renamed "${concept.name}" to "${input.value.trim()}".`);
-        if (pending) { pending = null; clearAnswer(); }
-      } catch (err) { showError(err.message); }
+      } catch (err) { say(""); showError(err.message); }
     });
     div.appendChild(form);
     const forget = document.createElement("button");
@@ -409,6 +415,11 @@ $("reset").addEventListener("click", () => {
   if (!confirm("Start over with an empty memory? (Undo brings it back.)")) return;
   control("/api/reset", {}, () => "Started over: the memory is empty. Draw a first shape.");
 });
+$("export").addEventListener("click", (e) => {
+  if (saved) return;                         // the browser downloads the file
+  e.preventDefault();
+  showError("Nothing is saved yet: teach a first drawing, then export.");
+});
 $("import").addEventListener("change", async () => {
   const file = $("import").files[0];
   if (!file) return;
@@ -416,9 +427,8 @@ $("import").addEventListener("change", async () => {
   try {
     const data = await api("/api/import", await file.arrayBuffer(), true);
     renderMemory(data.memory);
-    pending = null; clearAnswer();
     say(`Imported ${file.name}. (Undo brings the previous memory back.)`);
-  } catch (err) { showError(err.message); }
+  } catch (err) { say(""); showError(err.message.replace("the file", file.name)); }
   $("import").value = "";
 });
 
@@ -442,6 +452,22 @@ async function start() {
       padCtx.stroke();
       showAnswer(state.pending);
     }
+    // a reload while the robot learns: say so, and show the memory once it has learned
+    if (state.progress) await stillLearning();
   } catch (err) { showError(err.message); }
+}
+
+async function stillLearning() {
+  say("The robot is still learning your last answer...");
+  await withProgress((async () => {
+    for (;;) {
+      await new Promise((r) => setTimeout(r, 500));
+      const p = (await api("/api/progress")).progress;
+      if (!p) return;
+    }
+  })());
+  const state = await api(`/api/state?client=${encodeURIComponent(CLIENT)}`);
+  renderMemory(state.memory);
+  say("The robot has learned your last answer. Draw the next one.");
 }
 start();

@@ -25,7 +25,9 @@
  *
  * The float32 arithmetic, one definition for every instruction set (so one
  * seed trains bit-identical networks on any CPU; tests/plugins force each
- * path and compare, and an aarch64 build under qemu-user):
+ * path and compare, and an aarch64 build under qemu-user). The training's
+ * is also written in numpy, iloci/rnnpb/float32.py (the reference's float32
+ * mode), and tested bit for bit against every path:
  *
  *   - a matrix product's element C[i, j] = init + sum_k A[i, k] B[k, j] is
  *     acc = init (a bias, the row being added to, or +0), then for k

@@ -30,6 +30,7 @@ import ctypes
 import os
 import sys
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Self
@@ -40,7 +41,7 @@ from iloci.errors import IlociError, InvalidInputError
 from iloci.interfaces import Execution
 from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot, get_robot
-from iloci.sensorimotor.robots.urdf import resolved_urdf_text
+from iloci.sensorimotor.robots.urdf import read_urdf, resolved_urdf_text
 from iloci_pybullet.params import PyBulletParams
 
 
@@ -131,9 +132,19 @@ class PyBulletSimulator:
         self._urdf.write_text(resolved_urdf_text(self.robot.urdf_path, self.robot.package_dirs),
                               encoding="utf-8")
         # the URDF's root frame is the world frame: root at the origin, fixed
+        massless = read_urdf(self.robot.urdf_path).massless_moving()
+        if massless:  # said once here, not as PyBullet's C-level line per link
+            warnings.warn(
+                f"{self.robot.urdf_path}: link(s) {', '.join(map(repr, massless))} move with a "
+                "joint but have no <inertial>; PyBullet gives each 1 kg and an inertia of "
+                "1 kg m^2, so the arm tracks its joint path less closely. Add <inertial> "
+                "elements with the real masses for a faithful simulation.",
+                UserWarning, stacklevel=2)
         try:
-            self._body = c.loadURDF(str(self._urdf), basePosition=(0, 0, 0),
-                                    useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE)
+            with _quiet():  # PyBullet's b3Warning lines (a missing inertial, ...)
+                self._body = c.loadURDF(str(self._urdf), basePosition=(0, 0, 0),
+                                        useFixedBase=True,
+                                        flags=pb.URDF_USE_INERTIA_FROM_FILE)
         except pb.error as exc:
             raise InvalidInputError(f"PyBullet cannot load the URDF of {self.robot.name!r} "
                                     f"({self.robot.urdf_path}): {exc}") from None
@@ -254,7 +265,7 @@ class PyBulletSimulator:
             return self._scene
         with _quiet():
             c = BulletClient(connection_mode=pb.DIRECT)
-        body = c.loadURDF(str(self._urdf), basePosition=(0, 0, 0), useFixedBase=True)
+            body = c.loadURDF(str(self._urdf), basePosition=(0, 0, 0), useFixedBase=True)
 
         def dots(points, radius, rgba) -> list[int]:
             shape = c.createVisualShape(pb.GEOM_SPHERE, radius=radius, rgbaColor=rgba)

@@ -54,6 +54,11 @@ def run(args: argparse.Namespace) -> int:
     def on_event(kind, run, metrics) -> None:
         if kind == "started":
             return
+        if kind == "restarted":
+            bars.log(f"Ray lost its raylet ({metrics['error']}): stopped and started again "
+                     f"({metrics['restart']} of {metrics['of']} times), {metrics['runs']} "
+                     "run(s) left, those in flight redone")
+            return
         if kind in ("retried", "failed"):
             what = "started again" if kind == "retried" else "recorded as failed"
             bars.log(f"run {run.key}: {run.setting}, seed {run.seed}, fold {run.fold}: "

@@ -35,7 +35,8 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
     InvalidInputError
         No cluster answers at ``address``.
     """
-    import ray
+    from iloci_ray.lifecycle import import_ray
+    ray = import_ray("fold executor", "ray")
 
     if ray.is_initialized():
         return ray

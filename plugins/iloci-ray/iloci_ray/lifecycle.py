@@ -26,9 +26,24 @@ import signal
 import time
 from typing import Any
 
-__all__ = ["marker_dir", "owned_ray", "ray_processes", "reap_orphans"]
+__all__ = ["import_ray", "marker_dir", "owned_ray", "ray_processes", "reap_orphans"]
 
 _PROC = Path("/proc")
+
+
+def import_ray(kind: str = "command", what: str = "iloci sweep") -> Any:
+    """The ``ray`` module; :class:`~iloci.errors.MissingBackendError` naming ``what``
+    and how to install it when Ray is not installed or does not import (a broken
+    install, a version built for another Python)."""
+    try:
+        import ray
+    except ImportError as exc:
+        from iloci.errors import MissingBackendError
+        raise MissingBackendError(
+            kind, what, [f"ray ({type(exc).__name__}: {exc})"],
+            "pip install 'ray>=2.9' (or reinstall ./plugins/iloci-ray), then run "
+            "`python -c \"import ray\"` to see that it imports") from exc
+    return ray
 
 
 def marker_dir() -> Path:
@@ -210,5 +225,4 @@ def owned_ray(address: str | None, jobs: int | None) -> Iterator[tuple[Any, Any]
 
 
 def _ray_initialized() -> bool:
-    import ray
-    return bool(ray.is_initialized())
+    return bool(import_ray().is_initialized())

@@ -30,8 +30,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+import contextlib
 import hashlib
 import itertools
+import math
 import json
 from pathlib import Path
 import time
@@ -79,6 +81,11 @@ class Run:
 
 
 _SPEC_KEYS = {"base", "seeds", "folds", "search", "samples", "random_seed", "config", "values"}
+
+#: Most settings one spec may name (the grid's product, or random ``samples``): each is
+#: checked against the configuration schema before anything runs (~10-60 ms each), and
+#: each is ``seeds x folds`` runs; 2,000 settings of 5 folds are already 10,000 runs.
+MAX_SETTINGS = 2_000
 
 
 def _error(source: str, message: str) -> ConfigError:
@@ -149,6 +156,14 @@ def load_spec(path: str | Path) -> SweepSpec:
     samples = raw.get("samples", 0)
     if search == "random" and not (isinstance(samples, int) and samples >= 1):
         raise _error(source, "search = 'random' needs samples = N (settings to draw, >= 1).")
+    count = math.prod(len(v) if isinstance(v, list) else 1 for v in values.values()) \
+        if search == "grid" else samples
+    if count > MAX_SETTINGS:
+        sizes = " x ".join(str(len(v)) for v in values.values() if isinstance(v, list))
+        raise _error(source, f"{count:,} settings ({sizes if search == 'grid' else 'samples'}"
+                     f") x {len(seeds)} seed(s); a sweep spec names at most {MAX_SETTINGS:,} "
+                     "settings (iloci_ray.sweep.MAX_SETTINGS): sweep fewer values, split the "
+                     "spec into several, or draw some with search = 'random' and samples = N.")
     spec = SweepSpec(base=base, values=dict(values), seeds=tuple(seeds),
                      folds=None if folds is None else tuple(folds), search=search,
                      samples=int(samples), random_seed=int(raw.get("random_seed", 0)),
@@ -194,7 +209,8 @@ def _resolve(spec: SweepSpec, setting: Mapping[str, Any], seed: int) -> dict[str
     try:
         return load_config(data).to_dict()
     except ConfigError as exc:
-        raise _error(spec.source, f"setting {dict(setting)}: {exc}") from None
+        said = str(exc).removeprefix("<dict>: ")  # the spec is the source, not a mapping
+        raise _error(spec.source, f"setting {dict(setting)}: {said}") from None
 
 
 def _update(data: dict[str, Any], sec: str, values: Mapping[str, Any]) -> None:
@@ -340,7 +356,11 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
     on_event : callable, optional
         ``on_event(kind, run, metrics)`` with kind ``"skipped"`` (stored
         before), ``"started"``, ``"finished"``, ``"retried"`` or ``"failed"``
-        (``metrics`` then ``{"error": message, "attempts": n}``).
+        (``metrics`` then ``{"error": message, "attempts": n}``), or ``"restarted"``
+        once when the Ray started here lost its raylet and is started again (``run``
+        the first of the runs redone, ``metrics`` ``{"error", "runs", "restart",
+        "of"}``): up to :data:`RAY_RESTARTS` times, the runs in flight redone
+        without counting that try; after that the runs left are recorded failed.
 
     Returns
     -------
@@ -350,11 +370,10 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
         ``runs``, ``reused`` (runs not recomputed), ``computed``,
         ``retried`` (runs that finished after a retry), ``failed`` (one dict
         per failed run: ``key``, ``setting``, ``seed``, ``fold``, ``error``,
-        ``attempts``), ``retries``, ``wall_seconds``, ``jobs``, ``address``.
+        ``attempts``), ``retries``, ``ray_restarts``, ``wall_seconds``, ``jobs``,
+        ``address``.
     """
-    from iloci.errors import IlociError
-    from iloci_ray.executor import unwrap
-    from iloci_ray.lifecycle import owned_ray, reap_orphans
+    from iloci_ray.lifecycle import reap_orphans
 
     if retries < 0:
         raise InvalidInputError(f"retries must be >= 0, got {retries}.")
@@ -377,53 +396,126 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, address: str | None = None,
     n_jobs = jobs
     attempts: dict[str, int] = {}
     failed: dict[str, dict[str, Any]] = {}
-    if unique:
-        with owned_ray(address, jobs) as (ray, refresh):
-            n_jobs = jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
-            remote = ray.remote(num_cpus=1, max_retries=0)(fold_run)
-            waiting = list(unique)
-            running: dict[Any, Run] = {}
-            try:
-                while waiting or running:
-                    while waiting and len(running) < n_jobs:
-                        run = waiting.pop(0)
-                        attempts[run.key] = attempts.get(run.key, 0) + 1
-                        running[remote.remote(run.config, run.fold)] = run
-                        emit("started", run, None)
-                    refresh()
-                    ready, _ = ray.wait(list(running), num_returns=1)
-                    for ref in ready:
-                        run = running.pop(ref)
-                        try:
-                            metrics = ray.get(ref)
-                        except Exception as exc:  # noqa: BLE001  (kept, reported, retried)
-                            err = unwrap(exc)
-                            why = _why(err)
-                            if isinstance(err, IlociError) or attempts[run.key] > retries:
-                                failed[run.key] = {
-                                    "key": run.key, "setting": run.setting, "seed": run.seed,
-                                    "fold": run.fold, "error": why,
-                                    "attempts": attempts[run.key]}
-                                emit("failed", run, {"error": why,
-                                                     "attempts": attempts[run.key]})
-                            else:
-                                waiting.insert(0, run)
-                                emit("retried", run, {"error": why,
-                                                      "attempts": attempts[run.key]})
-                            continue
-                        _store(out, run, metrics)
-                        done[run.key] = {"metrics": metrics}
-                        emit("finished", run, metrics)
-            finally:
-                for ref in running:
-                    ray.cancel(ref, force=True)
+    waiting = list(unique)
+    restarts = 0
+    while waiting:
+        lost = _run_on_ray(address, jobs, waiting, attempts, failed, done, out, retries,
+                           emit)
+        n_jobs = lost.pop("jobs", n_jobs)
+        if not lost.get("lost"):
+            break
+        # the Ray started here lost its raylet (killed, out of memory): not the runs'
+        # fault; it is stopped (all of it) and started afresh, the runs in flight redone
+        restarts += 1
+        if restarts > RAY_RESTARTS:
+            why = (f"the Ray started for this sweep lost its raylet {restarts} times "
+                   f"({lost['why']}); gave up")
+            for run in waiting:
+                failed[run.key] = {"key": run.key, "setting": run.setting, "seed": run.seed,
+                                   "fold": run.fold, "error": why,
+                                   "attempts": attempts.get(run.key, 0)}
+                emit("failed", run, {"error": why, "attempts": attempts.get(run.key, 0)})
+            break
+        emit("restarted", waiting[0], {"error": lost["why"], "runs": len(waiting),
+                                       "restart": restarts, "of": RAY_RESTARTS})
     records = [{"key": r.key, "setting": r.setting, "seed": r.seed, "fold": r.fold,
                 **done[r.key]["metrics"]} for r in runs if r.key in done]
     info = {"runs": len(runs), "reused": reused, "computed": len(unique) - len(failed),
             "retried": sum(1 for k, n in attempts.items() if n > 1 and k not in failed),
+            "ray_restarts": restarts,
             "failed": list(failed.values()), "retries": retries,
             "wall_seconds": time.perf_counter() - t0, "jobs": n_jobs, "address": address}
     return records, info
+
+
+#: Times a Ray started by a sweep is started again after it lost its raylet.
+RAY_RESTARTS = 2
+#: Errors that say the local Ray itself is gone, not that a run failed.
+_RAY_LOST = ("LocalRayletDiedError", "RaySystemError", "NodeDiedError")
+
+
+def _ray_lost(err: BaseException, address: str | None) -> bool:
+    """Whether ``err`` says the Ray this sweep started (no ``address``) is gone."""
+    return address is None and type(err).__name__ in _RAY_LOST
+
+
+def _run_on_ray(address: str | None, jobs: int | None, waiting: list[Run],
+                attempts: dict[str, int], failed: dict[str, dict[str, Any]],
+                done: dict[str, dict[str, Any]], out: Path, retries: int,
+                emit: Callable[[str, Run, dict[str, Any] | None], None]) -> dict[str, Any]:
+    """Run ``waiting`` (taken from the front) on one Ray session until none is left, or the
+    Ray started here is lost: then the runs in flight go back to the front of ``waiting``
+    (their try not counted) and ``{"lost": True, "why": ...}`` is returned."""
+    from iloci.errors import IlociError
+    from iloci_ray.executor import unwrap
+    from iloci_ray.lifecycle import owned_ray
+
+    with owned_ray(address, jobs) as (ray, refresh):
+        n_jobs = jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        remote = ray.remote(num_cpus=1, max_retries=0)(fold_run)
+        running: dict[Any, Run] = {}
+        lost: dict[str, Any] = {"jobs": n_jobs}
+
+        def give_back(why: str) -> dict[str, Any]:
+            back = list(running.values())
+            for run in back:
+                attempts[run.key] -= 1
+            waiting[:0] = back
+            running.clear()
+            return {**lost, "lost": True, "why": why}
+
+        try:
+            while waiting or running:
+                while waiting and len(running) < n_jobs:
+                    run = waiting[0]
+                    try:
+                        ref = remote.remote(run.config, run.fold)
+                    except Exception as exc:  # noqa: BLE001  (Ray itself failed)
+                        if _ray_lost(unwrap(exc), address):
+                            return give_back(_why(unwrap(exc)))
+                        raise
+                    waiting.pop(0)
+                    attempts[run.key] = attempts.get(run.key, 0) + 1
+                    running[ref] = run
+                    emit("started", run, None)
+                refresh()
+                try:
+                    ready, _ = ray.wait(list(running), num_returns=1)
+                except Exception as exc:  # noqa: BLE001  (Ray itself failed)
+                    if _ray_lost(unwrap(exc), address):
+                        return give_back(_why(unwrap(exc)))
+                    raise
+                for ref in ready:
+                    run = running[ref]
+                    try:
+                        metrics = ray.get(ref)
+                    except Exception as exc:  # noqa: BLE001  (kept, reported, retried)
+                        err = unwrap(exc)
+                        if _ray_lost(err, address):
+                            return give_back(_why(err))
+                        running.pop(ref)
+                        why = _why(err)
+                        if isinstance(err, IlociError) or attempts[run.key] > retries:
+                            failed[run.key] = {
+                                "key": run.key, "setting": run.setting, "seed": run.seed,
+                                "fold": run.fold, "error": why,
+                                "attempts": attempts[run.key]}
+                            emit("failed", run, {"error": why,
+                                                 "attempts": attempts[run.key]})
+                        else:
+                            waiting.insert(0, run)
+                            emit("retried", run, {"error": why,
+                                                  "attempts": attempts[run.key]})
+                        continue
+                    running.pop(ref)
+                    _store(out, run, metrics)
+                    done[run.key] = {"metrics": metrics}
+                    emit("finished", run, metrics)
+        finally:
+            for ref in running:
+                with contextlib.suppress(Exception):  # a lost Ray cannot cancel
+                    ray.cancel(ref, force=True)
+    return lost
 
 
 def _why(err: BaseException) -> str:
@@ -433,8 +525,9 @@ def _why(err: BaseException) -> str:
     if isinstance(err, IlociError):
         return f"{type(err).__name__}: {err}"
     name = type(err).__name__
-    if name in ("WorkerCrashedError", "NodeDiedError", "OutOfMemoryError",
-                "LocalRayletDiedError", "ActorDiedError"):
+    if name == "LocalRayletDiedError":
+        return f"{name}: the Ray node's raylet process died (killed, or out of memory)"
+    if name in ("WorkerCrashedError", "NodeDiedError", "OutOfMemoryError", "ActorDiedError"):
         return f"{name}: {DIED}"
     first = str(err).strip().splitlines()[0] if str(err).strip() else ""
     return f"{name}: {first[:300]}"
@@ -447,6 +540,9 @@ def summary_lines(info: dict[str, Any], records: list[dict[str, Any]], command: 
     lines = [f"{info['runs']} runs: {len(records)} stored ({info['computed']} computed now, "
              f"{info['retried']} of them after a retry; {info['reused']} stored before), "
              f"{len(failed)} failed."]
+    if info.get("ray_restarts"):
+        lines.append(f"The Ray started for the sweep lost its raylet and was started again "
+                     f"{info['ray_restarts']} time(s); the runs in flight then were redone.")
     if failed:
         lines.append(f"{'run':20s}  {'seed':>4s}  {'fold':>4s}  {'tries':>5s}  setting: error")
         for f in failed:

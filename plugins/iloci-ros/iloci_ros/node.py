@@ -113,14 +113,26 @@ class RosNode:
 
     # -- in ------------------------------------------------------------------------
     def _on_path(self, msg: Any) -> None:
-        self._drawing(*path_to_drawing(msg))
+        self._drawing(*path_to_drawing(msg), key=self._key(msg))
 
     def _on_polygon(self, msg: Any) -> None:
-        self._drawing(*polygon_to_drawing(msg))
+        self._drawing(*polygon_to_drawing(msg), key=self._key(msg))
 
-    def _drawing(self, positions: np.ndarray, times: np.ndarray | None) -> None:
+    def _key(self, msg: Any) -> str | None:
+        """``"{shape}/{stamp in ns}"`` of a message with a header stamp, else None (a counter).
+
+        The same message delivered again (a duplicate, a late copy, a bag
+        replayed) then has the same key, and teaching it again changes
+        nothing (``already_learned``).
+        """
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        ns = int(stamp.to_nsec()) if stamp is not None else 0
+        return f"{self.session.shape}/{ns}" if ns > 0 else None
+
+    def _drawing(self, positions: np.ndarray, times: np.ndarray | None,
+                 key: str | None = None) -> None:
         try:
-            result = self.session.drawing(positions, times)
+            result = self.session.drawing(positions, times, key=key)
         except IlociError as exc:
             self.rospy.logwarn(f"iloci: drawing refused: {exc}")
             self._send(self.pub_error, {"error": str(exc)})

@@ -172,7 +172,14 @@ class TeachingSession:
             Strictly increasing time stamps (s).
         key : str, optional
             ``"SHAPE/INDEX"`` for the demonstration; by default
-            ``"{shape}/{n}"``.
+            ``"{shape}/{n}"``. A drawing that comes again (a message
+            delivered twice, a bag replayed) is recognized by its key and
+            positions (:func:`iloci.concepts.memory.demonstration_digest`):
+            while its guess is pending, that guess is returned again (its
+            answer id stays the one to judge); once learned, it is placed as
+            ``already_learned`` with nothing changed, provided its key is
+            the same (give one, e.g. from the message's stamp: the default
+            counter moves on after each learned drawing).
 
         Raises
         ------
@@ -192,6 +199,12 @@ class TeachingSession:
                 index = int(idx)
             demo = iloci.Demonstration(np.asarray(positions, dtype=np.float64),
                                        times=times, shape=shape, index=index)
+            from iloci.concepts.memory import demonstration_digest
+            if self._turn is not None and self.pending is not None and \
+                    demonstration_digest(self._turn.demo) == demonstration_digest(demo):
+                # the same drawing again (a duplicate delivery): its guess still waits
+                self.last_seconds = self._clock() - t0
+                return self.pending
             turn = self.agent.observe(demo)
             self._turn = turn          # the previous turn, if any, is abandoned
             result = self._after(turn)
