@@ -260,10 +260,15 @@ def ablation(runs: list[dict]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for ds in dict.fromkeys(r["dataset"] for r in runs):
         rs = [r for r in runs if r["dataset"] == ds]
-        table = {row: {"ccr_mean": float(np.mean([r["decisions"][row]["ccr_mean"] for r in rs])),
-                       "ccr_min_fold": float(min(r["decisions"][row]["ccr_min"] for r in rs)),
-                       "seeds": {str(r["seed"]): r["decisions"][row]["ccr_mean"] for r in rs}}
-                 for row in rs[0]["decisions"]}
+        rows = list(dict.fromkeys(row for r in rs for row in r["decisions"]))
+        # a row measured on some seeds only is averaged over those (``seeds`` names them)
+        table = {row: {"ccr_mean": float(np.mean([r["decisions"][row]["ccr_mean"]
+                                                  for r in rs if row in r["decisions"]])),
+                       "ccr_min_fold": float(min(r["decisions"][row]["ccr_min"]
+                                                 for r in rs if row in r["decisions"])),
+                       "seeds": {str(r["seed"]): r["decisions"][row]["ccr_mean"]
+                                 for r in rs if row in r["decisions"]}}
+                 for row in rows}
         base = {b: {"ccr_mean": float(np.mean([r["baselines"][b]["ccr_mean"] for r in rs])),
                     "seeds": {str(r["seed"]): r["baselines"][b]["ccr_mean"] for r in rs}}
                 for b in rs[0]["baselines"]}
