@@ -490,3 +490,26 @@ def test_shortcuts_names_an_empty_export_and_a_reload_while_learning(tmp_path, b
         expect(phone.locator(long_name)).to_have_count(1)
         width = phone.evaluate("document.documentElement.scrollWidth")
         assert width <= 390, f"the page is {width} px wide on a 390 px phone"
+
+
+def test_a_guess_like_nothing_taught_says_unsure_on_the_page(tmp_path, browser):
+    """With [learner] unknown_below above every familiarity, each guess is "Unsure" with
+    its familiarity and no confidence (the page's wording of the server's flag)."""
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    config = {"perceptual_model": {"name": "native-rnnpb", "epochs": EPOCHS,
+                                   "recognition_steps": EPOCHS},
+              "learner": {"rehearsal_epochs": EPOCHS, "unknown_below": 1.0},
+              "evaluation": {"seed": 0}}
+    expect = sync_api.expect
+    with serving(tmp_path / "m.npz", config=config) as (url, _):
+        page = browser.new_page(viewport={"width": 1000, "height": 900})
+        page.goto(url)
+        teach_first(page, lasa)
+        draw(page, lasa["Angle/0"], "fast")
+        expect(page.locator("#new")).to_be_visible(timeout=WAIT)
+        page.locator("#new").click()
+        expect(page.locator("#message")).to_contain_text('new concept, "c2"', timeout=WAIT)
+        draw(page, lasa["GShape/1"], "slow")
+        expect(page.locator("#guess")).to_contain_text("Unsure", timeout=WAIT)
+        expect(page.locator("#guess")).to_contain_text("familiarity 0.")
+        assert "confidence" not in page.locator("#guess").inner_text()

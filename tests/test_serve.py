@@ -461,6 +461,31 @@ def test_names_ports_origins_and_routes_are_checked_strictly(served, lasa):
     assert r.status_code == 404 and "nothing at /api/nothing" in r.json()["error"]
 
 
+def test_a_guess_for_a_drawing_like_nothing_taught_says_unsure_not_a_confidence(tmp_path,
+                                                                                 lasa):
+    """Below [learner] unknown_below (Recognize's "unknown"), a guess shows no margin
+    confidence: between two poor matches it can be 1.00. With the default config and 5
+    shapes taught, LASA's heee got "c3, confidence 0.999" at familiarity 0.66."""
+    for below, unsure in ((1.0, True), (0.0, False)):
+        config = small_config(learner={"unknown_below": below})
+        classroom = build_classroom(tmp_path / f"m{below}.npz", config, worker=False,
+                                    protocol="paper")
+        try:
+            with page_client(classroom) as client:
+                client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+                a = client.post("/api/observe",
+                                json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
+                judge(client, a, "new")                  # two concepts: a familiarity scale
+                a = client.post("/api/observe",
+                                json={"points": stroke(lasa["GShape/1"])}).json()["answer"]
+                assert a["unsure"] is unsure and 0 < a["familiarity"] <= 1
+                assert (a["confidence"] is None) is unsure
+                pending = client.get("/api/state").json()["pending"]   # a reload says the same
+                assert pending["unsure"] is unsure
+        finally:
+            classroom.close()
+
+
 def test_errors_are_in_a_persons_words(served, lasa):
     client, classroom, memory = served
     r = client.post("/api/recognize", json={"points": stroke(lasa["GShape/0"])})

@@ -32,6 +32,10 @@ zero, as in the kernel's layout):
   ``g * (1 - o o)`` separately rounded;
 * everything else (the loss, the mixing of inputs, Adam) separately
   rounded float32 operations in the order written below;
+* the closed-loop prediction error of a row scoring candidate PBs
+  (:func:`prediction_errors`): the forward pass above, each step's
+  ``sum_D d^2`` in float32, its sum over steps weighted by the mask in
+  float64, over ``D`` and the row's step count;
 * in float64: the loss's sum over rows (each row's float32
   ``sum_D d^2`` times its weight, added in time-major order), the
   clipping norm (8 partial sums of the squares, interleaved over the flat
@@ -60,7 +64,7 @@ import numpy as np
 
 from iloci.params import RNNPBParams
 
-__all__ = ["fma", "tanh", "train"]
+__all__ = ["fma", "tanh", "train", "prediction_errors"]
 
 F32 = np.float32
 #: tanh's clamp and its rational function's coefficients, as the kernel's float literals
@@ -149,29 +153,16 @@ def train(weights: Mapping[str, np.ndarray], u: np.ndarray, X: np.ndarray, mw: n
         The last epoch's loss (float32's value).
     losses : ndarray (float32), shape (epochs,)
     """
-    w_in = np.asarray(weights["w_in"], np.float32)
-    w_out = np.asarray(weights["w_out"], np.float32)
     X = np.asarray(X, np.float32)
     mw = np.asarray(mw, np.float32)
     u = np.array(u, np.float32)
     T, R, D = X.shape
-    H, S = w_out.shape
+    H, S = np.asarray(weights["w_out"]).shape
     P = u.shape[1]
     L, Sp, Hp = T - 1, _round16(S), _round16(H)
     alpha, bound = F32(params.closed_loop), F32(params.pb_bound)
     # the padded parameters, flat as the kernel holds them: Ws | Wp | bh | Wo | bo
-    Ws = np.zeros((Sp, Hp), np.float32)
-    Ws[:S, :H] = w_in[:S]
-    Wp = np.zeros((P, Hp), np.float32)
-    Wp[:, :H] = w_in[S:]
-    bh = np.zeros(Hp, np.float32)
-    bh[:H] = np.asarray(weights["b_hidden"], np.float32)
-    Wo = np.zeros((Hp, Sp), np.float32)
-    Wo[:H, :S] = w_out
-    bo = np.zeros(Sp, np.float32)
-    bo[:S] = np.asarray(weights["b_out"], np.float32)
-    parts = [Ws, Wp, bh, Wo, bo]
-    flat = np.concatenate([p.ravel() for p in parts])
+    flat = np.concatenate([p.ravel() for p in _padded(weights, S, H, P)])
     m, v = np.zeros_like(flat), np.zeros_like(flat)
     mu, vu = np.zeros_like(u), np.zeros_like(u)
     mix = np.zeros(Sp, np.float32)
@@ -273,3 +264,64 @@ def _adam(p: np.ndarray, g: np.ndarray, m: np.ndarray, v: np.ndarray, lr: float,
     m[...] = b1 * m + (F32(1.0) - b1) * gi
     v[...] = b2 * v + ((F32(1.0) - b2) * gi) * gi
     return p - (step * m) / (np.sqrt(v) + F32(1e-8))
+
+
+def _padded(weights: Mapping[str, np.ndarray], S: int, H: int, P: int
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's padded Ws, Wp, bh, Wo, bo from the weight dict (float32)."""
+    Sp, Hp = _round16(S), _round16(H)
+    w_in = np.asarray(weights["w_in"], np.float32)
+    Ws = np.zeros((Sp, Hp), np.float32)
+    Ws[:S, :H] = w_in[:S]
+    Wp = np.zeros((P, Hp), np.float32)
+    Wp[:, :H] = w_in[S:]
+    bh = np.zeros(Hp, np.float32)
+    bh[:H] = np.asarray(weights["b_hidden"], np.float32)
+    Wo = np.zeros((Hp, Sp), np.float32)
+    Wo[:H, :S] = np.asarray(weights["w_out"], np.float32)
+    bo = np.zeros(Sp, np.float32)
+    bo[:S] = np.asarray(weights["b_out"], np.float32)
+    return Ws, Wp, bh, Wo, bo
+
+
+def prediction_errors(weights: Mapping[str, np.ndarray], pbs: np.ndarray, X: np.ndarray,
+                      mask: np.ndarray) -> np.ndarray:
+    """Closed-loop prediction error of each row under its PB, in the kernel's float32 arithmetic.
+
+    What native-rnnpb's kernel computes to score candidate PBs
+    (``iloci_rnnpb_errors``): the same bits.
+
+    Parameters
+    ----------
+    weights : dict of ndarray
+    pbs : ndarray, shape (R, P)
+        The PBs themselves (not ``u``).
+    X : ndarray, shape (T, R, D)
+    mask : ndarray, shape (T - 1, R)
+
+    Returns
+    -------
+    ndarray (float32), shape (R,)
+        ``sum_t mask[t, r] sum_D (y_t - X[t + 1])^2 / D / max(1, sum_t mask[t, r])``.
+    """
+    X = np.asarray(X, np.float32)
+    mask = np.asarray(mask, np.float32)
+    pbs = np.asarray(pbs, np.float32)
+    T, R, D = X.shape
+    H, S = np.asarray(weights["w_out"]).shape
+    Ws, Wp, bh, Wo, bo = _padded(weights, S, H, pbs.shape[1])
+    pre = _product(pbs, Wp, pbs.shape[1], bh)
+    state = np.zeros((R, _round16(S)), np.float32)
+    state[:, :D] = X[0]
+    total = np.zeros(R, np.float64)
+    steps = np.zeros(R, np.float64)
+    for t in range(T - 1):
+        h = tanh(_product(state, Ws, S, pre))
+        state = tanh(_product(h, Wo, H, bo))
+        d = state[:, :D] - X[t + 1]
+        part = np.zeros(R, np.float32)
+        for j in range(D):
+            part = part + d[:, j] * d[:, j]
+        total += part.astype(np.float64) * mask[t].astype(np.float64)
+        steps += mask[t].astype(np.float64)
+    return (total / D / np.maximum(steps, 1.0)).astype(np.float32)

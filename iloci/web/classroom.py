@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import io
+import math
 import os
 from pathlib import Path
 import tempfile
@@ -46,6 +47,7 @@ class _Turn:
         self.memory = memory
         self.revision = memory.revision
         self.pending: list = []      # its observer events (the learner's are per turn)
+        self.familiarity: float | None = None     # how like what it was taught (0..1]
 
 
 class Classroom:
@@ -129,6 +131,13 @@ class Classroom:
         while len(self.gone) > 256:
             del self.gone[min(self.gone)]
 
+    def _familiarity(self, turn: Any) -> float | None:
+        """The drawing's familiarity (:attr:`Turn.familiarity`), None where it has none."""
+        with contextlib.suppress(IlociError, ValueError, FloatingPointError):
+            value = float(turn.familiarity)
+            return value if math.isfinite(value) else None
+        return None
+
     def answer_json(self, answer: Any, turn_id: int | None = None) -> dict[str, Any]:
         r = answer.response
         tid = self.turn_id if turn_id is None else turn_id
@@ -140,8 +149,15 @@ class Classroom:
         if rec is not None and not r.novel:
             concepts = set(self.agent.memory.concepts())
             last = len(concepts - set(rec.turn.tried) - {answer.concept}) == 0
+        # a drawing like nothing it was taught (below [learner] unknown_below, as
+        # Recognize says "unknown"): the margin between two poor matches can be 1.00,
+        # which is no certainty either (issue 26: a straight line was "c2, 1.00")
+        fam = rec.familiarity if rec is not None else None
+        below = float(getattr(self.agent.config.learner, "unknown_below", 0.0) or 0.0)
+        unsure = bool(not r.novel and fam is not None and below > 0 and fam < below)
         out = {"id": answer.id, "turn": tid, "concept": answer.concept, "novel": bool(r.novel),
-               "confidence": None if last else confidence, "last_guess": last,
+               "confidence": None if (last or unsure) else confidence, "last_guess": last,
+               "unsure": unsure, "familiarity": None if fam is None else round(fam, 3),
                "attempt": answer.attempt,
                "drawing": polyline(answer.drawing), "dt": answer.dt,
                "joint_path": [[round(float(v), 5) for v in row] for row in answer.joint_path],
@@ -218,6 +234,7 @@ class Classroom:
                 self.progress = None
         self.turns[tid] = _Turn(turn, demo, points, client, self.agent.memory)
         self.turns[tid].pending = list(turn.learner.queued_events)
+        self.turns[tid].familiarity = await asyncio.to_thread(self._familiarity, turn)
         while len(self.turns) > MAX_TURNS:
             self._end_turn(min(self.turns), f"more than {MAX_TURNS} tabs had a guess waiting; "
                                             "the oldest was let go")

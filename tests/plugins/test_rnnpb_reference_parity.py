@@ -168,3 +168,22 @@ def test_reference_float32_fma_rounds_once():
     for p, q, r, g in zip(x, y, z, got):
         want = _nearest_float32(Fraction(float(p)) * Fraction(float(q)) + Fraction(float(r)))
         assert g == want, (p, q, r)
+
+
+@pytest.mark.parametrize("isa", _native_isas())
+def test_native_scores_are_the_reference_float32_errors_bit_for_bit(isa, monkeypatch):
+    # Weaker than the training's test: each error is a float64 sum rounded once
+    # to float32, which absorbs a last-bit difference inside the forward pass
+    # (an unfused multiply-add there passes this test, not the training's).
+    from iloci.rnnpb.float32 import prediction_errors
+
+    seqs = synthetic_sequences(5, 6, lengths=(14, 20, 9), seed=2)
+    model = _model("native", "float32", f"native-{isa}", monkeypatch, hidden=24, context=9)
+    model.train(seqs, epochs=30)
+    X, mask, _ = model._padded(seqs, geometric=False)
+    pbs = np.random.default_rng(1).uniform(-0.9, 0.9, size=(X.shape[1], model.pb_size))
+    got = model._error_kernel(X, mask, pbs, exact=False)
+    w = {k: model.state()[k] for k in WEIGHT_NAMES}
+    want = prediction_errors(w, pbs, X, mask)
+    assert want.dtype == np.float32 and np.all(want[:len(seqs)] > 0)  # padding rows: 0
+    np.testing.assert_array_equal(got, want.astype(np.float64))

@@ -203,6 +203,10 @@ function showAnswer(answer) {
     answer.last_guess ?
     `Is it "${answer.concept}"? It is the only concept left to guess, so this is no ` +
     `certainty (attempt ${answer.attempt})` :
+    answer.unsure ?
+    `Is it "${answer.concept}"? Unsure: the drawing is like nothing it was taught ` +
+    `(familiarity ${answer.familiarity.toFixed(2)}); if it is new, say Something new ` +
+    `(attempt ${answer.attempt})` :
     `Is it "${answer.concept}"? (confidence ${answer.confidence === null ? "n/a" : answer.confidence.toFixed(2)}, ` +
     `attempt ${answer.attempt})`;
   $("judge").hidden = false;
