@@ -62,15 +62,23 @@ RESULTS = HERE / "results" / "recognition.json"
 DATASETS = ("lasa", "unipen", "unipen-writers")
 
 #: row -> ``[learner]`` changes recognized with (on the same memories).
+#: The ``regeneration-*`` rows are the ablation of the default's comparison
+#: (``compare = "both"``, ``warp = 8``): what each of its two changes does.
 DECISIONS: dict[str, dict[str, Any]] = {
     "pb_distance": {"decision": "pb_distance"},          # the paper
-    "regeneration": {"decision": "regeneration"},        # the default
-    "regeneration-warp-8": {"decision": "regeneration", "warp": 8},
+    "regeneration": {"decision": "regeneration"},        # the default: both, warp 8
+    "regeneration-displacements": {"decision": "regeneration", "compare": "displacements",
+                                   "warp": 0},           # the default until issue 25 part 5
+    "regeneration-displacements-warp-8": {"decision": "regeneration",
+                                          "compare": "displacements", "warp": 8},
+    "regeneration-both-no-warp": {"decision": "regeneration", "compare": "both", "warp": 0},
+    "regeneration-positions": {"decision": "regeneration", "compare": "positions"},
     "regeneration-no-tilt": {"decision": "regeneration", "tilts": []},
     "reproduction": {"decision": "reproduction"},
 }
 #: Rows run unless ``--rows`` says otherwise (the others cost more time).
-DEFAULT_ROWS = ("pb_distance", "regeneration")
+DEFAULT_ROWS = ("regeneration", "regeneration-displacements",
+                "regeneration-displacements-warp-8", "regeneration-both-no-warp")
 #: ``[learner] familiarity`` settings compared (``unknown_below`` is set
 #: just above 0 so that the reproduction errors are computed; its answers
 #: are not scored here).
@@ -128,7 +136,7 @@ def _auroc(known: list[float], outside: list[float]) -> float:
 
 def run_one(dataset: str, seed: int, jobs: int, data_dir: Path | None, root: Path,
             letters: list | None, rows_run: tuple[str, ...] = DEFAULT_ROWS,
-            untaught: bool = True) -> dict[str, Any]:
+            familiarity_on: bool = True, untaught: bool = True) -> dict[str, Any]:
     from iloci.data.concepts import GroundTruth
     from iloci.evaluation.evaluate import evaluate
 
@@ -153,12 +161,17 @@ def run_one(dataset: str, seed: int, jobs: int, data_dir: Path | None, root: Pat
         path = memories / f"fold-{res.fold}.npz"
         for row in rows_run:
             t1 = time.perf_counter()
+            if DECISIONS[row] == {"decision": "regeneration"}:
+                # the default on this memory is what evaluate() just scored
+                rows[row]["ccr_folds"].append(float(res.ccr))
+                rows[row]["from_evaluate"] = True
+                continue
             ccr, _ = _ccr(_agent(path, DECISIONS[row]), test, truth)
             rows[row]["ccr_folds"].append(ccr)
             rows[row]["seconds"] += time.perf_counter() - t1
-        if res.fold == 0 and dataset in ("lasa", "unipen"):
+        if familiarity_on and res.fold == 0 and dataset in ("lasa", "unipen"):
             familiarity = _unseen(dataset, path, test, letters)
-    if dataset == "lasa" and untaught:
+    if dataset == "lasa" and untaught and familiarity_on:
         familiarity["untaught"] = _untaught(seed, jobs, root, demos)
     for row in rows.values():
         row["ccr_mean"] = float(np.mean(row["ccr_folds"]))
@@ -247,10 +260,15 @@ def ablation(runs: list[dict]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for ds in dict.fromkeys(r["dataset"] for r in runs):
         rs = [r for r in runs if r["dataset"] == ds]
-        table = {row: {"ccr_mean": float(np.mean([r["decisions"][row]["ccr_mean"] for r in rs])),
-                       "ccr_min_fold": float(min(r["decisions"][row]["ccr_min"] for r in rs)),
-                       "seeds": {str(r["seed"]): r["decisions"][row]["ccr_mean"] for r in rs}}
-                 for row in rs[0]["decisions"]}
+        rows = list(dict.fromkeys(row for r in rs for row in r["decisions"]))
+        # a row measured on some seeds only is averaged over those (``seeds`` names them)
+        table = {row: {"ccr_mean": float(np.mean([r["decisions"][row]["ccr_mean"]
+                                                  for r in rs if row in r["decisions"]])),
+                       "ccr_min_fold": float(min(r["decisions"][row]["ccr_min"]
+                                                 for r in rs if row in r["decisions"])),
+                       "seeds": {str(r["seed"]): r["decisions"][row]["ccr_mean"]
+                                 for r in rs if row in r["decisions"]}}
+                 for row in rows}
         base = {b: {"ccr_mean": float(np.mean([r["baselines"][b]["ccr_mean"] for r in rs])),
                     "seeds": {str(r["seed"]): r["baselines"][b]["ccr_mean"] for r in rs}}
                 for b in rs[0]["baselines"]}
@@ -273,6 +291,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--jobs", "-j", type=int, default=2)
     ap.add_argument("--rows", default=",".join(DEFAULT_ROWS),
                     help=f"comma-separated decision rows of {', '.join(DECISIONS)}")
+    ap.add_argument("--familiarity-seeds", type=int, nargs="*", default=None,
+                    help="seeds whose fold 0 also measures familiarity (default: every seed)")
     ap.add_argument("--runs", default="runs/recognition", help="where fold memories go")
     ap.add_argument("--no-untaught", action="store_true",
                     help="skip the LASA untaught-concepts familiarity (5 more folds learned)")
@@ -298,12 +318,31 @@ def main(argv: list[str] | None = None) -> dict:
         letters = _letters(args.unipen, 0)
     load_before = os.getloadavg()
     t0 = time.perf_counter()
-    runs = []
+    runs: list[dict] = []
+
+    def write() -> dict:
+        out = {
+            "command": "python benchmarks/recognition.py " + " ".join(argv or sys.argv[1:]),
+            "decisions": {r: DECISIONS[r] for r in rows_run},
+            "familiarities": list(FAMILIARITIES),
+            "redrawn_multi_models": sorted(REDRAWN), "digit_like_letters": sorted(DIGIT_LIKE),
+            "runs": runs, "ablation": ablation(runs),
+            "wall_seconds": time.perf_counter() - t0,
+            "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+                        "load_before": load_before, "load_after": os.getloadavg()},
+        }
+        if args.note:
+            out["note"] = args.note
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+        return out
+
     for ds in args.datasets:
         seeds = (args.unipen_seeds or args.seeds) if ds.startswith("unipen") else args.seeds
         for seed in seeds:
             print(f"[recognition] {ds} seed {seed} ...", file=sys.stderr, flush=True)
-            r = run_one(ds, seed, args.jobs, data_dir, Path(args.runs), letters, rows_run,
+            fam = args.familiarity_seeds is None or seed in args.familiarity_seeds
+            r = run_one(ds, seed, args.jobs, data_dir, Path(args.runs), letters, rows_run, fam,
                         not args.no_untaught)
             runs.append(r)
             print(f"[recognition] {ds} seed {seed}: " + ", ".join(
@@ -311,19 +350,8 @@ def main(argv: list[str] | None = None) -> dict:
                 + "; " + ", ".join(f"{b} {100 * v['ccr_mean']:.2f}"
                                    for b, v in r["baselines"].items()),
                 file=sys.stderr, flush=True)
-    out = {
-        "command": "python benchmarks/recognition.py " + " ".join(argv or sys.argv[1:]),
-        "decisions": {r: DECISIONS[r] for r in rows_run}, "familiarities": list(FAMILIARITIES),
-        "redrawn_multi_models": sorted(REDRAWN), "digit_like_letters": sorted(DIGIT_LIKE),
-        "runs": runs, "ablation": ablation(runs),
-        "wall_seconds": time.perf_counter() - t0,
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                    "load_before": load_before, "load_after": os.getloadavg()},
-    }
-    if args.note:
-        out["note"] = args.note
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+            write()  # after every run, so a stopped benchmark keeps what it measured
+    out = write()
     print(f"wrote {args.out}", file=sys.stderr)
     return out
 

@@ -103,7 +103,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # a file name the OS gives as bytes that are not UTF-8 is printed with those
         # bytes as \xNN, not a UnicodeEncodeError (see iloci.data.files.shape_name)
         reconfigure = getattr(stream, "reconfigure", None)
-        if reconfigure is not None and getattr(stream, "errors", "") == "strict":
+        if reconfigure is not None and getattr(stream, "errors", "") in (
+                "strict", "backslashreplace"):  # stderr: \udcNN otherwise
             reconfigure(errors="iloci-bytes")
     with warnings.catch_warnings(), progress_sink(_show_progress):
         warnings.showwarning = _show_warning

@@ -119,8 +119,23 @@ class LearnerConfig:
     #: encoded sequence) the comparison of a drawing with a regenerated
     #: pattern may shift one against the other, by dynamic time warping in
     #: a band of this half-width (:func:`~iloci.concepts.learner.pattern_distances`);
-    #: 0 compares step ``t`` with step ``t``.
-    warp: int = constrained(0, Interval(0))
+    #: 0 compares step ``t`` with step ``t``. 8 steps (16 % of the default
+    #: 50): a corner drawn a little earlier or later along the path costs
+    #: its shape difference only (docs/method.md, "Recognition by
+    #: regeneration").
+    warp: int = constrained(8, Interval(0))
+    #: ``decision`` / ``familiarity = "regeneration"``: what of a drawing and
+    #: a regenerated pattern is compared (:func:`~iloci.concepts.inference.pattern_distances`):
+    #: ``"both"`` (the positions each moves through, pen in the drawing
+    #: plane and joint angles relative to the start, centred, beside the
+    #: encoded displacement rows, each half weighed by its spread over the
+    #: memory's regenerated patterns), ``"positions"`` (the positions
+    #: alone) or ``"displacements"`` (the encoded rows the network reads,
+    #: alone; the default until this change). Positions tell shapes apart by where
+    #: the pen goes, as DTW on normalised paths does; displacements keep
+    #: the direction of each step. Measured in docs/method.md,
+    #: "Recognition by regeneration".
+    compare: str = constrained("both", Options("both", "positions", "displacements"))
     #: What each rehearsal trains the network on for the entries it already
     #: holds: ``"regenerated"`` (the paper: each entry's pattern generated
     #: closed-loop from its PB; the robot keeps no demonstration) or

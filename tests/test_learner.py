@@ -20,7 +20,8 @@ import iloci
 from iloci import hookimpl
 from iloci.agent import SkippedDemonstrationWarning
 from iloci.concepts import rehearsal
-from iloci.concepts.inference import PATH_WARP, path_distances, path_scale, pen_path
+from iloci.concepts.inference import (PATH_WARP, as_positions, path_distances, path_scale,
+                                      pen_path)
 from iloci.concepts.learner import (novelty_scale, pattern_distances,
                                     regenerated_patterns, regeneration_scale)
 from iloci.concepts.memory import entries_equal
@@ -706,7 +707,8 @@ def test_reproduction_decision_answers_with_the_entry_that_reproduces_best(lasa)
 
 
 def test_regeneration_decision_answers_with_the_nearest_regenerated_pattern(lasa):
-    agent = make_agent(decision="regeneration", familiarity="regeneration", tilts=())
+    agent = make_agent(decision="regeneration", familiarity="regeneration", tilts=(), warp=0,
+                       compare="displacements")
     agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
     demos = [lasa["GShape/2"], lasa["Sine/3"], lasa["Angle/5"]]
     seqs = [agent._encode(agent.motion(d))[0] for d in demos]
@@ -731,6 +733,71 @@ def test_regeneration_decision_answers_with_the_nearest_regenerated_pattern(lasa
         assert r.familiarity == pytest.approx(scale / (scale + row.min()))
     with pytest.raises(iloci.errors.ConfigError, match="familiarity must be"):
         iloci.build(small_config(familiarity="regenerated"))
+
+
+def test_default_regeneration_compares_positions_and_displacements_warped(lasa):
+    """The default compare = "both", warp = 8: each entry's distance is pattern_distances of
+    the encoded drawing, as positions and displacements, to its regenerated pattern."""
+    agent = make_agent(familiarity="regeneration", tilts=())
+    assert (agent.config.learner.compare, agent.config.learner.warp) == ("both", 8)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    demos = [lasa["GShape/2"], lasa["Sine/3"]]
+    seqs = [agent._encode(agent.motion(d))[0] for d in demos]
+    patterns = regenerated_patterns(agent.perceptual_model, agent.memory)
+    d = agent.learner.regeneration_distances(seqs)
+    np.testing.assert_allclose(d, pattern_distances(seqs, patterns, 8, "both"))
+    assert not np.allclose(d, pattern_distances(seqs, patterns, 8, "displacements"))
+    scale = regeneration_scale(patterns, agent.memory.concept_labels, 8, "both")
+    for r, row in zip(agent.recognize(demos), d):
+        assert r.entry == int(np.argmin(row))
+        assert r.familiarity == pytest.approx(scale / (scale + row.min()))
+    with pytest.raises(iloci.errors.ConfigError, match="compare must be"):
+        iloci.build(small_config(compare="path"))
+
+
+def _naive_dtw(x: np.ndarray, y: np.ndarray, band: int) -> float:
+    """Textbook DTW (Sakoe and Chiba 1978, symmetric steps, band) of summed squared steps."""
+    n = len(x)
+    acc = np.full((n + 1, n + 1), np.inf)
+    acc[0, 0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(max(1, i - band), min(n, i + band) + 1):
+            acc[i, j] = np.sum((x[i - 1] - y[j - 1]) ** 2) + min(acc[i - 1, j], acc[i, j - 1],
+                                                                 acc[i - 1, j - 1])
+    return float(acc[n, n])
+
+
+def test_pattern_distances_as_positions_both_and_warp_against_a_plain_loop():
+    rng = np.random.default_rng(3)
+    seqs = [rng.normal(size=(7, 3)) for _ in range(3)]
+    pats = [rng.normal(size=(7, 3)) for _ in range(4)]
+    # positions: the displacements summed from a zero first row, centred over the steps
+    p = as_positions(seqs[0])
+    assert p.shape == (8, 3)
+    np.testing.assert_allclose(p.mean(axis=0), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.diff(p, axis=0), seqs[0])
+    d = pattern_distances(seqs, pats, compare="positions")
+    assert d[1, 2] == pytest.approx(np.mean((as_positions(seqs[1]) - as_positions(pats[2])) ** 2))
+    # both: positions (weighed by the patterns' RMS displacement over RMS position) beside
+    # the displacements
+    w = np.sqrt(np.mean(np.stack(pats) ** 2)) / np.sqrt(
+        np.mean(np.stack([as_positions(q) for q in pats]) ** 2))
+
+    def both(s):
+        return np.hstack([w * as_positions(s)[1:], s])
+
+    d = pattern_distances(seqs, pats, compare="both")
+    assert d[2, 3] == pytest.approx(np.mean((both(seqs[2]) - both(pats[3])) ** 2))
+    # the banded DTW, vectorised over pairs, is the textbook recursion
+    for compare, f in (("displacements", lambda s: s), ("both", both)):
+        for band in (1, 3, 7):
+            d = pattern_distances(seqs, pats, band, compare)
+            for b, s in enumerate(seqs):
+                for m, q in enumerate(pats):
+                    assert d[b, m] == pytest.approx(
+                        _naive_dtw(f(s), f(q), band) / (7 * f(s).shape[1]), rel=1e-10)
+    with pytest.raises(iloci.errors.InvalidInputError, match="compare must be one of"):
+        pattern_distances(seqs, pats, compare="path")
 
 
 def test_pattern_distances_and_regeneration_scale():

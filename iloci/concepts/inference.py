@@ -16,11 +16,12 @@ import numpy as np
 
 from iloci.concepts import rehearsal
 from iloci.concepts.memory import Memory
+from iloci.errors import InvalidInputError
 from iloci.interfaces import PerceptualModel
 
-__all__ = ["PATH_WARP", "Recognition", "TILT_MARGIN", "confidence", "familiarity",
-           "novelty_scale", "path_distances", "path_scale", "pen_path", "pattern_distances",
-           "regenerated_patterns", "regeneration_scale"]
+__all__ = ["COMPARES", "PATH_WARP", "Recognition", "TILT_MARGIN", "as_positions", "confidence",
+           "familiarity", "novelty_scale", "path_distances", "path_scale", "pen_path",
+           "pattern_distances", "regenerated_patterns", "regeneration_scale"]
 
 #: A turned reading of the tilt search (``[learner] tilts``) is recognized
 #: only when its entry prediction error is below this fraction of the
@@ -176,22 +177,53 @@ def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
     return np.stack([np.interp(u, t, pattern[:, j]) for j in range(pattern.shape[1])], axis=1)
 
 
+#: What :func:`pattern_distances` compares (``[learner] compare``).
+COMPARES = ("both", "positions", "displacements")
+
+
+def as_positions(sequence: np.ndarray) -> np.ndarray:
+    """An encoded sequence as the positions it moves through, centred: (T + 1, D).
+
+    The cumulative sum of the displacement rows from a zero first row (the
+    pen's position in the drawing plane and each joint's angle relative to
+    where the motion starts, in encoded units: the inverse of the
+    encoding's differencing, :meth:`SensorimotorEncoder.decode
+    <iloci.sensorimotor.encoding.SensorimotorEncoder.decode>` without its
+    scale), minus their mean over the steps (the centring of $P, Vatavu,
+    Anthony and Wobbrock 2012). The size needs no normalising: every
+    drawing is already fitted into the same drawing plane
+    (:func:`~iloci.sensorimotor.preprocess.fit_to_plane`).
+    """
+    s = np.asarray(sequence, dtype=np.float64)
+    p = np.vstack([np.zeros((1, s.shape[1])), np.cumsum(s, axis=0)])
+    return p - p.mean(axis=0)
+
+
 def pattern_distances(sequences: Sequence[np.ndarray],
-                      patterns: Sequence[np.ndarray], warp: int = 0) -> np.ndarray:
+                      patterns: Sequence[np.ndarray], warp: int = 0,
+                      compare: str = "displacements") -> np.ndarray:
     """Mean squared difference of each encoded sequence to each regenerated pattern, (B, M).
 
     Over the sequence's rows and every feature (encoded units; pen
-    displacement and joint displacements alike); a pattern of another
-    length is first resampled linearly in time to the sequence's. Both
-    sides come from the same preprocessing (arc-length resampling to
-    ``[sensorimotor] steps`` points), so step ``t`` is the same fraction of
-    the path's length in both. With ``warp = 0`` step ``t`` is compared
-    with step ``t``; with ``warp > 0`` the steps are aligned by dynamic
-    time warping (Sakoe and Chiba 1978, symmetric steps, a band of
-    ``warp`` steps around the diagonal) and the squared differences along
-    the alignment are summed and divided by the sequence's length times
-    ``D``: a corner drawn a little earlier or later along the path then
-    costs its shape difference, not a shift of every later step.
+    and joints alike); a pattern of another length is first resampled
+    linearly in time to the sequence's. Both sides come from the same
+    preprocessing (arc-length resampling to ``[sensorimotor] steps``
+    points), so step ``t`` is the same fraction of the path's length in
+    both. ``compare = "displacements"`` compares the rows as encoded (the
+    network's inputs: each step's displacement); ``"positions"`` first
+    turns both sides into the positions they move through, centred
+    (:func:`as_positions`): a difference in one step's direction then
+    costs the shift it makes in the rest of the drawing, which is what
+    tells two shapes apart, while jitter in the directions of single steps
+    averages out (DTW on positions is the field's strongest simple
+    baseline for pen gestures; docs/method.md, "Recognition by
+    regeneration"). With ``warp = 0`` step ``t`` is compared with step
+    ``t``; with ``warp > 0`` the steps are aligned by dynamic time warping
+    (Sakoe and Chiba 1978, symmetric steps, a band of ``warp`` steps
+    around the diagonal) and the squared differences along the alignment
+    are summed and divided by the number of rows times ``D``: a corner
+    drawn a little earlier or later along the path then costs its shape
+    difference, not a shift of every later step.
 
     Parameters
     ----------
@@ -199,13 +231,29 @@ def pattern_distances(sequences: Sequence[np.ndarray],
     patterns : sequence of ndarray, each (T_m, D)
     warp : int
         Band half-width of the alignment, in steps; 0 aligns step by step.
+    compare : {"displacements", "positions", "both"}
 
     Returns
     -------
     ndarray, shape (B, M)
+
+    Raises
+    ------
+    InvalidInputError
+        ``compare`` is not one of :data:`COMPARES`.
     """
+    if compare not in COMPARES:
+        raise InvalidInputError(f"compare must be one of {', '.join(COMPARES)}; got "
+                                f"{compare!r}.")
     seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
     pats = [np.asarray(p, dtype=np.float64) for p in patterns]
+    if compare == "positions":
+        seqs = [as_positions(s) for s in seqs]
+        pats = [as_positions(p) for p in pats]
+    elif compare == "both":
+        w = _position_weight(pats)
+        seqs = [np.hstack([w * as_positions(s)[1:], s]) for s in seqs]
+        pats = [np.hstack([w * as_positions(p)[1:], p]) for p in pats]
     out = np.zeros((len(seqs), len(pats)), dtype=np.float64)
     if not pats:
         return out
@@ -222,34 +270,55 @@ def pattern_distances(sequences: Sequence[np.ndarray],
     return out
 
 
+def _position_weight(patterns: Sequence[np.ndarray]) -> float:
+    """RMS of the patterns' displacements over RMS of their centred positions (1 when flat).
+
+    Weighs the two halves of ``compare = "both"`` equally: each, so
+    scaled, has unit-comparable spread over what the memory regenerates
+    (features standardised before a distance, as in Gorecki and Luczak
+    2013's derivative DTW, which adds distances on a series and on its
+    differences).
+    """
+    if not patterns:
+        return 1.0
+    disp = np.sqrt(np.mean(np.concatenate([p.ravel() ** 2 for p in patterns])))
+    pos = np.sqrt(np.mean(np.concatenate([as_positions(p).ravel() ** 2 for p in patterns])))
+    return float(disp / pos) if pos > 0 and np.isfinite(pos) and np.isfinite(disp) else 1.0
+
+
 def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:
     """DTW cost (summed squared differences) of every (sequence, pattern) pair, (B, M).
 
     ``S`` (B, T, D), ``P`` (M, T, D); cells further than ``band`` steps from
-    the diagonal are not visited. Vectorised over the pairs, one cell at a time.
+    the diagonal are not visited. Vectorised over the pairs, row by row of
+    the alignment (memory: two rows of ``T + 1`` cells per pair).
     """
     b, t = S.shape[0], S.shape[1]
     m = P.shape[0]
-    # squared distance of step i of S[b] to step j of P[m], laid out (i, j, pair)
-    cost = ((S * S).sum(-1).T[:, None, :, None] + (P * P).sum(-1).T[None, :, None, :]
-            - 2.0 * np.einsum("bid,mjd->ijbm", S, P)).reshape(t, t, b * m)
-    np.maximum(cost, 0.0, out=cost)
-    acc = np.full((t + 1, t + 1, b * m), np.inf)
-    acc[0, 0] = 0.0
+    s2 = (S * S).sum(-1)                                              # (B, T)
+    p2 = (P * P).sum(-1)                                              # (M, T)
+    prev = np.full((t + 1, b, m), np.inf)
+    prev[0] = 0.0
     for i in range(1, t + 1):
-        for j in range(max(1, i - band), min(t, i + band) + 1):
-            acc[i, j] = cost[i - 1, j - 1] + np.minimum(np.minimum(acc[i - 1, j], acc[i, j - 1]),
-                                                        acc[i - 1, j - 1])
-    return acc[t, t].reshape(b, m)
+        lo, hi = max(1, i - band), min(t, i + band)
+        # squared distance of step i of each sequence to steps lo..hi of each pattern
+        cost = (s2[:, i - 1][None, :, None] + p2[:, lo - 1:hi].T[:, None, :]
+                - 2.0 * np.einsum("bd,mjd->jbm", S[:, i - 1], P[:, lo - 1:hi]))
+        np.maximum(cost, 0.0, out=cost)
+        row = np.full((t + 1, b, m), np.inf)
+        for j in range(lo, hi + 1):
+            row[j] = cost[j - lo] + np.minimum(np.minimum(prev[j], row[j - 1]), prev[j - 1])
+        prev = row
+    return prev[t]
 
 
 def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],
-                       warp: int = 0) -> float:
+                       warp: int = 0, compare: str = "displacements") -> float:
     """The memory's own scale for "unlike everything it knows", on regenerated patterns.
 
-    For each entry, :func:`pattern_distances` (with ``warp``) from its regenerated pattern to
-    the nearest regenerated pattern of an entry of *another* concept (how
-    far apart two known concepts lie); the median over entries. The
+    For each entry, :func:`pattern_distances` (with ``warp`` and ``compare``)
+    from its regenerated pattern to the nearest regenerated pattern of an
+    entry of *another* concept (how far apart two known concepts lie); the median over entries. The
     project's calibration (the paper has none), the counterpart of
     :func:`novelty_scale` for ``[learner] familiarity = "regeneration"``.
 
@@ -262,7 +331,7 @@ def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],
     if len(set(lab.tolist())) < 2:
         return float("nan")
     pats = list(patterns)
-    d = pattern_distances(pats, pats, warp)
+    d = pattern_distances(pats, pats, warp, compare)
     other = np.where(lab[:, None] != lab[None, :], d, np.inf).min(axis=1)
     other = other[np.isfinite(other)]
     return float(np.median(other)) if other.size else float("nan")

@@ -283,13 +283,13 @@ class Learner:
         """How far each sequence lies from each entry's regenerated pattern, shape (B, M).
 
         :func:`~iloci.concepts.inference.pattern_distances` (with ``[learner]
-        warp``) of the sequences to the memory's
+        warp`` and ``compare``) of the sequences to the memory's
         :func:`~iloci.concepts.inference.regenerated_patterns` (``patterns``
         when given, e.g. computed once for several calls): ``[learner]
         decision = "regeneration"`` answers with the entry of the lowest one.
         """
         pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
-        return pattern_distances(sequences, pats, self.policies.warp)
+        return pattern_distances(sequences, pats, self.policies.warp, self.policies.compare)
 
     def tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
         """Per sequence, how well the memory reproduces it: the tilt search's criterion.
@@ -477,7 +477,7 @@ class Learner:
             pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
             labels = self.memory.concept_labels
             return (path_scale(pats, labels) if policies.familiar_by_path
-                    else regeneration_scale(pats, labels, policies.warp))
+                    else regeneration_scale(pats, labels, policies.warp, policies.compare))
         return novelty_scale(self.model, self.memory)
 
     def familiarities(self, sequences: Sequence[np.ndarray], scale: float, *,

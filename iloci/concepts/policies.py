@@ -164,6 +164,9 @@ class Policies:
         ``"regeneration"`` (see :func:`~iloci.concepts.inference.familiarity`).
     warp : int
         DTW band (steps) of the regeneration distances (``warp``).
+    compare : str
+        What the regeneration distances compare (``compare``):
+        ``"both"``, ``"positions"`` or ``"displacements"``.
     confirmation : Confirmation
     novelty : Novelty
     placement : Placement
@@ -173,7 +176,8 @@ class Policies:
 
     ranking: str = "regeneration"
     familiarity: str = "path"
-    warp: int = 0
+    warp: int = 8
+    compare: str = "both"
     confirmation: Confirmation = Confirmation()
     novelty: Novelty = Novelty()
     placement: Placement = Placement()
@@ -187,6 +191,7 @@ class Policies:
             ranking=config.decision,
             familiarity=config.familiarity,
             warp=config.warp,
+            compare=config.compare,
             confirmation=Confirmation(after_no=config.confirm_rewards,
                                       new_exemplars=config.confirm_new_exemplars,
                                       twice_deep=config.confirm_twice_after_novelty),

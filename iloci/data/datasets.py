@@ -48,6 +48,7 @@ import numpy as np
 from iloci.data.files import load_trajectory
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
+from iloci.progress import long_step
 
 __all__ = ["Sample", "DataSet", "load_dataset", "check_protocol", "writer_folds", "demos_checksum",
            "TRAJECTORY_SUFFIXES"]
@@ -273,6 +274,31 @@ def _position_unit(path: Path) -> str | None:
     return units.pop() if len(units) == 1 else None
 
 
+def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstration],
+                  counter: Counter[str], timed: dict[bool, list[str]],
+                  units: dict[str, list[str]], problems: list[str], h: Any,
+                  report: Any) -> None:
+    """Read every sample's file (the loop of :func:`load_dataset`), reporting progress."""
+    for i, s in enumerate(samples):
+        report(i / max(len(samples), 1))
+        f = root / s.path
+        try:
+            d = load_trajectory(f, shape=s.concept, true_concept=s.concept,
+                                index=counter[s.concept])
+        except InvalidInputError as exc:
+            problems.append(f"{f}: {exc}")
+            continue
+        counter[s.concept] += 1
+        demos.append(d)
+        timed[_has_times(d)].append(s.path)
+        unit = _position_unit(f)
+        if unit:
+            units.setdefault(unit, []).append(s.path)
+        h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode(
+            "utf-8", "surrogatepass"))
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+
+
 def load_dataset(path: str | os.PathLike[str]) -> DataSet:
     """Read and check a data set (module docstring: the layouts).
 
@@ -334,23 +360,8 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
     timed: dict[bool, list[str]] = {True: [], False: []}
     units: dict[str, list[str]] = {}
     h = hashlib.sha256()
-    for s in samples:
-        f = root / s.path
-        try:
-            d = load_trajectory(f, shape=s.concept, true_concept=s.concept,
-                                index=counter[s.concept])
-        except InvalidInputError as exc:
-            problems.append(f"{f}: {exc}")
-            continue
-        counter[s.concept] += 1
-        demos.append(d)
-        timed[_has_times(d)].append(s.path)
-        unit = _position_unit(f)
-        if unit:
-            units.setdefault(unit, []).append(s.path)
-        h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode(
-            "utf-8", "surrogatepass"))
-        h.update(hashlib.sha256(f.read_bytes()).digest())
+    with long_step(f"reading data set {p} ({len(samples):,} files)") as report:
+        _read_samples(samples, root, demos, counter, timed, units, problems, h, report)
     if problems:
         raise _fail(f"data set {p}: {len(problems)} file(s) cannot be read; nothing was "
                     "learned:", problems,

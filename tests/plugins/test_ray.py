@@ -362,3 +362,23 @@ def test_ray_that_does_not_import_is_named_with_how_to_install(tmp_path, monkeyp
     spec = load_spec(write(tmp_path, SMALL + '[values]\n"learner.k_cutoff" = [1.0]\n'))
     with pytest.raises(MissingBackendError, match="iloci sweep' needs ray"):
         run_sweep(spec, tmp_path / "out")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(__import__("sys").getfilesystemencoding() != "utf-8",
+                    reason="a UTF-8 file system encoding")
+def test_a_sweep_whose_file_names_are_not_utf8_runs_and_reports(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    spec = write(tmp_path, SMALL + '[values]\n"learner.k_cutoff" = [1.0]\n',
+                 name=os.fsdecode(b"sp\xe9.toml"))
+    out = tmp_path / os.fsdecode(b"o\xe9")
+    # bytes, not text: the names' own bytes may be echoed (Ray's log lines)
+    r = subprocess.run([sys.executable, "-m", "iloci", "sweep", str(spec), "--out", str(out),
+                        "-q"], capture_output=True, timeout=600)
+    assert r.returncode == 0, r.stderr.decode(errors="replace")
+    assert len(list((out / "runs").glob("*.json"))) == 1
+    assert (out / "report.md").read_bytes().startswith(b"# Sweep: ")
+    assert b"sp\\xe9.toml" in (out / "report.md").read_bytes()

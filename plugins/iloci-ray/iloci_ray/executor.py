@@ -50,6 +50,13 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
         # happens to run on this machine (what ray.init() would join)
         address = "local"
         kwargs["num_cpus"] = num_cpus
+    # Ray sends the driver's command line (read from /proc) to its C++ core as UTF-8:
+    # a file name the OS gave as bytes that are not UTF-8 (lone surrogates) made
+    # ray.init fail; it is passed with those bytes written \xNN
+    from ray._private import utils as ray_utils
+    entrypoint = getattr(ray_utils, "get_entrypoint_name", None)
+    if entrypoint is not None:
+        ray_utils.get_entrypoint_name = lambda: _utf8(entrypoint())
     try:
         ray.init(address=address, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
@@ -62,7 +69,16 @@ def connect(address: str | None, num_cpus: int | None = None) -> Any:
                                 "`ray start --head` and pass the address it prints "
                                 "(HOST:PORT), or omit --address to start Ray here." + auth
                                 ) from exc
+    finally:
+        if entrypoint is not None:
+            ray_utils.get_entrypoint_name = entrypoint
     return ray
+
+
+def _utf8(text: str) -> str:
+    """``text`` encodable as UTF-8: lone surrogates (undecodable bytes) written ``\\xNN``."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace") \
+        if isinstance(text, str) else text
 
 
 def _check_reachable(address: str, timeout: float = 5.0) -> None:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci.data.writes import write_text_atomic
 from iloci_ray.sweep import BASELINES_METRIC, RUN_METRICS, SweepSpec
 
 __all__ = ["summarize", "write_report"]
@@ -71,7 +72,7 @@ def write_csv(path: Path, records: Sequence[dict[str, Any]]) -> Path:
     for r in records:
         w.writerow([r["key"], *(r["setting"][k] for k in keys), r["seed"], r["fold"],
                     *(r[m] for m in RUN_METRICS)])
-    path.write_text(buf.getvalue())
+    write_text_atomic(path, buf.getvalue())
     return path
 
 
@@ -140,7 +141,7 @@ def write_report(out: str | Path, spec: SweepSpec, records: Sequence[dict[str, A
     rows = summarize(records)
     write_csv(out / "results.csv", records)
     top = best(rows)
-    (out / "summary.json").write_text(json.dumps(
+    write_text_atomic(out / "summary.json", json.dumps(
         {"settings": rows, "best": top, "info": info, "spec": spec.source}, indent=1))
     lines = [f"# Sweep: {spec.source}", "",
              f"{len(rows)} setting(s) ({spec.search} search) x {len(spec.seeds)} seed(s) "
@@ -177,6 +178,6 @@ def write_report(out: str | Path, spec: SweepSpec, records: Sequence[dict[str, A
         if fig is not None:
             lines += [f"## Against `{key}`", "", f"![CCR and feedbacks against {key}]"
                       f"(figures/{safe}.png)", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(lines))
+    path = out / "report.md"  # \xNN for bytes of a file name that are not UTF-8
+    write_text_atomic(path, "\n".join(lines))
     return path
