@@ -14,8 +14,7 @@ On the local pool a fold is up to three tasks: its learning
 (:func:`~iloci.evaluation.fold.learn_fold`, which saves the learned
 agent), its baselines (:func:`~iloci.evaluation.fold.fold_baselines`) and,
 queued when the learning ends, the recognition of its test set by the
-saved agent (in one part per worker, at most 2), each in whichever worker
-is free; results are those of
+saved agent, each in whichever worker is free; results are those of
 :func:`~iloci.evaluation.fold.run_fold`, bit for bit. Learning is the long,
 sequential part, so every learning task is queued first and the short
 tasks fill the workers that would otherwise wait for the last learning
@@ -325,9 +324,10 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
     # Learning a fold is sequential and by far its longest part: every
     # learning task is queued first (the pool takes tasks in the order they
     # were queued), then the baselines, and the recognition of a fold's test
-    # set (in parts) when its learning ends. With 5 folds on 2 workers, one
-    # worker learns 3 folds and the other 2; the other runs the short tasks
-    # meanwhile, and both recognize the last fold's test set.
+    # set when its learning ends. With 5 folds on 2 workers, one worker
+    # learns 3 folds and the other 2; the other runs the short tasks
+    # meanwhile, and the last learning is followed by its fold's
+    # recognition alone.
     with tempfile.TemporaryDirectory(prefix="iloci-evaluate-") as tmp:
         def agent_path(task: FoldTask) -> str:
             return os.path.join(task.memory_dir or tmp, fold_memory_name(task.fold))
