@@ -264,19 +264,18 @@ class _Recognized:
     fold: int
     recognitions: list[Any]
     seconds: float
-    part: int = 0
 
 
 def _recognize_in_worker(config_dict: dict, fold: int, test: list[int], shapes: list[str],
                          specs: Sequence[Any] | LocalContext | None, agent_path: str,
-                         part: int, queue: Any) -> Any:
-    """Recognize part ``part`` of a fold's test set (``test``) with its saved agent, in a worker."""
+                          queue: Any) -> Any:
+    """Recognize a fold's test set with its saved agent, in a worker."""
     demos, pm = _worker_context(config_dict, shapes, specs)
     agent = Agent.load(agent_path, config_dict, plugin_manager=pm)
     agent.motion_cache = _motion_cache(config_dict, specs)
     t0 = time.perf_counter()
     recs = agent.recognize([demos[i] for i in test])
-    return _Recognized(fold, recs, time.perf_counter() - t0, part)
+    return _Recognized(fold, recs, time.perf_counter() - t0)
 
 
 def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
@@ -335,24 +334,14 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
         by_fold = {task.fold: task for task in tasks}
         learned: dict[int, LearnedFold] = {}
         baselines: dict[int, dict[str, dict[str, Any]]] = {}
-        recognized: dict[int, dict[int, _Recognized]] = {}
-        # a test set is recognized in parts, one per worker, so the last
-        # fold's recognition does not run on one worker while the other waits
-        # (a demonstration's recognition does not depend on the others in its
-        # batch: tests/test_evaluate.py compares with the serial run)
-        parts = max(1, min(int(getattr(runner, "jobs", 1)), 2))
-
-        def chunks(test: list[int]) -> list[list[int]]:
-            n = -(-len(test) // parts)
-            return [test[i:i + n] for i in range(0, len(test), n)]
+        recognized: dict[int, _Recognized] = {}
 
         def then(res: Any) -> list[tuple[Callable[..., Any], tuple]]:
             if not isinstance(res, LearnedFold):
                 return []
             task = by_fold[res.result.fold]
-            return [(_recognize_in_worker, (config_dict, task.fold, chunk, shapes, specs,
-                                            agent_path(task), i))
-                    for i, chunk in enumerate(chunks(task.test))]
+            return [(_recognize_in_worker, (config_dict, task.fold, task.test, shapes, specs,
+                                            agent_path(task)))]
 
         first: list[tuple[Callable[..., Any], tuple]] = [
             (_learn_fold_in_worker, (config_dict, task, shapes, baseline, specs,
@@ -368,16 +357,12 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
                 baselines[res.fold] = res.baselines
                 k = res.fold
             else:
-                recognized.setdefault(res.fold, {})[res.part] = res
+                recognized[res.fold] = res
                 k = res.fold
-            done = recognized.get(k, {})
-            if (k in learned and len(done) == len(chunks(by_fold[k].test))
-                    and (not baseline or k in baselines)):
+            if k in learned and k in recognized and (not baseline or k in baselines):
                 fold = learned.pop(k).with_baselines(baselines.pop(k, {}))
-                got = recognized.pop(k)
-                recs = [got[i] for i in sorted(got)]
-                on_result(fold.complete([r for rec in recs for r in rec.recognitions],
-                                        sum(rec.seconds for rec in recs)))
+                rec = recognized.pop(k)
+                on_result(fold.complete(rec.recognitions, rec.seconds))
 
 
 #: The name :func:`run_folds` had before serial runs took the same path.
