@@ -262,7 +262,7 @@ def test_the_oracle_knows_the_founding_demonstration_of_a_concept_outside_lasa()
 
 TINY = """
 [perceptual_model]
-name = "torch-rnnpb"
+name = "native-rnnpb"
 epochs = 150
 recognition_steps = 40
 [learner]
