@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import CancelledError, Future, ThreadPoolExecutor
+import logging
 import threading
 import time
 from typing import Any, Protocol, runtime_checkable
@@ -43,6 +44,8 @@ from iloci.errors import InvalidInputError
 from iloci.interfaces import Execution
 from iloci.sensorimotor import simulation
 from iloci.sensorimotor.robots import Robot
+
+LOG = logging.getLogger(__name__)
 
 __all__ = ["ArmDriver", "ArmExecutor", "ArmMotion"]
 
@@ -85,7 +88,22 @@ class ArmMotion:
         self.dt = dt
         self.started = started
         self.finished = threading.Event()
-        future.add_done_callback(lambda _: self.finished.set())
+        self._callbacks: list[Callable[[ArmMotion], None]] = []
+        self._callbacks_lock = threading.Lock()
+        future.add_done_callback(self._ended)
+
+    def _ended(self, _: Future) -> None:
+        # One done-callback of the future runs the caller's callbacks in order and only
+        # then sets ``finished``, so that once result(), wait() or done() say the motion
+        # ended, every callback has run (a Future wakes its waiters before its callbacks).
+        with self._callbacks_lock:
+            callbacks, self._callbacks = self._callbacks, []
+        for fn in callbacks:
+            try:
+                fn(self)
+            except Exception:
+                LOG.exception("a done-callback of %r raised", self)
+        self.finished.set()
 
     def __repr__(self) -> str:
         state = ("cancelled" if self._future.cancelled() else "done" if self._future.done()
@@ -94,7 +112,7 @@ class ArmMotion:
 
     def done(self) -> bool:
         """Whether the motion has ended (done, failed or cancelled); never blocks."""
-        return self._future.done()
+        return self.finished.is_set()
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the motion ends, at most ``timeout`` s; whether it ended."""
@@ -112,11 +130,21 @@ class ArmMotion:
         Exception
             Whatever the driver raised (the arm stopped where it was).
         """
-        return self._future.result(timeout)
+        if not self.finished.wait(timeout):
+            raise TimeoutError(f"the motion did not end within {timeout} s")
+        return self._future.result(0)
 
     def add_done_callback(self, fn: Callable[[ArmMotion], None]) -> None:
-        """Call ``fn(motion)`` when the motion ends, in the arm's thread (at once if it has)."""
-        self._future.add_done_callback(lambda _: fn(self))
+        """Call ``fn(motion)`` when the motion ends, in the arm's thread (at once if it has).
+
+        Callbacks run in the order they were added, before :attr:`finished` is set.
+        """
+        with self._callbacks_lock:
+            if not self._future.done():
+                self._callbacks.append(fn)
+                return
+        self.finished.wait()      # the future's own callback is running the others
+        fn(self)
 
     def cancel(self) -> bool:
         """Stop the motion: a queued one never starts, a running one stops at its next
