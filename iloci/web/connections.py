@@ -87,6 +87,8 @@ def guarded_protocol(head_seconds: float = HEAD_SECONDS,
     class GuardedH11Protocol(H11Protocol):
         """h11 with a deadline for each request head and a cap on open connections."""
 
+        head_seconds: float         # set below, for inspection (tests, logs)
+        max_connections: int
         _head_timer: Any = None
         _waiting_since = 0.0
 
@@ -138,8 +140,8 @@ def guarded_protocol(head_seconds: float = HEAD_SECONDS,
                 self._head_timer = None
             super().connection_lost(exc)
 
-    GuardedH11Protocol.head_seconds = head_seconds        # type: ignore[attr-defined]
-    GuardedH11Protocol.max_connections = limit            # type: ignore[attr-defined]
+    GuardedH11Protocol.head_seconds = head_seconds
+    GuardedH11Protocol.max_connections = limit
     return GuardedH11Protocol
 
 
