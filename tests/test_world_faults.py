@@ -51,6 +51,16 @@ def _toml(path: Path, urdf: str, simulator: str = "none") -> Path:
     return path
 
 
+def _assert_check_and_robots_name(cfg, urdf, names, capsys):
+    """`config check` and `iloci robots` each refuse (exit 2), naming the file and ``names``."""
+    for argv in (["config", "check", str(cfg)], ["robots", "--show", "--config", str(cfg)]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert str(urdf) in err and "Traceback" not in err
+        for name in names:
+            assert name in err, (argv, name, err)
+
+
 @pytest.mark.parametrize("spoil, simulator, names", [
     ({"j3_extra": '<mimic joint="s2" multiplier="-0.5" offset="0.1"/>'}, "none",
      ["'s3' mimics joint 's2'", "fixed joint"]),
@@ -67,12 +77,7 @@ def test_urdf_faults_are_named_by_config_check_and_robots(tmp_path, capsys, spoi
                                                          names):
     urdf = _arm(tmp_path / "arm.urdf", **spoil)
     cfg = _toml(tmp_path / "arm.toml", "arm.urdf", simulator)
-    for argv in (["config", "check", str(cfg)], ["robots", "--show", "--config", str(cfg)]):
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err
-        assert str(urdf) in err and "Traceback" not in err
-        for name in names:
-            assert name in err, (argv, name, err)
+    _assert_check_and_robots_name(cfg, urdf, names, capsys)
 
 
 def test_xacro_tags_and_substitution_args_are_caught(tmp_path):
@@ -140,12 +145,7 @@ def test_more_urdf_faults_are_named(tmp_path, capsys, old, new, names):
     if "caf" in new:
         urdf.write_bytes(urdf.read_text().encode("latin-1"))
     cfg = _toml(tmp_path / "arm.toml", "arm.urdf")
-    for argv in (["config", "check", str(cfg)], ["robots", "--show", "--config", str(cfg)]):
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err
-        assert str(urdf) in err and "Traceback" not in err
-        for name in names:
-            assert name in err, (argv, name, err)
+    _assert_check_and_robots_name(cfg, urdf, names, capsys)
 
 
 def test_a_chain_without_a_movable_joint_says_where_one_is(tmp_path):
