@@ -217,3 +217,33 @@ def test_the_papers_lasa_figure_is_not_shown_beside_a_users_data_set():
                                      "concepts": {"a": 1}, "checksum": "0" * 64}})
     assert "paper (Alibeigi et al.) | 91.35" in lasa
     assert "paper" not in own
+
+
+def test_the_guides_recipe_turns_xml_logs_into_a_data_set(digits, tmp_path, monkeypatch):
+    """docs/guide.md, "Your own shapes": its Python block, run on XML logs of real strokes
+    (writer folders inside concept folders, time stamps of a 15.6 ms clock in ms)."""
+    import re
+
+    from conftest import ROOT
+
+    guide = (ROOT / "docs" / "guide.md").read_text(encoding="utf-8")
+    section = guide[guide.index("## Your own shapes"):guide.index("## Teaching the robot")]
+    (recipe,) = re.findall(r"^```python\n(.*?)^```$", section, re.S | re.M)
+    count: dict[str, int] = {}
+    for s in digits:
+        if s.label not in ("2", "3", "6"):
+            continue
+        count[s.label] = count.get(s.label, 0) + 1
+        xy = np.concatenate(s.strokes) * 40  # pixels
+        t = 1_171_743_302_847 + np.floor(np.arange(len(xy)) * 10 / 15.6) * 15.6
+        points = "".join(f'<Point X="{x:.0f}" Y="{-y:.0f}" T="{ti:.0f}" />'
+                         for (x, y), ti in zip(xy, t))
+        f = tmp_path / "logs" / s.label / s.writer.split("/")[1] / f"{s.label}{count[s.label]}.xml"
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_text(f'<?xml version="1.0"?><Gesture Name="{s.label}">{points}</Gesture>')
+    monkeypatch.chdir(tmp_path)
+    exec(compile(recipe, "guide.md", "exec"), {})
+    ds = load_dataset(tmp_path / "shapes-csv")
+    assert ds.concepts == count and len(ds.writers) == 3
+    assert all(np.all(np.diff(d.times) > 0) for d in ds.demos)
+    assert 0.05 < ds.demos[0].times[-1] - ds.demos[0].times[0] < 10  # seconds, from ms

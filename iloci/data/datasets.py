@@ -475,13 +475,22 @@ def _fingerprint(p: Path) -> tuple:
     return (str(p.resolve()), tuple(sorted(out)))
 
 
-def load_dataset_once(path: str | os.PathLike[str]) -> DataSet:
+def load_dataset_once(path: str | os.PathLike[str], *, warn: bool = False) -> DataSet:
     """:func:`load_dataset`, read again only when a file of the data set changed.
 
-    An evaluation's workers each need the data set for every task they run
-    (a fold's learning, its baselines, its recognition); this reads it once
-    per process. Its :class:`~iloci.errors.TimeUnitWarning` is not repeated
-    (the evaluation's own process gave it).
+    ``iloci evaluate`` needs the data set in its own process (to check it,
+    then to plan the folds) and in every task of its workers (a fold's
+    learning, its baselines, its recognition); this reads it once per
+    process. The data set read last is kept, with the size and modification
+    time of each of its files (see :func:`_fingerprint`).
+
+    Parameters
+    ----------
+    path : path
+        As for :func:`load_dataset`.
+    warn : bool
+        Give the data set's :class:`~iloci.errors.TimeUnitWarning` when it is
+        read (workers do not: the evaluation's own process gave it).
     """
     p = Path(path).expanduser()
     key = str(p.resolve())
@@ -490,7 +499,8 @@ def load_dataset_once(path: str | os.PathLike[str]) -> DataSet:
     if hit is not None and hit[0] == fp:
         return hit[1]
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", TimeUnitWarning)
+        if not warn:
+            warnings.simplefilter("ignore", TimeUnitWarning)
         dataset = load_dataset(p)
     _READ.clear()  # one data set kept: a worker serves one evaluation at a time
     _READ[key] = (fp, dataset)
