@@ -27,9 +27,12 @@ Each (row, seed) run is cached in ``--cache`` (a JSON file per run) so an
 interrupted benchmark resumes; ``--fresh`` ignores the cache.
 
 Run: ``python benchmarks/quality.py [--seeds 0 1 2] [--jobs 2]
-[--rows default,paper,...] [--config base.toml]``. The base config defaults
-to ``torch-rnnpb`` (about 2.5 times faster than ``jax-rnnpb`` here); the
-back end is recorded in the output.
+[--rows default,paper,...] [--config base.toml]``. The base config is the
+project's default config (``load_config({})``: ``native-rnnpb``, the
+default perceptual model, and every other default), so row ``default`` is
+exactly what ``iloci evaluate`` runs; ``--config`` gives another base (e.g.
+a TOML naming ``torch-rnnpb`` or ``jax-rnnpb``). The back ends are recorded
+in the output.
 """
 
 from __future__ import annotations
@@ -313,8 +316,8 @@ def summarize_stream(runs: list[dict]) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", "-c", help="base TOML config (default: torch-rnnpb, "
-                    "otherwise the defaults)")
+    ap.add_argument("--config", "-c", help="base TOML config (default: the project's "
+                    "default config, native-rnnpb)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--jobs", "-j", type=int, default=2)
     ap.add_argument("--rows", default=",".join(DEFAULT_ROWS),
@@ -337,8 +340,7 @@ def main(argv: list[str] | None = None) -> dict:
     from iloci.evaluation import figures
     from iloci.evaluation.report import write_json_atomic
 
-    base = (load_config(args.config) if args.config
-            else load_config({"perceptual_model": {"name": "torch-rnnpb"}})).to_dict()
+    base = (load_config(args.config) if args.config else load_config({})).to_dict()
     rows = [r.strip() for r in args.rows.split(",") if r.strip()]
     unknown = set(rows) - set(ROWS)
     if unknown:
