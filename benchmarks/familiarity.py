@@ -38,7 +38,8 @@ not; ``config``: the learner settings and back ends the memories were
 learned and read with (the default config), and the commit.
 
 Run: ``python benchmarks/familiarity.py [--unipen PATH] [--seeds 0 1 2]
-[--runs DIR]``. A memory found in ``--runs`` is reused as saved (with the
+[--runs DIR]``; ``--merge A.json B.json ...`` writes one file from runs
+made apart (e.g. one process per seed). A memory found in ``--runs`` is reused as saved (with the
 config saved in it): give a fresh ``--runs`` after a default changes.
 """
 
@@ -191,6 +192,35 @@ def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
         "auroc": table, "path_auroc_per_letter": per_letter}}
 
 
+def merge(parts: list[Path], out_path: Path, note: str | None) -> dict[str, Any]:
+    """One output from several (their runs, by seed); each part's command, commit, config kept."""
+    outs = [json.loads(p.read_text()) for p in parts]
+    configs = {json.dumps(o.get("config"), sort_keys=True) for o in outs}
+    if len(configs) > 1:
+        raise SystemExit(f"{', '.join(map(str, parts))}: learned with different configs; "
+                         "merge only runs of the same config")
+    runs = sorted((r for o in outs for r in o["runs"]), key=lambda r: r["seed"])
+    seeds = [r["seed"] for r in runs]
+    if len(set(seeds)) < len(seeds):
+        raise SystemExit(f"seed given twice in {', '.join(map(str, parts))}: {seeds}")
+    summary, targets = summarize(runs, outs[0]["config"]["learner"]["familiarity"])
+    out = {k: v for k, v in outs[0].items() if k not in ("command", "commit", "note",
+                                                          "machine", "wall_seconds", "runs")}
+    out |= {"command": "python benchmarks/familiarity.py --merge " + " ".join(map(str, parts)),
+            "parts": [{k: o.get(k) for k in ("command", "commit", "note", "wall_seconds",
+                                               "machine")} for o in outs],
+            "commit": sorted({o.get("commit") or "" for o in outs}),
+            "summary": summary, "targets": targets, "runs": runs}
+    if note:
+        out["note"] = note
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(json.dumps(out, indent=1) + "\n")
+    for name, t in targets.items():
+        print(f"{name}: {t['value']} -> {'met' if t['met'] else 'MISSED'}", file=sys.stderr)
+    print(f"wrote {out_path}", file=sys.stderr)
+    return out
+
+
 #: Issue 25's familiarity targets: (part, subset) -> AUROC floor, for the
 #: default familiarity on every seed.
 TARGETS = {("multi_models", "all_28"): 0.95, ("letters", "all_260"): 0.95}
@@ -241,15 +271,22 @@ def main(argv: list[str] | None = None) -> dict:
                     help="fold memories: read when there, else learned and saved there")
     ap.add_argument("--out", default=str(RESULTS))
     ap.add_argument("--note", help="free text recorded in the output")
+    ap.add_argument("--merge", nargs="+", metavar="JSON",
+                    help="run nothing: write one file from the per-seed runs of these "
+                    "outputs (e.g. one process per seed), summarised together")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge([Path(p) for p in args.merge], Path(args.out), args.note)
     load_before = os.getloadavg()
     t0 = time.perf_counter()
     runs = []
     for seed in args.seeds:
         print(f"[familiarity] seed {seed} ...", file=sys.stderr, flush=True)
+        t_seed = time.perf_counter()
         r: dict[str, Any] = {"seed": seed, **lasa(seed, Path(args.runs))}
         if args.unipen:
             r |= unipen(seed, Path(args.runs), args.unipen)
+        r["wall_seconds"] = time.perf_counter() - t_seed
         runs.append(r)
         for part in ("multi_models", "untaught", "letters"):
             if part in r:
