@@ -428,7 +428,9 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
                                EPI_DTANH, o - (size_t)R * Sp);
         }
         /* weight gradients: sums over all steps and rows, each part of g
-           written whole (no zeroing pass) */
+           written whole (no zeroing pass) but the padded rows of gWo (h >= H)
+           and gWs (j >= S): their sums are exactly zero, and g holds the
+           zeros calloc gave them */
         F(gemm_tn)((int)LR, H, Sp, Hs, Hp, G, 0, gWo);
         F(gemm_tn)(R, S, Hp, s0, Sp, DZ, 0, gWs);
         if (L > 1)
