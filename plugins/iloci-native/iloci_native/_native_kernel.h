@@ -345,15 +345,17 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
                    + LR * Hp * 2 + LR * Sp * 2   /* H, DZ, O, G */
                    + (alpha != 1.0f ? LR * Sp : 0) /* IN when teacher-forced in part */
                    + (size_t)R * Sp + (size_t)R * Hp * 2 + nWs + nWo + Sp;
-    float *mem = (float *)calloc(total, sizeof(float));
+    float *mem = zeroed_floats(total);
     if (!mem) return 1;
+    /* every array a vector touches starts a multiple of 16 floats (64
+       bytes) into mem: the PB's (R P floats each) come last */
     float *w = mem, *g = w + nW, *m = g + nW, *v = m + nW;
-    float *gu = v + nW, *mu = gu + nU, *vu = mu + nU, *pb = vu + nU;
-    float *Hs = pb + nU, *DZ = Hs + LR * Hp, *Os = DZ + LR * Hp, *G = Os + LR * Sp;
+    float *Hs = v + nW, *DZ = Hs + LR * Hp, *Os = DZ + LR * Hp, *G = Os + LR * Sp;
     float *IN = alpha != 1.0f ? G + LR * Sp : NULL;
     float *s0 = (IN ? IN + LR * Sp : G + LR * Sp), *pre = s0 + (size_t)R * Sp;
     float *sdz = pre + (size_t)R * Hp, *WoT = sdz + (size_t)R * Hp, *WsTm = WoT + nWo;
     float *mix = WsTm + nWs;
+    float *gu = mix + Sp, *mu = gu + nU, *vu = mu + nU, *pb = vu + nU;
     float *Ws = w, *Wp = Ws + nWs, *bh = Wp + nWp, *Wo = bh + Hp, *bo = Wo + nWo;
     float *gWs = g, *gWp = gWs + nWs, *gbh = gWp + nWp, *gWo = gbh + Hp, *gbo = gWo + nWo;
     float *u = a->u;
@@ -428,9 +430,7 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
                                EPI_DTANH, o - (size_t)R * Sp);
         }
         /* weight gradients: sums over all steps and rows, each part of g
-           written whole (no zeroing pass) but the padded rows of gWo (h >= H)
-           and gWs (j >= S): their sums are exactly zero, and g holds the
-           zeros calloc gave them */
+           written whole (no zeroing pass) */
         F(gemm_tn)((int)LR, H, Sp, Hs, Hp, G, 0, gWo);
         F(gemm_tn)(R, S, Hp, s0, Sp, DZ, 0, gWs);
         if (L > 1)
