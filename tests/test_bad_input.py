@@ -189,7 +189,7 @@ def test_dialects_and_encodings(tmp_path, name, text, encoding):
      r"line 3, column 'y': 'abc' is not a number \(.*separated by ';', decimal commas\)"),
     ("x,y\n0,0\n1,\n2,0\n", "line 3, column 'y': '' is not a number"),
     ("x,y\n0,0\n1,1\n2,0,5\n", "line 4 has 3 fields where the header has 2"),
-    ("t,x,y\n0,0,0\n1,1,1\n1,2,0\n", "line 4: time 1 is not after the previous row's 1"),
+    ("t,x,y\n0,0,0\n1,1,1\n0.5,2,0\n", "line 4: time 0.5 is before the previous row's 1"),
     ("x,y\n", "at least 3"),
     ("", "holds no rows"),
 ])

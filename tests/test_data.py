@@ -168,8 +168,9 @@ def test_load_csv_without_header(tmp_path):
     ("0,0,0,0\n1,1,1,1\n2,2,0,2\n", "4 columns and no header"),
     ("0,0\n1,1,1\n2,0\n", "line 2 has 3 fields where line 1 has 2"),
     ("0,0\n1,x\n2,0\n", "line 2, column 'y': 'x' is not a number"),
-    ("0,0,0\n0,1,1\n2,2,0\n", "line 2: time 0 is not after the previous row's 0; times "
-                                 "must be strictly increasing"),
+    ("0,0,0\n-1,1,1\n2,2,0\n", "line 2: time -1 is before the previous row's 0; times "
+                                  "must not go back"),
+    ("7,0,0\n7,1,1\n7,2,0\n", "every time stamp is 7; they say nothing of the pace"),
     ("0,0\n1,nan\n2,0\n", "line 2, column 'y' is nan: NaN or inf"),
 ])
 def test_bad_csv(tmp_path, content, match):

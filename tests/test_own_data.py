@@ -155,7 +155,7 @@ def test_a_folder_per_concept_is_a_data_set_with_a_checksum(tmp_path):
     assert [d.key for d in ds.demos[:2]] == ["circle/0", "circle/1"]
     assert all(d.true_concept == s.concept for d, s in zip(ds.demos, ds.samples))
     assert len(ds.checksum) == 64 and load_dataset(tmp_path / "shapes").checksum == ds.checksum
-    _write(tmp_path / "shapes" / "line" / "0.csv", _line(3))
+    _write(tmp_path / "shapes" / "line" / "0.csv", _line(7))
     assert load_dataset(tmp_path / "shapes").checksum != ds.checksum
     check_protocol(ds, 5)
     with pytest.raises(InvalidInputError, match=r"fewer samples than the 6 folds(.|\n)*circle: 5"):

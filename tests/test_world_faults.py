@@ -284,7 +284,7 @@ def test_a_big_csv_is_read_as_the_row_by_row_reader_reads_it(tmp_path, monkeypat
         load_trajectory(f)
     lines[4001] = "0.5;0.5;0.5"
     f.write_text("\n".join(lines) + "\n")
-    with pytest.raises(InvalidDemonstrationError, match=r"line 4002: time 0.0005 is not after"):
+    with pytest.raises(InvalidDemonstrationError, match=r"line 4002: time 0.0005 is before"):
         load_trajectory(f)
 
 

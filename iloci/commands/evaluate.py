@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from iloci.config import load_config
-from iloci.data.datasets import check_protocol, load_dataset
+from iloci.data.datasets import check_protocol, load_dataset_once
 from iloci.data.files import writable_dir
 
 
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_stream(args, config)
     if config.data.path and config.evaluation.protocol == "folds":
         # read and checked before anything runs (evaluate() checks again, cheaply)
-        dataset = load_dataset(config.data.path)
+        dataset = load_dataset_once(config.data.path, warn=True)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
         names = list(dataset.concepts)

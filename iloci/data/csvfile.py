@@ -52,12 +52,35 @@ def _decode(raw: bytes, name: str) -> tuple[str, str]:
         if raw[:2] and b"\x00" in raw[:64]:  # UTF-16 without a byte-order mark
             enc = "utf-16-le" if raw[1:64:2].count(0) > raw[0:64:2].count(0) else "utf-16-be"
     try:
-        return raw.decode(enc), enc
+        text = raw.decode(enc)
     except UnicodeDecodeError:
+        if enc.startswith("utf-16-"):  # zero bytes and no byte-order mark: not text at all
+            _check_text(raw, raw.decode("latin-1"), name)
         if enc != "utf-8":
             raise InvalidInputError(f"cannot read {name}: it is not valid {enc} text. Save "
                                     "it as UTF-8.") from None
-        return raw.decode("latin-1"), "latin-1"
+        text, enc = raw.decode("latin-1"), "latin-1"
+    _check_text(raw, text, name)
+    return text, enc
+
+
+#: Signatures of binary files people save under a text name (zip: .xlsx/.ods; OLE2: .xls).
+_BINARY_KINDS = ((b"PK\x03\x04", "a zip archive (an Excel .xlsx or LibreOffice workbook?)"),
+                 (b"\xd0\xcf\x11\xe0", "an old Excel .xls workbook"),
+                 (b"\x93NUMPY", "a numpy .npy array (name it .npy)"))
+_CONTROL_RE = re.compile(r"[\x00-\x08\x0e-\x1f\x7f]")
+
+
+def _check_text(raw: bytes, text: str, name: str) -> None:
+    """Refuse a file that is not text (a workbook, an array, binary data) with what it is."""
+    kind = next((what for magic, what in _BINARY_KINDS if raw.startswith(magic)), None)
+    bad = _CONTROL_RE.search(text, 0, 8192)
+    if kind is None and bad is None:
+        return
+    what = kind or (f"binary data (a control byte 0x{ord(bad.group()):02x} at character "
+                    f"{bad.start()})" if bad else "binary data")
+    raise InvalidInputError(f"{name} is not a text CSV file: it holds {what}. Export it as "
+                            "text, comma-separated values (UTF-8).")
 
 
 def _split_name(cell: str) -> tuple[str, float | None]:
@@ -113,6 +136,14 @@ def _dialect(text: str) -> tuple[str | None, bool]:
     of at least 2 columns to win over one that does not. A decimal comma is
     only considered with a separator other than ``,``.
     """
+    # plain comma-separated numbers first, without the sniffer (most of the time of
+    # reading a small file): when every cell is then a number, in rows of one width of
+    # 2 or more, no other separator is in the text, so the sniffer's answer is the same
+    try:
+        if _score(_rows(text, ","), False) == (1, 1.0):
+            return ",", False
+    except InvalidDemonstrationError:
+        pass
     candidates: list[str | None] = []
     try:
         sniffed = csv.Sniffer().sniff(text[:8192], delimiters="".join(_DELIMITERS)).delimiter
@@ -127,16 +158,21 @@ def _dialect(text: str) -> tuple[str | None, bool]:
         except InvalidDemonstrationError:
             continue
         for comma in ((False, True) if delim != "," else (False,)):
-            data = rows[1:] if rows and not _numeric_rows(rows[:1], comma) else rows
-            cells = [c for _, r in data for c in r]
-            widths = {len(r) for _, r in data}
-            consistent = int(len(widths) == 1 and min(widths) >= 2)
-            parsed = sum(_number(c, comma) is not None for c in cells) / max(1, len(cells))
-            if (consistent, parsed) > best[0]:
-                best = ((consistent, parsed), delim, comma)
-            if consistent and parsed == 1.0:
+            score = _score(rows, comma)
+            if score > best[0]:
+                best = (score, delim, comma)
+            if score == (1, 1.0):
                 return delim, comma
     return best[1], best[2]
+
+
+def _score(rows: list[tuple[int, list[str]]], comma: bool) -> tuple[int, float]:
+    """(1 if the data rows have one width of 2 or more, else 0; share of cells that are numbers)."""
+    data = rows[1:] if rows and not _numeric_rows(rows[:1], comma) else rows
+    cells = [c for _, r in data for c in r]
+    widths = {len(r) for _, r in data}
+    consistent = int(len(widths) == 1 and min(widths) >= 2)
+    return consistent, sum(_number(c, comma) is not None for c in cells) / max(1, len(cells))
 
 
 def _describe_dialect(delimiter: str | None, decimal_comma: bool, encoding: str) -> str:
@@ -183,8 +219,8 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
             if cols["t"] is None:
                 return positions, None
             times = values[:, cols["t"]] * cols["unit"]
-            if np.all(np.diff(times) > 0):
-                return positions, times
+            if np.all(np.diff(times) >= 0):
+                return positions, check_times(times, [], p.name)
             # a time out of order: read again below, to name its line
     try:
         rows = _rows(text, delimiter)
@@ -226,7 +262,7 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
     times = None
     if cols["t"] is not None:
         times = values[:, cols["t"]] * cols["unit"]
-        check_times(times, [f"line {line}" for line, _ in rows], p.name)
+        times = check_times(times, [f"line {line}" for line, _ in rows], p.name)
     return positions, times
 
 
@@ -299,12 +335,55 @@ def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[
         "and y (time t, time or t_ms; other columns such as pressure are ignored).")
 
 
-def check_times(times: np.ndarray, rows: list[str], name: str) -> None:
-    """Raise naming the first row whose time is not after the previous one."""
-    bad = np.flatnonzero(np.diff(times) <= 0)
-    if len(bad):
-        i = int(bad[0]) + 1
-        raise InvalidDemonstrationError(
-            f"{name}: {rows[i]}: time {times[i]:g} is not after the previous row's "
-            f"{times[i - 1]:g}; times must be strictly increasing.")
+def check_times(times: np.ndarray, rows: list[str], name: str) -> np.ndarray:
+    """The time stamps, checked: ``times`` with repeated stamps spread, else an error.
 
+    A clock coarser than the pen's sampling (15.6 ms on Windows, a browser's
+    1 ms, a device that stamps a batch of samples at once) gives runs of equal
+    time stamps. Each run is spread evenly from its stamp towards the next
+    one (the last run by the median step between distinct stamps), so the
+    times become strictly increasing and keep the file's pace; only the
+    robot's drawing speed and ``resample = "time"`` read them.
+
+    Parameters
+    ----------
+    times : ndarray, shape (N,)
+        Time stamps (s), in file order.
+    rows : list of str
+        How each row is named in an error (``"line 4"``).
+    name : str
+        The file's name, for the error.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Strictly increasing times (``times`` itself when it already was).
+
+    Raises
+    ------
+    InvalidDemonstrationError
+        A time before the previous row's (naming its row), or every time
+        stamp equal (they say nothing of the pace: drop the time column).
+    """
+    step = np.diff(times)
+    if np.all(step > 0):
+        return times
+    back = np.flatnonzero(step < 0)
+    if len(back):
+        i = int(back[0]) + 1
+        raise InvalidDemonstrationError(
+            f"{name}: {rows[i]}: time {times[i]:g} is before the previous row's "
+            f"{times[i - 1]:g}; times must not go back (is the file sorted by time?).")
+    rise = step[step > 0]
+    if not len(rise):
+        raise InvalidDemonstrationError(
+            f"{name}: every time stamp is {times[0]:g}; they say nothing of the pace. "
+            "Leave the time column out (the samples are then counted as steps).")
+    start = np.flatnonzero(np.r_[True, step > 0])  # first row of each run of equal stamps
+    stop = np.r_[start[1:], len(times)]
+    nxt = np.r_[times[start[1:]], times[start[-1]] + float(np.median(rise))]
+    out = times.astype(np.float64, copy=True)
+    for a, b, t_next in zip(start, stop, nxt):
+        if b - a > 1:
+            out[a:b] = times[a] + (t_next - times[a]) * np.arange(b - a) / (b - a)
+    return out

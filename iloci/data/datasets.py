@@ -37,6 +37,7 @@ import io
 import json
 import os
 import re
+import warnings
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -45,13 +46,14 @@ from typing import Any
 
 import numpy as np
 
+from iloci.data.csvfile import _decode
 from iloci.data.files import load_trajectory
-from iloci.errors import InvalidInputError
+from iloci.errors import InvalidInputError, TimeUnitWarning
 from iloci.interfaces import Demonstration
 from iloci.progress import long_step
 
-__all__ = ["Sample", "DataSet", "load_dataset", "check_protocol", "writer_folds", "demos_checksum",
-           "TRAJECTORY_SUFFIXES"]
+__all__ = ["Sample", "DataSet", "load_dataset", "load_dataset_once", "check_protocol",
+           "writer_folds", "demos_checksum", "TRAJECTORY_SUFFIXES"]
 
 #: File suffixes read as trajectories (what ``iloci teach`` reads).
 TRAJECTORY_SUFFIXES = (".csv", ".npy")
@@ -197,10 +199,10 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
         raw = path.read_bytes()
     except OSError as exc:
         raise InvalidInputError(f"cannot read manifest {path}: {exc.strerror or exc}.") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
+    try:  # UTF-8 with or without a byte-order mark, UTF-16/32 (Excel's "Unicode text"), Latin-1
+        text = _decode(raw, str(path))[0].lstrip("\ufeff")
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"manifest {exc}") from None
     rows: list[dict[str, Any]]
     if path.suffix.lower() == ".json":
         try:
@@ -228,9 +230,13 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
             dialect = csv.Sniffer().sniff(text[:4096], delimiters=",;\t|")
         except csv.Error:
             dialect = csv.excel
-        reader = csv.DictReader(io.StringIO(text), dialect=dialect)
-        header = list(reader.fieldnames or [])
-        rows = [dict(r) for r in reader]
+        reader = csv.DictReader(io.StringIO(text, newline=""), dialect=dialect)
+        try:
+            header = list(reader.fieldnames or [])
+            rows = [dict(r) for r in reader]
+        except csv.Error as exc:
+            raise InvalidInputError(f"manifest {path}, line {reader.line_num}: {exc}. Save it "
+                                    "as comma-separated text, one sample a line.") from None
         where = [f"line {i + 2}" for i in range(len(rows))]
     fcol, ccol = _pick(header, _FILE_COLS), _pick(header, _CONCEPT_COLS)
     if fcol is None or ccol is None:
@@ -278,15 +284,38 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
                   counter: Counter[str], timed: dict[bool, list[str]],
                   units: dict[str, list[str]], problems: list[str], h: Any,
                   report: Any) -> None:
-    """Read every sample's file (the loop of :func:`load_dataset`), reporting progress."""
+    """Read every sample's file (the loop of :func:`load_dataset`), reporting progress.
+
+    Also adds to ``problems`` the files that hold the same drawing as an earlier
+    one (a copy would be taught in one fold and recognized in another), and
+    gives one :class:`~iloci.errors.TimeUnitWarning` for all the files whose
+    time stamps look like milliseconds, not one per file.
+    """
+    drawings: dict[bytes, Sample] = {}
+    ms: list[tuple[Sample, str]] = []
     for i, s in enumerate(samples):
         report(i / max(len(samples), 1))
         f = root / s.path
         try:
-            d = load_trajectory(f, shape=s.concept, true_concept=s.concept,
-                                index=counter[s.concept])
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", TimeUnitWarning)
+                d = load_trajectory(f, shape=s.concept, true_concept=s.concept,
+                                    index=counter[s.concept])
         except InvalidInputError as exc:
             problems.append(f"{f}: {exc}")
+            continue
+        for w in caught:
+            if issubclass(w.category, TimeUnitWarning):
+                ms.append((s, str(w.message)))
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        key = hashlib.sha256(np.ascontiguousarray(d.positions, dtype="<f8").tobytes()).digest()
+        first = drawings.setdefault(key, s)
+        if first is not s:
+            same = ("" if first.concept == s.concept
+                    else f" (labelled {first.concept!r} there, {s.concept!r} here)")
+            problems.append(f"{f}: the same drawing as {root / first.path}{same}; a copy would "
+                            "be taught in one fold and recognized in another: remove one")
             continue
         counter[s.concept] += 1
         demos.append(d)
@@ -297,6 +326,14 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
         h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode(
             "utf-8", "surrogatepass"))
         h.update(hashlib.sha256(f.read_bytes()).digest())
+    if ms:
+        span = re.search(r"span [^;]*", ms[0][1])
+        warnings.warn(
+            f"{len(ms)} of {len(samples)} files have time stamps that look like milliseconds, "
+            f"not seconds, e.g. {root / ms[0][0].path} ({span.group() if span else ms[0][1]}). "
+            "Name the column "
+            "t_ms (or divide the times by 1000); only the robot's drawing speed reads them, "
+            "so the evaluation goes on.", TimeUnitWarning, stacklevel=3)
 
 
 def load_dataset(path: str | os.PathLike[str]) -> DataSet:
@@ -335,13 +372,21 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                                     "manifest.")
         manifest = p
     else:
-        manifest = next((p / m for m in _MANIFESTS if (p / m).is_file()), None)
+        found = [p / m for m in _MANIFESTS if (p / m).is_file()]
+        if len(found) > 1:
+            raise InvalidInputError(
+                f"data set {p} holds both {' and '.join(f.name for f in found)}: give the one "
+                f"to read (--data {found[0]}) or remove the other.")
+        manifest = found[0] if found else None
     if manifest is not None:
         root = manifest.parent
         samples, problems = _read_manifest(manifest)
         layout, name = "manifest", (p.name if p.is_dir() else manifest.stem)
         for s in samples:
-            if not (root / s.path).is_file():
+            if (root / s.path).is_dir():
+                problems.append(f"{root / s.path}: listed in {manifest.name} but it is a "
+                                "folder; list its trajectory files, one a row")
+            elif not (root / s.path).is_file():
                 problems.append(f"{root / s.path}: listed in {manifest.name} but not found")
             elif Path(s.path).suffix.lower() not in TRAJECTORY_SUFFIXES:
                 problems.append(f"{root / s.path}: not a .csv or .npy trajectory file")
@@ -363,10 +408,10 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
     with long_step(f"reading data set {p} ({len(samples):,} files)") as report:
         _read_samples(samples, root, demos, counter, timed, units, problems, h, report)
     if problems:
-        raise _fail(f"data set {p}: {len(problems)} file(s) cannot be read; nothing was "
+        raise _fail(f"data set {p}: {len(problems)} file(s) cannot be used; nothing was "
                     "learned:", problems,
-                    "Each file must be what `iloci teach` reads: .csv or .npy, N x 2 "
-                    "(x, y) or N x 3 (t, x, y).")
+                    "Fix or remove them and run again. Each file must be what `iloci teach` "
+                    "reads: .csv or .npy, N x 2 (x, y) or N x 3 (t, x, y), one drawing.")
     if timed[True] and timed[False]:
         raise _fail(f"data set {p} mixes units of time: {len(timed[True])} file(s) have time "
                     f"stamps and {len(timed[False])} have none (their samples are counted "
@@ -378,6 +423,14 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
         raise _fail(f"data set {p} mixes position units:",
                     [f"{u}: {len(fs)} file(s), e.g. {root / fs[0]}" for u, fs in units.items()],
                     "Convert the files to one unit.")
+    alike: dict[str, list[str]] = {}
+    for c in counter:
+        alike.setdefault(" ".join(c.split()).casefold(), []).append(c)
+    for names in alike.values():
+        if len(names) > 1:
+            warnings.warn(f"data set {p}: the concepts {', '.join(map(repr, sorted(names)))} "
+                          "differ only in case or spaces; they are scored as different "
+                          "concepts. If they are one, name them alike.", stacklevel=2)
     if len(counter) < 2:
         hint = ""
         if layout == "folders" and len(counter) == 1:
@@ -390,6 +443,68 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                                 f"least 2.{hint}")
     return DataSet(name=name, root=str(root.resolve()), source=str(p.resolve()), layout=layout,
                    samples=samples, demos=demos, checksum=h.hexdigest())
+
+
+#: Data sets read in this process: resolved path -> (fingerprint, DataSet).
+_READ: dict[str, tuple[tuple, DataSet]] = {}
+
+
+def _fingerprint(p: Path) -> tuple:
+    """Name, size and modification time of every file a data set at ``p`` reads.
+
+    Cheap (one ``stat`` per file, nothing read but a manifest): a changed,
+    added or removed trajectory file or manifest changes it.
+    """
+    def stat(f: str) -> tuple[str, int, int]:
+        try:
+            st = os.stat(f)
+        except OSError:
+            return (f, -1, -1)
+        return (f, st.st_size, st.st_mtime_ns)
+
+    found = [p / m for m in _MANIFESTS if (p / m).is_file()] if p.is_dir() else [p]
+    if found:  # the manifest and the files it lists (which may lie anywhere)
+        files = [str(m) for m in found]
+        try:
+            files += [str(found[0].parent / s.path) for s in _read_manifest(found[0])[0]]
+        except InvalidInputError:
+            pass
+        return (str(p.resolve()), tuple(stat(f) for f in files))
+    out = [stat(os.path.join(dirpath, name)) for dirpath, _dirs, names in os.walk(p)
+           for name in names if name.lower().endswith(TRAJECTORY_SUFFIXES)]
+    return (str(p.resolve()), tuple(sorted(out)))
+
+
+def load_dataset_once(path: str | os.PathLike[str], *, warn: bool = False) -> DataSet:
+    """:func:`load_dataset`, read again only when a file of the data set changed.
+
+    ``iloci evaluate`` needs the data set in its own process (to check it,
+    then to plan the folds) and in every task of its workers (a fold's
+    learning, its baselines, its recognition); this reads it once per
+    process. The data set read last is kept, with the size and modification
+    time of each of its files (see :func:`_fingerprint`).
+
+    Parameters
+    ----------
+    path : path
+        As for :func:`load_dataset`.
+    warn : bool
+        Give the data set's :class:`~iloci.errors.TimeUnitWarning` when it is
+        read (workers do not: the evaluation's own process gave it).
+    """
+    p = Path(path).expanduser()
+    key = str(p.resolve())
+    fp = _fingerprint(p)
+    hit = _READ.get(key)
+    if hit is not None and hit[0] == fp:
+        return hit[1]
+    with warnings.catch_warnings():
+        if not warn:
+            warnings.simplefilter("ignore", TimeUnitWarning)
+        dataset = load_dataset(p)
+    _READ.clear()  # one data set kept: a worker serves one evaluation at a time
+    _READ[key] = (fp, dataset)
+    return dataset
 
 
 def demos_checksum(demos: Sequence[Demonstration]) -> str:
@@ -461,9 +576,21 @@ def writer_folds(samples: Sequence[Sample], folds: int, seed: int
             problems.append(f"fold {k} (writers {', '.join(ws)}) has no sample of "
                             f"{', '.join(lack)}")
     if problems:
+        drew: dict[str, set[str]] = {}
+        for s in samples:
+            drew.setdefault(str(s.writer), set()).add(s.concept)
+        partial = []
+        for w in writers:
+            lacks = [c for c in concepts if c not in drew[w]]
+            if lacks:
+                partial.append(f"writer {w} drew {len(concepts) - len(lacks)} of the "
+                               f"{len(concepts)} concepts, not {', '.join(lacks[:8])}"
+                               + (", ..." if len(lacks) > 8 else ""))
         raise _fail("--split writers: some writer groups do not draw every concept, so "
-                    "their fold could not learn it:", problems,
-                    "Use fewer folds, or the per-concept split (--split concepts).")
+                    "their fold could not learn it:", problems + partial,
+                    "Leave out the writers who did not draw every concept (or give them "
+                    "the missing drawings), use fewer folds, or split per concept "
+                    "(--split concepts).")
     return [(np.flatnonzero(of == k), np.flatnonzero(of != k)) for k in range(folds)]
 
 

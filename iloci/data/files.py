@@ -103,6 +103,16 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
 
 
 def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    try:
+        with open(p, "rb") as fh:
+            magic = fh.read(6)
+    except OSError as exc:
+        raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror or exc}.") from None
+    if magic != b"\x93NUMPY":
+        raise InvalidInputError(
+            f"{str(p)!r} is not a .npy file (one written by numpy.save starts with "
+            f"\\x93NUMPY; this one starts with {magic!r}). Save the array with "
+            "numpy.save(path, array), or give a text file the .csv suffix.")
     try:  # mapped, not read: the header's shape is checked before any data is loaded
         arr = np.load(p, allow_pickle=False, mmap_mode="r")
     except (OSError, ValueError, EOFError) as exc:
@@ -129,8 +139,8 @@ def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
         raise InvalidDemonstrationError(f"{p.name}: row {int(bad[0, 0])} contains NaN or inf; "
                                         "remove or interpolate missing samples.")
     if arr.shape[1] == 3:
-        check_times(arr[:, 0], [f"row {i}" for i in range(len(arr))], p.name)
-        return arr[:, 1:], arr[:, 0]
+        times = check_times(arr[:, 0], [f"row {i}" for i in range(len(arr))], p.name)
+        return arr[:, 1:], times
     return arr, None
 
 

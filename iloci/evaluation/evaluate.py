@@ -36,7 +36,7 @@ import time
 
 from iloci.config import check_installed, load_config
 from iloci.data import load_lasa
-from iloci.data.datasets import check_protocol, demos_checksum, load_dataset
+from iloci.data.datasets import check_protocol, demos_checksum, load_dataset_once
 from iloci.data.files import writable_dir
 from iloci.errors import InvalidInputError
 from iloci.evaluation.executors import InProcessExecutor, LocalExecutor, make_executor
@@ -172,7 +172,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
             jobs = 1
     dataset = None
     if config.data.path:  # read and checked whole before anything is learned
-        dataset = load_dataset(config.data.path)
+        dataset = load_dataset_once(config.data.path, warn=True)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
         # workers (other processes, maybe other machines) read the same files

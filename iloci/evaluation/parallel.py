@@ -200,8 +200,8 @@ def _worker_context(config_dict: dict, shapes: list[str],
         return specs.demos, specs.plugin_manager
     path = (config_dict.get("data") or {}).get("path")
     if path:  # a data set of the user's own ([data] path), read as the parent read it
-        from iloci.data.datasets import load_dataset
-        demos = load_dataset(path).demos
+        from iloci.data.datasets import load_dataset_once
+        demos = load_dataset_once(path).demos
     else:
         demos = load_lasa(shapes or None)
     # specs: what the caller's plugin manager resolved; None: the default manager's

