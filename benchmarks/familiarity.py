@@ -30,10 +30,17 @@ nearest learning demonstration of the fold (``dtw_normalised``'s paths),
 as a familiarity; it says how far the raw data themselves separate the two
 sets.
 
-Writes ``benchmarks/results/familiarity.json``.
+Writes ``benchmarks/results/familiarity.json``: per seed the tables above;
+``summary``: per part, subset and familiarity the AUROC per seed and its
+mean; ``targets``: issue 25's (AUROC >= 0.95 with the default familiarity
+on Multi_Models all 28 and on UNIPEN letters all 260, every seed), met or
+not; ``config``: the learner settings and back ends the memories were
+learned and read with (the default config), and the commit.
 
-Run: ``python benchmarks/familiarity.py [--unipen PATH] [--seeds 0]
-[--runs DIR] [--jobs 1]``.
+Run: ``python benchmarks/familiarity.py [--unipen PATH] [--seeds 0 1 2]
+[--runs DIR]``; ``--merge A.json B.json ...`` writes one file from runs
+made apart (e.g. one process per seed). A memory found in ``--runs`` is reused as saved (with the
+config saved in it): give a fresh ``--runs`` after a default changes.
 """
 
 from __future__ import annotations
@@ -185,31 +192,116 @@ def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
         "auroc": table, "path_auroc_per_letter": per_letter}}
 
 
+def merge(parts: list[Path], out_path: Path, note: str | None) -> dict[str, Any]:
+    """One output from several (their runs, by seed); each part's command, commit, config kept."""
+    outs = [json.loads(p.read_text()) for p in parts]
+    configs = {json.dumps(o.get("config"), sort_keys=True) for o in outs}
+    if len(configs) > 1:
+        raise SystemExit(f"{', '.join(map(str, parts))}: learned with different configs; "
+                         "merge only runs of the same config")
+    runs = sorted((r for o in outs for r in o["runs"]), key=lambda r: r["seed"])
+    seeds = [r["seed"] for r in runs]
+    if len(set(seeds)) < len(seeds):
+        raise SystemExit(f"seed given twice in {', '.join(map(str, parts))}: {seeds}")
+    summary, targets = summarize(runs, outs[0]["config"]["learner"]["familiarity"])
+    out = {k: v for k, v in outs[0].items() if k not in ("command", "commit", "note",
+                                                          "machine", "wall_seconds", "runs")}
+    out |= {"command": "python benchmarks/familiarity.py --merge " + " ".join(map(str, parts)),
+            "parts": [{k: o.get(k) for k in ("command", "commit", "note", "wall_seconds",
+                                               "machine")} for o in outs],
+            "commit": sorted({o.get("commit") or "" for o in outs}),
+            "summary": summary, "targets": targets, "runs": runs}
+    if note:
+        out["note"] = note
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(json.dumps(out, indent=1) + "\n")
+    for name, t in targets.items():
+        print(f"{name}: {t['value']} -> {'met' if t['met'] else 'MISSED'}", file=sys.stderr)
+    print(f"wrote {out_path}", file=sys.stderr)
+    return out
+
+
+#: Issue 25's familiarity targets: (part, subset) -> AUROC floor, for the
+#: default familiarity on every seed.
+TARGETS = {("multi_models", "all_28"): 0.95, ("letters", "all_260"): 0.95}
+
+
+def summarize(runs: list[dict[str, Any]], default: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Per part, subset and familiarity: AUROC per seed and mean; and the targets."""
+    summary: dict[str, Any] = {}
+    for r in runs:
+        for part in ("multi_models", "untaught", "letters"):
+            for fam, row in r.get(part, {}).get("auroc", {}).items():
+                for subset, v in row.items():
+                    if "unknown_below" in subset:
+                        continue
+                    cell = summary.setdefault(part, {}).setdefault(subset, {}).setdefault(
+                        fam, {"seeds": {}})
+                    cell["seeds"][str(r["seed"])] = v
+    for part in summary.values():
+        for subset in part.values():
+            for cell in subset.values():
+                cell["mean"] = float(np.mean(list(cell["seeds"].values())))
+    targets: dict[str, Any] = {}
+    for (part, subset), floor in TARGETS.items():
+        cell = summary.get(part, {}).get(subset, {}).get(default)
+        if cell:
+            targets[f"{part}_{subset}_ge_{floor}"] = {
+                "familiarity": default, "value": cell["seeds"],
+                "met": all(v >= floor for v in cell["seeds"].values())}
+    return summary, targets
+
+
+def _git_head() -> str | None:
+    """The checkout's commit (``None`` outside a git checkout)."""
+    import subprocess
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                              check=True, cwd=HERE).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--unipen", metavar="PATH", help="the train_r01_v07 folder (without it: "
                     "LASA only)")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--runs", default="runs/recognition",
                     help="fold memories: read when there, else learned and saved there")
     ap.add_argument("--out", default=str(RESULTS))
     ap.add_argument("--note", help="free text recorded in the output")
+    ap.add_argument("--merge", nargs="+", metavar="JSON",
+                    help="run nothing: write one file from the per-seed runs of these "
+                    "outputs (e.g. one process per seed), summarised together")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge([Path(p) for p in args.merge], Path(args.out), args.note)
     load_before = os.getloadavg()
     t0 = time.perf_counter()
     runs = []
     for seed in args.seeds:
         print(f"[familiarity] seed {seed} ...", file=sys.stderr, flush=True)
+        t_seed = time.perf_counter()
         r: dict[str, Any] = {"seed": seed, **lasa(seed, Path(args.runs))}
         if args.unipen:
             r |= unipen(seed, Path(args.runs), args.unipen)
+        r["wall_seconds"] = time.perf_counter() - t_seed
         runs.append(r)
         for part in ("multi_models", "untaught", "letters"):
             if part in r:
                 print(f"[familiarity] seed {seed} {part}: " + ", ".join(
                     f"{f} {v}" for f, v in r[part]["auroc"].items()), file=sys.stderr,
                     flush=True)
+    from iloci.config import load_config
+    config = load_config({}).to_dict()
+    summary, targets = summarize(runs, config["learner"]["familiarity"])
     out = {"command": "python benchmarks/familiarity.py " + " ".join(argv or sys.argv[1:]),
+           "commit": _git_head(),
+           "config": {"learner": config["learner"], "back_ends": {
+               k: config[k]["name"] for k in ("perceptual_model", "clusterer", "teacher",
+                                              "ik", "simulator")}},
+           "summary": summary, "targets": targets,
            "familiarities": list(rec.FAMILIARITIES), "unknown_below": rec.UNKNOWN_BELOW,
            "redrawn_multi_models": sorted(rec.REDRAWN),
            "digit_like_letters": sorted(rec.DIGIT_LIKE), "runs": runs,
@@ -220,6 +312,8 @@ def main(argv: list[str] | None = None) -> dict:
         out["note"] = args.note
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+    for name, t in targets.items():
+        print(f"{name}: {t['value']} -> {'met' if t['met'] else 'MISSED'}", file=sys.stderr)
     print(f"wrote {args.out}", file=sys.stderr)
     return out
 

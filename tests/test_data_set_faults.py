@@ -247,3 +247,22 @@ def test_the_guides_recipe_turns_xml_logs_into_a_data_set(digits, tmp_path, monk
     assert ds.concepts == count and len(ds.writers) == 3
     assert all(np.all(np.diff(d.times) > 0) for d in ds.demos)
     assert 0.05 < ds.demos[0].times[-1] - ds.demos[0].times[0] < 10  # seconds, from ms
+
+
+def test_the_pb_space_figure_of_a_large_fold_places_a_seeded_sample():
+    """Non-metric MDS grows faster than the square of the points: a fold of thousands of
+    test drawings would hold the report for hours. LASA's folds (about 30 entries and 146
+    test drawings) are drawn whole."""
+    from iloci.evaluation.figures import PB_SPACE_POINTS, pb_space_sample
+
+    lasa = ["exemplar"] * 30 + ["test"] * 146
+    assert pb_space_sample(lasa).tolist() == list(range(len(lasa)))
+    big = ["prototype"] * 20 + ["exemplar"] * 170 + ["test"] * 768
+    keep = pb_space_sample(big, seed=3)
+    assert len(keep) == PB_SPACE_POINTS and np.all(np.diff(keep) > 0)
+    assert sum(big[i] != "test" for i in keep) == PB_SPACE_POINTS // 2
+    assert keep.tolist() == pb_space_sample(big, seed=3).tolist()
+    assert keep.tolist() != pb_space_sample(big, seed=4).tolist()
+    few_entries = ["exemplar"] * 12 + ["test"] * 500
+    keep = pb_space_sample(few_entries)
+    assert set(range(12)) <= set(keep.tolist()) and len(keep) == PB_SPACE_POINTS

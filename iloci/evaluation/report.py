@@ -297,7 +297,9 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     if have_pb:
         lines += [f"## PB space (fold {first.fold})", "",
                   "Memory PB_rec (large: prototypes, medium: exemplars) and test PB_obs "
-                  "(small), by non-metric MDS; one marker per true concept.", "",
+                  "(small), by non-metric MDS; one marker per true concept (at most "
+                  f"{figures.PB_SPACE_POINTS} points: of a larger fold, a seeded sample, "
+                  "half of it memory entries at most).", "",
                   "![PB space](figures/pb_space.png)", ""]
     if first.shapes:
         lines += ["## Regenerated shapes", "",
