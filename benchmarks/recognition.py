@@ -63,22 +63,29 @@ DATASETS = ("lasa", "unipen", "unipen-writers")
 
 #: row -> ``[learner]`` changes recognized with (on the same memories).
 #: The ``regeneration-*`` rows are the ablation of the default's comparison
-#: (``compare = "both"``, ``warp = 8``): what each of its two changes does.
+#: (``compare = "both-distances"``, ``warp = 8``, no tilt search): what
+#: each of its changes does.
 DECISIONS: dict[str, dict[str, Any]] = {
     "pb_distance": {"decision": "pb_distance"},          # the paper
-    "regeneration": {"decision": "regeneration"},        # the default: both, warp 8
+    "regeneration": {"decision": "regeneration"},        # the default
+    # the default before this change: RMS-weighed halves, tilts searched past a PB distance
+    "regeneration-before": {"decision": "regeneration", "compare": "both",
+                            "tilts": [8.0, 16.0], "tilt_gate": "pb_distance"},
+    "regeneration-both-features": {"decision": "regeneration", "compare": "both"},
+    "regeneration-tilts-pb-gate": {"decision": "regeneration", "tilts": [8.0, 16.0],
+                                   "tilt_gate": "pb_distance"},
+    "regeneration-tilts": {"decision": "regeneration", "tilts": [8.0, 16.0]},
     "regeneration-displacements": {"decision": "regeneration", "compare": "displacements",
                                    "warp": 0},           # the default until issue 25 part 5
     "regeneration-displacements-warp-8": {"decision": "regeneration",
                                           "compare": "displacements", "warp": 8},
-    "regeneration-both-no-warp": {"decision": "regeneration", "compare": "both", "warp": 0},
+    "regeneration-both-distances-no-warp": {"decision": "regeneration", "warp": 0},
     "regeneration-positions": {"decision": "regeneration", "compare": "positions"},
-    "regeneration-no-tilt": {"decision": "regeneration", "tilts": []},
     "reproduction": {"decision": "reproduction"},
 }
 #: Rows run unless ``--rows`` says otherwise (the others cost more time).
-DEFAULT_ROWS = ("regeneration", "regeneration-displacements",
-                "regeneration-displacements-warp-8", "regeneration-both-no-warp")
+DEFAULT_ROWS = ("regeneration", "regeneration-before", "regeneration-both-features",
+                "regeneration-tilts-pb-gate", "regeneration-tilts")
 #: ``[learner] familiarity`` settings compared (``unknown_below`` is set
 #: just above 0 so that the reproduction errors are computed; its answers
 #: are not scored here).

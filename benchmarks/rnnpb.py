@@ -300,8 +300,8 @@ def agent_recognize_one_ms(demos, learn, test, rotated_degrees: float = 15.0) ->
     recorded, and turned by ``rotated_degrees`` (``iloci.evaluation.perturb.rotate``,
     the robustness suite's rotation), where the tilt search runs more often.
     ``searched`` is the share of demonstrations read turned as well
-    (PB_obs beyond ``tilt_beyond``), ``answered_turned`` those whose turned
-    reading answered.
+    (beyond ``[learner] tilt_gate``'s gate; none without ``tilts``, the
+    default), ``answered_turned`` those whose turned reading answered.
     """
     import iloci
     from iloci.evaluation.perturb import rotate
@@ -323,13 +323,22 @@ def agent_recognize_one_ms(demos, learn, test, rotated_degrees: float = 15.0) ->
             cpu.append((time.process_time() - c0) * 1e3)
             # read turned as well: the upright reading was beyond the gate
             # (an answer from a turned reading implies it)
-            searched += rec.tilt != 0.0 or (bool(cfg.tilts) and rec.distance > cfg.tilt_beyond)
+            searched += rec.tilt != 0.0 or (bool(cfg.tilts) and _beyond_gate(agent, d, rec))
             turned += rec.tilt != 0.0
         out[name] = {"wall": statistics.median(wall), "cpu": statistics.median(cpu),
                      "wall_p90": float(np.percentile(wall, 90)),
                      "searched": searched / len(items),
                      "answered_turned": turned / len(items)}
     return out
+
+
+def _beyond_gate(agent, demo, rec) -> bool:
+    """Whether the tilt search's gate (``[learner] tilt_gate``) opened for ``demo``."""
+    cfg = agent.config.learner
+    if cfg.tilt_gate == "pb_distance":
+        return bool(rec.distance > cfg.tilt_beyond)
+    seq = agent._encode(agent.motion(demo))[0]
+    return bool(agent.learner.tilt_scores([seq])[0] > agent.learner.ranking_scale())
 
 
 def recognize_one_ms(demos, motions, learn, test, entries: int = 25) -> dict:

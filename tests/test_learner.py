@@ -736,18 +736,20 @@ def test_regeneration_decision_answers_with_the_nearest_regenerated_pattern(lasa
 
 
 def test_default_regeneration_compares_positions_and_displacements_warped(lasa):
-    """The default compare = "both", warp = 8: each entry's distance is pattern_distances of
-    the encoded drawing, as positions and displacements, to its regenerated pattern."""
+    """The default compare = "both-distances", warp = 8: each entry's distance is
+    pattern_distances of the encoded drawing, as positions and displacements, to its
+    regenerated pattern."""
     agent = make_agent(familiarity="regeneration", tilts=())
-    assert (agent.config.learner.compare, agent.config.learner.warp) == ("both", 8)
+    assert (agent.config.learner.compare, agent.config.learner.warp) == ("both-distances", 8)
     agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
     demos = [lasa["GShape/2"], lasa["Sine/3"]]
     seqs = [agent._encode(agent.motion(d))[0] for d in demos]
     patterns = regenerated_patterns(agent.perceptual_model, agent.memory)
     d = agent.learner.regeneration_distances(seqs)
-    np.testing.assert_allclose(d, pattern_distances(seqs, patterns, 8, "both"))
+    np.testing.assert_allclose(d, pattern_distances(seqs, patterns, 8, "both-distances"))
     assert not np.allclose(d, pattern_distances(seqs, patterns, 8, "displacements"))
-    scale = regeneration_scale(patterns, agent.memory.concept_labels, 8, "both")
+    assert not np.allclose(d, pattern_distances(seqs, patterns, 8, "both"))
+    scale = regeneration_scale(patterns, agent.memory.concept_labels, 8, "both-distances")
     for r, row in zip(agent.recognize(demos), d):
         assert r.entry == int(np.argmin(row))
         assert r.familiarity == pytest.approx(scale / (scale + row.min()))
@@ -788,6 +790,25 @@ def test_pattern_distances_as_positions_both_and_warp_against_a_plain_loop():
 
     d = pattern_distances(seqs, pats, compare="both")
     assert d[2, 3] == pytest.approx(np.mean((both(seqs[2]) - both(pats[3])) ** 2))
+    # both-distances: positions weighed so that both halves' distances between the
+    # patterns (with the same band) have the same median
+    for band in (0, 3):
+        off = ~np.eye(4, dtype=bool)
+        pp = pattern_distances(pats, pats, band, "positions")[off]
+        dd = pattern_distances(pats, pats, band, "displacements")[off]
+        wd = np.sqrt(np.median(dd) / np.median(pp))
+        assert np.median(wd ** 2 * pp) == pytest.approx(np.median(dd))
+
+        def both_d(s, wd=wd):
+            return np.hstack([wd * as_positions(s)[1:], s])
+
+        d = pattern_distances(seqs, pats, band, "both-distances")
+        ref = pattern_distances([both_d(q) for q in seqs], [both_d(q) for q in pats], band,
+                                "displacements")
+        np.testing.assert_allclose(d, ref, rtol=1e-12)
+    assert pattern_distances(seqs[:1], pats[:1], 0, "both-distances")[0, 0] == pytest.approx(
+        np.mean((np.hstack([as_positions(seqs[0])[1:], seqs[0]])
+                 - np.hstack([as_positions(pats[0])[1:], pats[0]])) ** 2))   # one pattern: w = 1
     # the banded DTW, vectorised over pairs, is the textbook recursion
     for compare, f in (("displacements", lambda s: s), ("both", both)):
         for band in (1, 3, 7):

@@ -1,4 +1,4 @@
-"""Recognition's tilt search (``[learner] tilts``, ``tilt_beyond``) on real LASA demonstrations.
+"""Recognition's tilt search (``[learner] tilts``, ``tilt_gate``) on real LASA demonstrations.
 
 A drawing turned in the plane is read again turned back by the search's
 angles; the reading the memory reproduces best is recognized, and an
@@ -46,8 +46,9 @@ def taught(demos):
     return agent
 
 
-def _with_tilts(agent, tilts):
-    learner = dataclasses.replace(agent.config.learner, tilts=tuple(tilts))
+def _with_tilts(agent, tilts, gate=None):
+    learner = dataclasses.replace(agent.config.learner, tilts=tuple(tilts),
+                                  tilt_gate=gate or agent.config.learner.tilt_gate)
     agent.config = dataclasses.replace(agent.config, learner=learner)
 
 
@@ -75,20 +76,25 @@ def test_a_turned_drawing_is_read_turned_back(taught, demos):
     keys = [f"{s}/{i}" for s in ("Sine", "Worm") for i in (1, 2, 4, 5, 6)]
     shown = [_turned(demos[k], 15.0) for k in keys]
     known = {k: k.split("/")[0] for k in ("Sine/0", "Worm/0", "Sine/3", "Worm/3")}
+    default = load_config(None).learner
     try:
         _with_tilts(agent, ())
         plain = agent.recognize(shown)
         upright = agent.recognize([demos[k] for k in keys])
-        _with_tilts(agent, (8.0, 16.0))
+        _with_tilts(agent, (8.0, 16.0), "pb_distance")
         searched = agent.recognize(shown)
         upright_searched = agent.recognize([demos[k] for k in keys])
+        _with_tilts(agent, (8.0, 16.0), "ranking")
+        gated = agent.recognize(shown)
+        seqs = [agent._encode(agent.motion(d))[0] for d in shown]
+        scores, scale = agent.learner.tilt_scores(seqs), agent.learner.ranking_scale()
     finally:
-        _with_tilts(agent, load_config(None).learner.tilts)
+        _with_tilts(agent, default.tilts, default.tilt_gate)
     assert all(r.tilt == 0.0 for r in plain)
-    # the drawings turned by +15 degrees that lie beyond tilt_beyond from every
-    # PB_rec are read turned back (by -8 or -16 degrees, never the wrong way);
-    # the others are read as drawn
-    beyond = load_config(None).learner.tilt_beyond
+    # tilt_gate = "pb_distance": the drawings turned by +15 degrees that lie
+    # beyond tilt_beyond from every PB_rec are read turned back (by -8 or -16
+    # degrees, never the wrong way); the others are read as drawn
+    beyond = default.tilt_beyond
     far = [p.distance > beyond for p in plain]
     assert sum(far) >= 5, [round(p.distance, 3) for p in plain]
     for r, p, f in zip(searched, plain, far):
@@ -97,6 +103,13 @@ def test_a_turned_drawing_is_read_turned_back(taught, demos):
             assert r.tilt in (-8.0, -16.0) and r.error < p.error, (r.demo, r.tilt)
         else:
             assert r.tilt == 0.0 and r.entry == p.entry, (r.demo, r.tilt)
+    # tilt_gate = "ranking" (the default gate): only a drawing whose nearest
+    # regenerated pattern lies further than the memory's own scale (how far
+    # its concepts lie apart) is searched. Sine and Worm lie far apart, so
+    # every turned drawing here is nearer to one of them and read as drawn
+    assert np.isfinite(scale) and (scores < scale).all(), (scores, scale)
+    assert [(r.concept, r.entry, r.tilt) for r in gated] == \
+        [(r.concept, r.entry, 0.0) for r in plain]
     # and every one is recognized as its own concept
     assert [known[r.source] for r in searched] == [k.split("/")[0] for k in keys], \
         [(r.demo, r.source, r.tilt, round(r.distance, 3)) for r in searched]
@@ -107,7 +120,8 @@ def test_a_turned_drawing_is_read_turned_back(taught, demos):
 
 
 def test_tilt_settings_are_validated():
-    assert load_config(None).learner.tilts == (8.0, 16.0)
+    assert load_config(None).learner.tilts == ()       # the paper: read as drawn
+    assert load_config({"learner": {"tilts": [8, 16]}}).learner.tilts == (8.0, 16.0)
     assert load_config({"learner": {"tilts": []}}).learner.tilts == ()
     for bad in ([0.0], [-8.0], [95.0]):
         with pytest.raises(ConfigError,
@@ -115,3 +129,5 @@ def test_tilt_settings_are_validated():
             load_config({"learner": {"tilts": bad}})
     with pytest.raises(ConfigError, match="tilt_beyond must be >= 0 \\(a PB distance\\)"):
         load_config({"learner": {"tilt_beyond": -0.1}})
+    with pytest.raises(ConfigError, match="tilt_gate must be"):
+        load_config({"learner": {"tilt_gate": "pb"}})

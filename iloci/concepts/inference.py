@@ -178,7 +178,7 @@ def _on_steps(pattern: np.ndarray, steps: int) -> np.ndarray:
 
 
 #: What :func:`pattern_distances` compares (``[learner] compare``).
-COMPARES = ("both", "positions", "displacements")
+COMPARES = ("both-distances", "both", "positions", "displacements")
 
 
 def as_positions(sequence: np.ndarray) -> np.ndarray:
@@ -231,7 +231,13 @@ def pattern_distances(sequences: Sequence[np.ndarray],
     patterns : sequence of ndarray, each (T_m, D)
     warp : int
         Band half-width of the alignment, in steps; 0 aligns step by step.
-    compare : {"displacements", "positions", "both"}
+    compare : {"displacements", "positions", "both", "both-distances"}
+        ``"both"`` and ``"both-distances"`` put the centred positions, weighed,
+        beside the displacements: weighed so that both halves' features
+        have the same RMS over ``patterns`` (:func:`_position_weight`), or
+        so that both halves' distances between the patterns have the same
+        median (:func:`_distance_weight`; the default of ``[learner]
+        compare``).
 
     Returns
     -------
@@ -250,8 +256,9 @@ def pattern_distances(sequences: Sequence[np.ndarray],
     if compare == "positions":
         seqs = [as_positions(s) for s in seqs]
         pats = [as_positions(p) for p in pats]
-    elif compare == "both":
-        w = _position_weight(pats)
+    elif compare in ("both", "both-distances"):
+        w = (_position_weight(pats) if compare == "both"
+             else _distance_weight(pats, warp))
         seqs = [np.hstack([w * as_positions(s)[1:], s]) for s in seqs]
         pats = [np.hstack([w * as_positions(p)[1:], p]) for p in pats]
     out = np.zeros((len(seqs), len(pats)), dtype=np.float64)
@@ -284,6 +291,24 @@ def _position_weight(patterns: Sequence[np.ndarray]) -> float:
     disp = np.sqrt(np.mean(np.concatenate([p.ravel() ** 2 for p in patterns])))
     pos = np.sqrt(np.mean(np.concatenate([as_positions(p).ravel() ** 2 for p in patterns])))
     return float(disp / pos) if pos > 0 and np.isfinite(pos) and np.isfinite(disp) else 1.0
+
+
+def _distance_weight(patterns: Sequence[np.ndarray], warp: int) -> float:
+    """The positions' weight that gives both halves the same median distance over the patterns.
+
+    Standardises the two distances rather than the features: the median,
+    over every pair of the memory's regenerated patterns, of the
+    displacements' distance over that of the centred positions (each by
+    :func:`pattern_distances` with ``warp``), square-rooted (the distances
+    are squared differences); 1 with fewer than two patterns or a zero median.
+    """
+    pats = [np.asarray(p, dtype=np.float64) for p in patterns]
+    if len(pats) < 2:
+        return 1.0
+    off = ~np.eye(len(pats), dtype=bool)
+    dp = float(np.median(pattern_distances(pats, pats, warp, "positions")[off]))
+    dd = float(np.median(pattern_distances(pats, pats, warp, "displacements")[off]))
+    return float(np.sqrt(dd / dp)) if dp > 0 and dd > 0 and np.isfinite(dp + dd) else 1.0
 
 
 def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:

@@ -27,7 +27,7 @@ rehearsal      epochs, what it trains on:              the model's epochs, regen
                                                        the demonstrations)
 inference      "unknown", the tilt search:             always a concept, drawings read
                ``unknown_below``, ``tilts``,           as drawn (iloci's default
-               ``tilt_beyond``                         searches tilts)
+               ``tilt_beyond``, ``tilt_gate``          searches tilts)
 =============  ======================================  =================================
 
 :meth:`Policies.of` is the one place a :class:`~iloci.config.LearnerConfig`
@@ -145,8 +145,11 @@ class Inference:
     unknown_below: float = 0.0
     #: Tilt search angles (degrees, each both ways); ``()`` reads drawings as drawn.
     tilts: tuple[float, ...] = ()
-    #: PB distance beyond which the tilt search runs.
+    #: PB distance beyond which the tilt search runs (``tilt_gate = "pb_distance"``).
     tilt_beyond: float = 0.3
+    #: ``"ranking"``: the search runs beyond the memory's own scale of the
+    #: ranking's quantity; ``"pb_distance"``: beyond ``tilt_beyond``.
+    tilt_gate: str = "ranking"
 
 
 @dataclass(frozen=True)
@@ -166,7 +169,7 @@ class Policies:
         DTW band (steps) of the regeneration distances (``warp``).
     compare : str
         What the regeneration distances compare (``compare``):
-        ``"both"``, ``"positions"`` or ``"displacements"``.
+        ``"both-distances"``, ``"both"``, ``"positions"`` or ``"displacements"``.
     confirmation : Confirmation
     novelty : Novelty
     placement : Placement
@@ -177,7 +180,7 @@ class Policies:
     ranking: str = "regeneration"
     familiarity: str = "path"
     warp: int = 8
-    compare: str = "both"
+    compare: str = "both-distances"
     confirmation: Confirmation = Confirmation()
     novelty: Novelty = Novelty()
     placement: Placement = Placement()
@@ -201,7 +204,8 @@ class Policies:
             rehearsal=Rehearsal(epochs=config.rehearsal_epochs or None,
                                 keep_patterns=config.rehearse_from == "demonstrations"),
             inference=Inference(unknown_below=config.unknown_below,
-                                    tilts=tuple(config.tilts), tilt_beyond=config.tilt_beyond))
+                                    tilts=tuple(config.tilts), tilt_beyond=config.tilt_beyond,
+                                    tilt_gate=config.tilt_gate))
 
     @property
     def rank_by_reproduction(self) -> bool:

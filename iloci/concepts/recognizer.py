@@ -87,15 +87,36 @@ class Recognizer:
         pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
         return pattern_distances(sequences, pats, self.policies.warp, self.policies.compare)
 
-    def tilt_scores(self, sequences: Sequence[np.ndarray]) -> np.ndarray:
+    def tilt_scores(self, sequences: Sequence[np.ndarray],
+                    patterns: Sequence[np.ndarray] | None = None) -> np.ndarray:
         """Per sequence, how well the memory reproduces it: the tilt search's criterion.
 
         The best over entries of the quantity ``[learner] decision`` ranks
-        by (regeneration distance, else the entry prediction error), shape (B,).
+        by (regeneration distance, else the entry prediction error), shape (B,);
+        ``patterns``: the memory's regenerated patterns, when already computed.
         """
         if self.policies.rank_by_regeneration:
-            return self.regeneration_distances(sequences).min(axis=1)
+            return self.regeneration_distances(sequences, patterns).min(axis=1)
         return self.entry_errors(sequences).min(axis=1)
+
+    def ranking_scale(self, patterns: Sequence[np.ndarray] | None = None) -> float:
+        """The memory's own scale of :meth:`tilt_scores`' quantity: how far its concepts lie apart.
+
+        :func:`~iloci.concepts.inference.regeneration_scale` (with ``[learner]
+        warp`` and ``compare``) when the decision ranks by regeneration, else
+        :func:`~iloci.concepts.inference.novelty_scale` (entry prediction
+        errors): for each entry, the distance from its regenerated pattern to
+        the nearest entry of another concept, the median over entries.
+        ``[learner] tilt_gate = "ranking"`` searches the tilts of a drawing
+        whose :meth:`tilt_scores` lies beyond it. NaN (nothing searched)
+        with fewer than two concepts.
+        """
+        policies = self.policies
+        if policies.rank_by_regeneration:
+            pats = regenerated_patterns(self.model, self.memory) if patterns is None else patterns
+            return regeneration_scale(pats, self.memory.concept_labels, policies.warp,
+                                      policies.compare)
+        return novelty_scale(self.model, self.memory)
 
     # -- inference phase -------------------------------------------------------------
     def recognize(self, sequences: Sequence[np.ndarray],
@@ -110,17 +131,19 @@ class Recognizer:
         keys : sequence of str, optional
             Demonstration keys, for the results.
         tilted : callable, optional
-            The tilt search (``[learner] tilts``, ``tilt_beyond``):
+            The tilt search (``[learner] tilts``, ``tilt_gate``):
             ``tilted(b)`` gives ``(degrees, sequence)`` pairs, sequence
             ``b`` turned by each angle of ``tilts`` and encoded
             (:meth:`Agent.recognize <iloci.agent.Agent.recognize>` turns the
             pen path with :func:`~iloci.sensorimotor.pipeline.tilted`). It
-            is called only for the sequences whose PB_obs lies further
-            than ``tilt_beyond`` from every PB_rec; of a sequence's
-            readings, the one with the lowest entry prediction error
-            (:meth:`entry_errors`, the best over the memory's entries) is
-            recognized, a turned one only when that error is below
-            :data:`TILT_MARGIN` times the upright reading's.
+            is called only for the sequences whose :meth:`tilt_scores`
+            lies beyond :meth:`ranking_scale` (``tilt_gate = "ranking"``)
+            or whose PB_obs lies further than ``tilt_beyond`` from every
+            PB_rec (``"pb_distance"``); of a sequence's readings, the one
+            with the lowest :meth:`tilt_scores` (the best over the memory's
+            entries of what the decision ranks by) is recognized, a turned
+            one only when that is below :data:`TILT_MARGIN` times the
+            upright reading's.
 
         Returns
         -------
@@ -136,7 +159,17 @@ class Recognizer:
         out = self._recognize(sequences, keys, scale, patterns)
         if tilted is None or not self.policies.inference.tilts:
             return out
-        ask = [b for b, r in enumerate(out) if r.distance > self.policies.inference.tilt_beyond]
+        seqs = list(sequences)
+        inference = self.policies.inference
+        if inference.tilt_gate == "ranking":
+            # gate, choice of reading and answer on one measure: the ranking's
+            scores = self.tilt_scores(seqs, patterns)
+            beyond = self.ranking_scale(patterns)
+            ask = [b for b in range(len(seqs)) if np.isfinite(beyond) and scores[b] > beyond]
+            upright = scores[ask]
+        else:
+            ask = [b for b, r in enumerate(out) if r.distance > inference.tilt_beyond]
+            upright = None
         owners: list[tuple[int, float]] = []
         turned: list[np.ndarray] = []
         for b in ask:
@@ -145,10 +178,10 @@ class Recognizer:
                 turned.append(seq)
         if not turned:
             return out
-        seqs = list(sequences)
-        upright = self.tilt_scores([seqs[b] for b in ask])
+        if upright is None:
+            upright = self.tilt_scores([seqs[b] for b in ask], patterns)
         best = {b: (TILT_MARGIN * float(e), -1) for b, e in zip(ask, upright)}
-        for j, e in enumerate(self.tilt_scores(turned)):
+        for j, e in enumerate(self.tilt_scores(turned, patterns)):
             b = owners[j][0]
             if e < best[b][0]:
                 best[b] = (float(e), j)
