@@ -332,8 +332,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--keep-previous", action="store_true",
                     help="keep the output file's previous contents under 'previous_run' "
                     "(its rows that this run does not repeat stay readable, marked as "
-                    "measured by older code; when this run repeats every row of the "
-                    "file's latest run, the file's own previous_run is kept instead)")
+                    "measured by older code, with the runs before it nested in it; when "
+                    "this run repeats every row of the file's latest run, the file's own "
+                    "previous_run is kept instead)")
     ap.add_argument("--note", help="free text recorded in the output (e.g. what shared the "
                     "machine, which code the cached runs came from)")
     args = ap.parse_args(argv)
@@ -561,12 +562,13 @@ def main(argv: list[str] | None = None) -> dict:
                       "note": "shared with other work; wall times are not comparable"}
     if args.keep_previous and Path(args.out).is_file():
         previous = json.loads(Path(args.out).read_text())
-        older = previous.pop("previous_run", None)
+        older = previous.get("previous_run")
         if older is not None and all(r in runs for r in previous.get("ablation", {})):
             # this run repeats every row of the file's latest run: the run
             # before that (whose rows this one may not repeat) is what stays
             previous = older
             previous.pop("rows_not_repeated", None)
+        # otherwise the latest run stays whole, its own previous_run in it
         out["previous_run"] = previous | {
             "rows_not_repeated": [r for r in previous.get("ablation", {}) if r not in runs]}
     write_json_atomic(args.out, out)
