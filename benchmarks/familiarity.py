@@ -152,6 +152,29 @@ def lasa(seed: int, runs: Path) -> dict[str, Any]:
     return out
 
 
+def _unique_copy(src: Path, dst: Path) -> list[str]:
+    """Copy ``src``'s drawing files to ``dst`` but those whose bytes repeat an earlier file's.
+
+    Files in sorted path order; returns the left-out files (relative paths).
+    """
+    import shutil
+
+    if dst.exists():
+        shutil.rmtree(dst)
+    seen: set[str] = set()
+    removed = []
+    for f in sorted(src.rglob("*.csv")):
+        key = hashlib.sha256(f.read_bytes()).hexdigest()
+        rel = f.relative_to(src)
+        if key in seen:
+            removed.append(str(rel))
+            continue
+        seen.add(key)
+        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(f, dst / rel)
+    return removed
+
+
 def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
     from iloci.data.concepts import majority_names
     from iloci.data.datasets import load_dataset
@@ -161,7 +184,12 @@ def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
         os.path.expanduser("~"), ".cache", "iloci")
     data_dir = Path(cache_root) / "unipen-digits"
     export_unipen(root, data_dir)
-    config = rec._config("unipen", seed, data_dir)
+    # train_r01_v07 holds some drawings twice (the same ibm writer in several
+    # releases, e.g. ibm/r01-12 and ibm/r03-12), and the data set reader
+    # refuses a drawing in two files: the later copies are left out here
+    unique = data_dir.parent / f"unipen-digits-unique-seed{seed}"
+    removed = _unique_copy(data_dir, unique)
+    config = rec._config("unipen", seed, unique)
     demos = load_dataset(config.data.path).demos
     path = runs / f"unipen-seed{seed}"
     learn, test, sha, reused = _fold0(config, demos, path)
@@ -189,6 +217,7 @@ def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
     return {"letters": {
         "memory": {"file": str(path / "fold-0.npz"), "sha256": sha, "reused": reused},
         "known": n, "outside": len(letters), "known_recognized": int(sum(right)),
+        "digits": len(demos), "duplicates_left_out": removed,
         "auroc": table, "path_auroc_per_letter": per_letter}}
 
 
