@@ -336,3 +336,36 @@ def test_two_jobs_write_the_same_metrics_and_folds_as_one_bit_for_bit(tmp_path):
     folds = json.loads(texts[1][1])
     assert len(folds) == 3 and all(f["baselines"] for f in folds)  # the baselines ran
     assert texts[2] == texts[1]
+
+
+def test_the_last_learnings_recognition_is_split_over_the_free_workers(small_config, tmp_path):
+    # one fold, no baselines, 2 workers: when its learning ends nothing else runs,
+    # so its test set is recognized in 2 parts, one task each; the answers are the
+    # serial run's, in the test set's order, bit for bit
+    from iloci.config import load_config
+    from iloci.data import load_lasa
+    from iloci.evaluation.evaluate import fold_plan
+    from iloci.evaluation.executors import LocalExecutor
+    from iloci.evaluation.parallel import FoldTask, run_folds
+
+    class Recording(LocalExecutor):
+        def run_then(self, tasks, emit, then=None):
+            def noted(res):
+                more = then(res)
+                self.follow_ups += [args for _, args in more]
+                return more
+            self.follow_ups = []
+            return super().run_then(tasks, emit, noted)
+
+    config = load_config(small_config)
+    shapes = list(config.data.shapes)
+    learn, test = fold_plan(load_lasa(shapes), config)[1]
+    runner, got = Recording(2), []
+    run_folds(config.to_dict(), [FoldTask(1, learn, test)], shapes, runner, baseline=False,
+              specs=None, emit=lambda msg: None, on_result=got.append)
+    parts = [args[3] for args in runner.follow_ups]  # each part's test indices
+    assert len(parts) == 2 and parts[0] + parts[1] == test and all(parts)
+    _, (serial,) = evaluate(small_config, jobs=1, folds=[1], baseline=False)
+    (split,) = got
+    assert json.dumps(_timeless(split.to_dict()), sort_keys=True) == \
+        json.dumps(_timeless(serial.to_dict()), sort_keys=True)

@@ -17,9 +17,10 @@ queued when the learning ends, the recognition of its test set by the
 saved agent, each in whichever worker is free; results are those of
 :func:`~iloci.evaluation.fold.run_fold`, bit for bit. Learning is the long,
 sequential part, so every learning task is queued first and the short
-tasks fill the workers that would otherwise wait for the last learning
-(:func:`run_folds`). A worker converts each demonstration (preprocessing +
-IK) once for all the tasks it runs
+tasks fill the workers that would otherwise wait for the last learning;
+the last learning to end has its fold's recognition split over the
+workers it leaves free (:func:`run_folds`). A worker converts each
+demonstration (preprocessing + IK) once for all the tasks it runs
 (:class:`~iloci.sensorimotor.pipeline.MotionCache`).
 """
 
@@ -264,18 +265,22 @@ class _Recognized:
     fold: int
     recognitions: list[Any]
     seconds: float
+    part: int = 0
+    parts: int = 1
 
 
-def _recognize_in_worker(config_dict: dict, fold: int, test: list[int], shapes: list[str],
-                         specs: Sequence[Any] | LocalContext | None, agent_path: str,
-                          queue: Any) -> Any:
-    """Recognize a fold's test set with its saved agent, in a worker."""
+def _recognize_part_in_worker(config_dict: dict, fold: int, part: tuple[int, int],
+                              test: list[int], shapes: list[str],
+                              specs: Sequence[Any] | LocalContext | None, agent_path: str,
+                              queue: Any) -> Any:
+    """Recognize part ``part = (k, parts)`` of a fold's test set with its saved agent, in a
+    worker (``test``: that part's indices; ``(0, 1)``: the whole test set)."""
     demos, pm = _worker_context(config_dict, shapes, specs)
     agent = Agent.load(agent_path, config_dict, plugin_manager=pm)
     agent.motion_cache = _motion_cache(config_dict, specs)
     t0 = time.perf_counter()
     recs = agent.recognize([demos[i] for i in test])
-    return _Recognized(fold, recs, time.perf_counter() - t0)
+    return _Recognized(fold, recs, time.perf_counter() - t0, *part)
 
 
 def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
@@ -325,8 +330,12 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
     # were queued), then the baselines, and the recognition of a fold's test
     # set when its learning ends. With 5 folds on 2 workers, one worker
     # learns 3 folds and the other 2; the other runs the short tasks
-    # meanwhile, and the last learning is followed by its fold's
-    # recognition alone.
+    # meanwhile. The last learning to end leaves every worker free: its
+    # fold's recognition is split over them (the test set in ``jobs``
+    # consecutive parts, one task each; each demonstration is recognized
+    # alone, so the answers are the same), not run by one worker while the
+    # others wait. A part pays a recognition's fixed cost (loading the
+    # agent), the split shortens the run's tail.
     with tempfile.TemporaryDirectory(prefix="iloci-evaluate-") as tmp:
         def agent_path(task: FoldTask) -> str:
             return os.path.join(task.memory_dir or tmp, fold_memory_name(task.fold))
@@ -335,13 +344,35 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
         learned: dict[int, LearnedFold] = {}
         baselines: dict[int, dict[str, dict[str, Any]]] = {}
         recognized: dict[int, _Recognized] = {}
+        parts_in: dict[int, list[_Recognized]] = {}
+        workers = max(1, int(getattr(runner, "jobs", 1)))
+        running = [0]  # tasks queued whose result has not arrived
 
         def then(res: Any) -> list[tuple[Callable[..., Any], tuple]]:
+            running[0] -= 1
             if not isinstance(res, LearnedFold):
                 return []
             task = by_fold[res.result.fold]
-            return [(_recognize_in_worker, (config_dict, task.fold, task.test, shapes, specs,
-                                            agent_path(task)))]
+            n = min(workers, len(task.test)) if running[0] == 0 else 1
+            cut = [len(task.test) * k // n for k in range(n + 1)]
+            running[0] += n
+            return [(_recognize_part_in_worker,
+                     (config_dict, task.fold, (k, n), task.test[cut[k]:cut[k + 1]], shapes,
+                      specs, agent_path(task))) for k in range(n)]
+
+        def whole(res: _Recognized) -> _Recognized | None:
+            """The fold's recognition once all its parts are in (answers in test order)."""
+            if res.parts == 1:
+                return res
+            got = parts_in.setdefault(res.fold, [])
+            got.append(res)
+            if len(got) < res.parts:
+                return None
+            got.sort(key=lambda r: r.part)
+            del parts_in[res.fold]
+            # the parts ran at once: the recognition took as long as the longest
+            return _Recognized(res.fold, [r for p in got for r in p.recognitions],
+                               max(p.seconds for p in got))
 
         first: list[tuple[Callable[..., Any], tuple]] = [
             (_learn_fold_in_worker, (config_dict, task, shapes, baseline, specs,
@@ -349,6 +380,7 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
         if baseline:
             first += [(_baselines_in_worker, (config_dict, task, shapes, specs))
                       for task in tasks]
+        running[0] = len(first)
         for res in runner.run_then(first, emit, then):
             if isinstance(res, LearnedFold):
                 learned[res.result.fold] = res
@@ -357,7 +389,10 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
                 baselines[res.fold] = res.baselines
                 k = res.fold
             else:
-                recognized[res.fold] = res
+                rec = whole(res)
+                if rec is None:
+                    continue
+                recognized[res.fold] = rec
                 k = res.fold
             if k in learned and k in recognized and (not baseline or k in baselines):
                 fold = learned.pop(k).with_baselines(baselines.pop(k, {}))

@@ -82,6 +82,29 @@ def _versus(ccr: float, other: float) -> tuple[str, str]:
     return ("beats" if gap > 0 else "trails"), f" by {abs(gap):.2f} points of CCR"
 
 
+#: A fold whose memory's mean generation error is above this has a network that no
+#: longer regenerates what it stored: about 10 x what one that does reaches (0.0024 on
+#: LASA; 0.0022 on 320 UNIPEN letters, 64 learned per fold; 0.10 on 960 of them, 192
+#: learned per fold, where the CCR fell to 36.5 % against normalised DTW's 89.7 %).
+GENERATION_ERROR_WARN = 0.02
+
+
+def memory_warning(metrics: dict[str, Any]) -> str | None:
+    """A line for the headline when a fold's network lost its memory (see GENERATION_ERROR_WARN)."""
+    folds = metrics.get("folds") or []
+    bad = [f for f in folds if f.get("generation_error", 0.0) > GENERATION_ERROR_WARN]
+    if not bad:
+        return None
+    worst = max(bad, key=lambda f: f["generation_error"])
+    return (f"warning: in fold(s) {', '.join(str(f['fold']) for f in bad)} the network no "
+            "longer regenerates its memory (mean generation error "
+            f"{worst['generation_error']:.3f}, where one that does reaches about 0.002; fold "
+            f"{worst['fold']}: {worst['learn']} demonstrations learned, {worst['entries']} "
+            f"entries, {worst['prototypes']} of them prototypes), and recognition by "
+            "regeneration fails with it. See docs/guide.md, \"Your own shapes\" (large "
+            "learning sets).")
+
+
 def headline(metrics: dict[str, Any]) -> str:
     """The headline table (Markdown), also printed by ``iloci evaluate``."""
     rows = [
@@ -138,6 +161,9 @@ def headline(metrics: dict[str, Any]) -> str:
         f"generation error {m['generation_error']['mean']:.4f}; wall "
         f"{m['wall_seconds']:.1f} s ({m['jobs']} job(s))",
     ]
+    warning = memory_warning(m)
+    if warning:
+        rows += ["", warning]
     return "\n".join(rows)
 
 
