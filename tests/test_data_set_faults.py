@@ -269,16 +269,18 @@ def test_the_pb_space_figure_of_a_large_fold_places_a_seeded_sample():
 
 
 def test_a_fold_whose_network_lost_its_memory_is_pointed_out_under_the_headline():
-    """960 UNIPEN letters, fold 0 (192 learned): generation error 0.10, CCR 36.5 %."""
+    """960 UNIPEN letters, fold 0 (192 learned): generation error 0.10, CCR 37.8 %; with
+    clustering off 0.023 and 83.7 %; 320 letters (64 learned per fold) 0.0022."""
     from iloci.evaluation.report import GENERATION_ERROR_WARN, memory_warning
 
     fold = {"fold": 0, "generation_error": 0.0022, "learn": 64, "entries": 59,
             "prototypes": 0}
-    assert memory_warning({"folds": [fold, {**fold, "fold": 1}]}) is None
+    no_prototypes = {**fold, "fold": 1, "generation_error": 0.0229, "learn": 192, "entries": 171}
+    assert memory_warning({"folds": [fold, no_prototypes]}) is None
     lost = {**fold, "fold": 3, "generation_error": 0.1015, "learn": 192, "entries": 61,
             "prototypes": 16}
     said = memory_warning({"folds": [fold, lost]})
-    assert 0.0022 < GENERATION_ERROR_WARN < 0.1015
+    assert 0.0229 < GENERATION_ERROR_WARN < 0.1015
     assert said is not None and said.startswith("warning: in fold(s) 3 the network no longer "
                                                 "regenerates its memory")
     assert "fold 3: 192 demonstrations learned, 61 entries, 16 of them prototypes" in said

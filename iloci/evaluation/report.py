@@ -83,10 +83,11 @@ def _versus(ccr: float, other: float) -> tuple[str, str]:
 
 
 #: A fold whose memory's mean generation error is above this has a network that no
-#: longer regenerates what it stored: about 10 x what one that does reaches (0.0024 on
-#: LASA; 0.0022 on 320 UNIPEN letters, 64 learned per fold; 0.10 on 960 of them, 192
-#: learned per fold, where the CCR fell to 36.5 % against normalised DTW's 89.7 %).
-GENERATION_ERROR_WARN = 0.02
+#: longer regenerates what it stored. Measured: 0.0024 on LASA; 0.0022 on 320 UNIPEN
+#: letters, 64 learned per fold (CCR 85.8 %); on 960 of them, 192 learned in fold 0,
+#: 0.10 with prototypes (CCR 37.8 % against normalised DTW's 89.7 %) and 0.023 with
+#: clustering off (171 exemplars, CCR 83.7 %).
+GENERATION_ERROR_WARN = 0.05
 
 
 def memory_warning(metrics: dict[str, Any]) -> str | None:
@@ -101,7 +102,7 @@ def memory_warning(metrics: dict[str, Any]) -> str | None:
             f"{worst['generation_error']:.3f}, where one that does reaches about 0.002; fold "
             f"{worst['fold']}: {worst['learn']} demonstrations learned, {worst['entries']} "
             f"entries, {worst['prototypes']} of them prototypes), and recognition by "
-            "regeneration fails with it. See docs/guide.md, \"Your own shapes\" (large "
+            "regeneration suffers with it. See docs/guide.md, \"Your own shapes\" (large "
             "learning sets).")
 
 
