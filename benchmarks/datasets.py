@@ -34,8 +34,9 @@ UNIPEN is not shipped: clone it and give its folder::
     python benchmarks/datasets.py --unipen /data/train_r01_v07
 
 Run: ``python benchmarks/datasets.py --unipen PATH [--seeds 0 1 2] [--quick]
-[--datasets lasa unipen unipen-writers] [--config C] [--jobs 2]``.
-``--quick``: seed 0 only.
+[--datasets lasa unipen unipen-writers] [--config C] [--jobs 2] [--reuse lasa]``.
+``--quick``: seed 0 only. ``--reuse D``: D's cached rows even if other code
+made them (marked ``"reused": true``).
 """
 
 from __future__ import annotations
@@ -116,8 +117,13 @@ def _key(config_dict: dict, extra: str) -> str:
 
 
 def run_one(name: str, seed: int, config, jobs: int, unipen_dir: Path | None,
-            fresh: bool) -> dict:
-    """One data set at one seed: cached result, or evaluate() now."""
+            fresh: bool, reuse: bool = False) -> dict:
+    """One data set at one seed: cached result, or evaluate() now.
+
+    ``reuse``: take the cached row even if other code made it (its key
+    differs), marked ``"reused": true``; for rows whose data and code path
+    did not change (``--reuse lasa`` after a change to the UNIPEN reader).
+    """
     from iloci.evaluation.evaluate import evaluate
 
     changes: dict = {"evaluation": {"seed": seed}}
@@ -135,6 +141,10 @@ def run_one(name: str, seed: int, config, jobs: int, unipen_dir: Path | None,
         if got.get("cache_key") == key:
             print(f"{name} seed {seed}: cached ({cache.relative_to(HERE)})", file=sys.stderr)
             return got
+        if reuse:
+            print(f"{name} seed {seed}: reused from the cache, made by other code "
+                  f"({cache.relative_to(HERE)})", file=sys.stderr)
+            return {**got, "reused": True}
     print(f"{name} seed {seed}: running", file=sys.stderr)
     t0 = time.perf_counter()
     metrics, _ = evaluate(cfg, jobs=jobs)
@@ -183,6 +193,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--config", "-c", help="TOML config (default: the paper's settings)")
     ap.add_argument("--jobs", "-j", type=int, default=2, help="folds in parallel (default 2)")
     ap.add_argument("--fresh", action="store_true", help="ignore cached results")
+    ap.add_argument("--reuse", nargs="+", choices=DATASETS, default=[],
+                    help="take these data sets' cached rows even if other code made them "
+                    "(marked reused in the JSON)")
     ap.add_argument("--export", metavar="DIR", default=None,
                     help="where the UNIPEN digits are exported as CSV files "
                     "(default: $ILOCI_CACHE_DIR or ~/.cache/iloci, /unipen-digits)")
@@ -205,7 +218,8 @@ def main(argv: list[str] | None = None) -> dict:
         unipen_info = export_unipen(args.unipen, unipen_dir)
     load_before = os.getloadavg()
     # seed by seed, so an interrupted run has every data set at the first seeds
-    done = {(d, s): run_one(d, s, config, args.jobs, unipen_dir, args.fresh)
+    done = {(d, s): run_one(d, s, config, args.jobs, unipen_dir, args.fresh,
+                            reuse=d in args.reuse)
             for s in seeds for d in wanted}
     rows = [done[(d, s)] for d in wanted for s in seeds]
     out = {
