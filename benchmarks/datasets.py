@@ -9,7 +9,9 @@ Data sets (each run through ``iloci.evaluation.evaluate.evaluate``, what
 ``unipen``
     UNIPEN ``train_r01_v07`` single-stroke isolated digits: the writers who
     drew every digit in one stroke (19), one sample of each digit from each
-    (190 samples, :func:`iloci.data.unipen.balanced_subset`, seed 0),
+    (190 samples, :func:`iloci.data.unipen.balanced_subset`, seed 0; of a
+    drawing the release stores twice only the first copy is read, see
+    :func:`iloci.data.unipen.read_unipen`),
     exported as a folder per digit with a sub-folder per writer and read by
     ``[data] path`` exactly as a user's data set is; 5 folds per concept.
 ``unipen-writers``
@@ -60,8 +62,14 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     Positions as the reader gives them (mm where the file says its
     resolution, else tablet units; scale differs between contributors,
     which every method but ``dtw_raw`` normalises away); no time column,
-    since not every contributor gives a sampling rate.
+    since not every contributor gives a sampling rate. A drawing the release
+    stores twice is exported once (:func:`iloci.data.unipen.read_unipen`
+    keeps its first copy). An earlier export in ``out`` (one with a
+    ``SOURCE.json``) of other samples is removed first, so no stale file
+    stays beside the new ones.
     """
+    import shutil
+
     import numpy as np
 
     from iloci.data.unipen import balanced_subset, samples_checksum, unipen_digits
@@ -71,6 +79,10 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     stamp = out / "SOURCE.json"
     if stamp.is_file() and json.loads(stamp.read_text()).get("checksum") == digest:
         return json.loads(stamp.read_text())
+    if stamp.is_file():
+        for old in out.iterdir():
+            if old.is_dir():
+                shutil.rmtree(old)
     counter: dict[tuple[str, str], int] = {}
     for s in samples:
         writer = s.writer.replace("/", "-")

@@ -186,7 +186,9 @@ def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
     export_unipen(root, data_dir)
     # train_r01_v07 holds some drawings twice (the same ibm writer in several
     # releases, e.g. ibm/r01-12 and ibm/r03-12), and the data set reader
-    # refuses a drawing in two files: the later copies are left out here
+    # refuses a drawing in two files: the later copies are left out here (the
+    # export drops them itself since read_unipen(drop_copies=True); this
+    # step then removes nothing, and familiarity.json predates it)
     unique = data_dir.parent / f"unipen-digits-unique-seed{seed}"
     removed = _unique_copy(data_dir, unique)
     config = rec._config("unipen", seed, unique)

@@ -125,6 +125,46 @@ def test_unipen_reader_finds_labelled_single_stroke_digits_of_each_writer():
     assert d.key == "1/4" and d.true_concept == "1" and d.times[1] == pytest.approx(0.01)
 
 
+def test_unipen_drawing_stored_twice_is_read_once_keeping_the_first(tmp_path):
+    """train_r01_v07 stores some digits twice: a segment listed twice in one file, and a
+    file repeated under another writer id (IBM's r02-04 repeats r01-04). Rebuilt here from
+    the slice's real strokes: ``aga/greghunt``'s file listed again under the writer id
+    ``zzcopy`` (sorted after it), and its first segment listed twice."""
+    import shutil
+
+    from iloci.data.unipen import balanced_subset
+
+    root = tmp_path / "train_r01_v07"
+    shutil.copytree(UNIPEN, root)
+    inc = root / "include" / "aga" / "data"
+    (inc / "zzcopy.dat").write_text((inc / "greghunt.dat").read_text(encoding="latin-1")
+                                    .replace(".WRITER_ID  greghunt", ".WRITER_ID  zzcopy"),
+                                    encoding="latin-1")
+    data = root / "data" / "1a" / "aga"
+    lines = (data / "greghunt.dat").read_text(encoding="latin-1").splitlines()
+    (data / "zzcopy.dat").write_text("\n".join(lines).replace("aga/data/greghunt.dat",
+                                                              "aga/data/zzcopy.dat") + "\n",
+                                     encoding="latin-1")
+    first = next(i for i, line in enumerate(lines) if line.startswith(".SEGMENT"))
+    (data / "greghunt.dat").write_text("\n".join(lines + [lines[first]]) + "\n",
+                                       encoding="latin-1")
+
+    original = unipen_digits(UNIPEN)
+    every = unipen_digits(root, drop_copies=False)
+    greg = [s for s in original if s.writer == "aga/greghunt"]
+    assert len(every) == len(original) + len(greg) + 1           # the copies are there
+    digits = unipen_digits(root)                                   # the default drops them
+    assert [(s.label, s.writer, s.path) for s in digits] == [
+        (s.label, s.writer, s.path) for s in original]           # first copy kept, in order
+    keys = {np.concatenate(s.strokes).tobytes() for s in digits}
+    assert len(keys) == len(digits)
+    # the writer rule still holds: zzcopy drew nothing of its own, so it is not picked
+    chosen = balanced_subset(digits, per=1, seed=0, labels="1")
+    assert "aga/zzcopy" not in {s.writer for s in chosen}
+    assert "aga/zzcopy" in {s.writer for s in balanced_subset(every, per=1, seed=0,
+                                                                 labels="1")}
+
+
 def test_unipen_letters_and_clear_errors():
     letters = unipen_letters(UNIPEN)
     assert letters and {s.label for s in letters} <= set("acelos")

@@ -251,7 +251,7 @@ def _delineation(text: str, n: int) -> list[tuple[int, int, int | None]] | None:
 
 def read_unipen(root: str | os.PathLike[str], category: str = "1a", *,
                 labels: Iterable[str] | None = None, single_stroke: bool = True,
-                min_points: int = 8) -> list[UnipenSample]:
+                min_points: int = 8, drop_copies: bool = True) -> list[UnipenSample]:
     """Labelled samples of one UNIPEN category.
 
     Parameters
@@ -267,6 +267,17 @@ def read_unipen(root: str | os.PathLike[str], category: str = "1a", *,
         recognizer and iloci's one pen path take).
     min_points : int
         Drop samples with fewer points (taps, broken strokes).
+    drop_copies : bool
+        Keep a drawing stored more than once (the same points, bit for bit)
+        only the first time it is met, in the order below, whatever its
+        label or writer says elsewhere. train_r01_v07 stores such copies:
+        of its 11321 single-stroke digits, 354 repeat an earlier one, some
+        within one file (a segment listed twice), some under another writer
+        id (IBM's ``r02-04`` repeats ``r01-04``, ...). The release does not
+        say which writer drew a copied digit; keeping the first is
+        deterministic and needs no seed. A copy kept would be taught in one
+        fold and recognized in another (the check of
+        :func:`iloci.data.datasets.load_dataset` refuses such a data set).
 
     Returns
     -------
@@ -290,6 +301,7 @@ def read_unipen(root: str | os.PathLike[str], category: str = "1a", *,
                                 "case).")
     keep = None if labels is None else set(labels)
     out = []
+    seen: set[bytes] = set()
     for f in files:
         parser = _Parser(base, f.relative_to(base).as_posix())
         parser.read(f)
@@ -303,6 +315,11 @@ def read_unipen(root: str | os.PathLike[str], category: str = "1a", *,
             pos = np.concatenate(s.strokes)
             if not np.all(np.isfinite(pos)) or float(np.max(np.ptp(pos, axis=0))) <= 0:
                 continue
+            if drop_copies:
+                key = hashlib.sha256(np.ascontiguousarray(pos, dtype="<f8").tobytes()).digest()
+                if key in seen:
+                    continue
+                seen.add(key)
             out.append(s)
     return out
 
@@ -327,9 +344,13 @@ def balanced_subset(samples: Iterable[UnipenSample], *, per: int = 1, seed: int 
 
     The benchmark's UNIPEN digits (benchmarks/datasets.py): the writers who
     drew each of the ten digits in one stroke at least ``per`` times (19 in
-    train_r01_v07 for ``per=1``), ``per`` samples of each digit from each,
-    drawn at random (seeded). Every writer draws every concept, so
-    writer-disjoint folds can learn every concept in each fold.
+    train_r01_v07 for ``per=1``, counted after :func:`read_unipen` dropped
+    the 354 copies: no writer loses a digit by it), ``per`` samples of each
+    digit from each, drawn at random (seeded). Every writer draws every
+    concept, so writer-disjoint folds can learn every concept in each fold.
+    A writer left short of a label (e.g. one whose digits were all copies of
+    another writer's, kept under that one) is not picked. Identical samples
+    in ``samples`` are not removed here; read with ``drop_copies=True``.
 
     Parameters
     ----------
