@@ -62,6 +62,7 @@ RESULTS = HERE / "results" / "familiarity.json"
 sys.path.insert(0, str(HERE))
 
 import recognition as rec  # noqa: E402  (benchmarks/recognition.py)
+from golden import git_head  # noqa: E402  (benchmarks/golden.py)
 
 
 def _sha(path: Path) -> str:
@@ -283,16 +284,6 @@ def summarize(runs: list[dict[str, Any]], default: str) -> tuple[dict[str, Any],
     return summary, targets
 
 
-def _git_head() -> str | None:
-    """The checkout's commit (``None`` outside a git checkout)."""
-    import subprocess
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True, cwd=HERE).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-
-
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--unipen", metavar="PATH", help="the train_r01_v07 folder (without it: "
@@ -328,7 +319,7 @@ def main(argv: list[str] | None = None) -> dict:
     config = load_config({}).to_dict()
     summary, targets = summarize(runs, config["learner"]["familiarity"])
     out = {"command": "python benchmarks/familiarity.py " + " ".join(argv or sys.argv[1:]),
-           "commit": _git_head(),
+           "commit": git_head(),
            "config": {"learner": config["learner"], "back_ends": {
                k: config[k]["name"] for k in ("perceptual_model", "clusterer", "teacher",
                                               "ik", "simulator")}},

@@ -102,7 +102,8 @@ def record(config: dict[str, Any], baseline: bool, jobs: int) -> dict[str, Any]:
     return canonical({"metrics": _timeless(kept), "folds": folds})
 
 
-def _git_head() -> str | None:
+def git_head() -> str | None:
+    """The checkout's commit (``None`` outside a git checkout), recorded beside results."""
     try:
         return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
                               check=True, cwd=HERE).stdout.strip()
@@ -141,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         seconds = time.perf_counter() - t0
         if args.write:
             golden["runs"][name] = got
-            golden.setdefault("recorded_at", {})[name] = _git_head()
+            golden.setdefault("recorded_at", {})[name] = git_head()
             print(f"{name}: recorded ({seconds:.0f} s), CCR {got['metrics']['ccr_mean']:.4f}")
             continue
         expected = golden["runs"].get(name)

@@ -49,6 +49,9 @@ from typing import Any
 
 import numpy as np
 
+# benchmarks/golden.py: this folder is on sys.path when run, or imported by golden.py
+from golden import git_head
+
 RESULTS = Path(__file__).resolve().parent / "results" / "quality.json"
 
 #: The novelty answer with confirmed rewards and the paper's PB-distance
@@ -205,20 +208,10 @@ def run_one(base: dict, row: str, seed: int, jobs: int, cache: Path, fresh: bool
                 for r in (f.to_dict() for f in results)]}
     out["config"] = config.to_dict()
     out["seconds"] = time.perf_counter() - t0
-    out["commit"] = _git_head()
+    out["commit"] = git_head()
     cache.mkdir(parents=True, exist_ok=True)
     key.write_text(json.dumps(out))
     return out
-
-
-def _git_head() -> str | None:
-    """The checkout's commit (``None`` outside a git checkout)."""
-    import subprocess
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True, cwd=Path(__file__).parent).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 def _folds(runs: list[dict], key: str) -> list[float]:
