@@ -53,7 +53,7 @@ from iloci.interfaces import Demonstration
 from iloci.progress import long_step
 
 __all__ = ["Sample", "DataSet", "load_dataset", "load_dataset_once", "check_protocol",
-           "writer_folds", "demos_checksum", "TRAJECTORY_SUFFIXES"]
+           "writer_folds", "demos_checksum", "drawing_key", "TRAJECTORY_SUFFIXES"]
 
 #: File suffixes read as trajectories (what ``iloci teach`` reads).
 TRAJECTORY_SUFFIXES = (".csv", ".npy")
@@ -280,6 +280,19 @@ def _position_unit(path: Path) -> str | None:
     return units.pop() if len(units) == 1 else None
 
 
+def drawing_key(positions: np.ndarray) -> bytes:
+    """What makes two drawings "the same": SHA-256 of the positions as little-endian float64.
+
+    Used by :func:`load_dataset` (a data set holding one drawing twice is
+    refused) and :func:`iloci.data.unipen.read_unipen` (copies dropped).
+
+    Parameters
+    ----------
+    positions : ndarray, shape (N, 2)
+    """
+    return hashlib.sha256(np.ascontiguousarray(positions, dtype="<f8").tobytes()).digest()
+
+
 def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstration],
                   counter: Counter[str], timed: dict[bool, list[str]],
                   units: dict[str, list[str]], problems: list[str], h: Any,
@@ -309,8 +322,7 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
                 ms.append((s, str(w.message)))
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        key = hashlib.sha256(np.ascontiguousarray(d.positions, dtype="<f8").tobytes()).digest()
-        first = drawings.setdefault(key, s)
+        first = drawings.setdefault(drawing_key(d.positions), s)
         if first is not s:
             same = ("" if first.concept == s.concept
                     else f" (labelled {first.concept!r} there, {s.concept!r} here)")

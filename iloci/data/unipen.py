@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iloci.data.datasets import drawing_key
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
@@ -316,7 +317,7 @@ def read_unipen(root: str | os.PathLike[str], category: str = "1a", *,
             if not np.all(np.isfinite(pos)) or float(np.max(np.ptp(pos, axis=0))) <= 0:
                 continue
             if drop_copies:
-                key = hashlib.sha256(np.ascontiguousarray(pos, dtype="<f8").tobytes()).digest()
+                key = drawing_key(pos)
                 if key in seen:
                     continue
                 seen.add(key)
