@@ -83,6 +83,8 @@ def _serve(conn: Any) -> None:  # pragma: no cover - runs in the worker process
         try:
             value = getattr(model, method)(*args, **kwargs)
             extra = {"train_loss_": float(getattr(model, "train_loss_", float("nan")))}
+            if method == "load_state":   # a state brings its own settings
+                extra["params"] = getattr(model, "params", None)
             reply = (True, value, extra)
         except BaseException as exc:  # sent back to the caller
             try:
@@ -116,7 +118,8 @@ class WorkerModel:
     input_size, pb_size : int
         As the model's.
     params : object
-        The model's ``params`` (when it has them).
+        The model's ``params`` (when it has them), as the worker's model
+        holds them after the last :meth:`load_state`.
     train_loss_ : float
         The worker model's ``train_loss_`` after the last call.
 
@@ -182,12 +185,20 @@ class WorkerModel:
         if not ok:
             raise value
         self.train_loss_ = extra.get("train_loss_", float("nan"))
+        if "params" in extra:
+            self.params = extra["params"]
         return value
 
     # -- PerceptualModel -----------------------------------------------------------
     def train(self, sequences: Sequence[np.ndarray], pbs_init: np.ndarray | None = None,
-              epochs: int | None = None) -> np.ndarray:
-        return self._call("train", list(sequences), pbs_init, epochs)
+              epochs: int | None = None, *, learning_rate: float | None = None
+              ) -> np.ndarray:
+        # ``learning_rate`` (RNNPB back ends, a rehearsal's rate) is passed on
+        # only when given: a model without that argument trains as before
+        if learning_rate is None:
+            return self._call("train", list(sequences), pbs_init, epochs)
+        return self._call("train", list(sequences), pbs_init, epochs,
+                          learning_rate=learning_rate)
 
     def recognize(self, sequences: Sequence[np.ndarray],
                   candidate_pbs: np.ndarray | None = None) -> np.ndarray:

@@ -163,6 +163,23 @@ class Learner(Recognizer):
             return None
         return self.policies.rehearsal.epochs
 
+    @property
+    def rehearsal_learning_rate(self) -> float | None:
+        """The weights' learning rate of the next rehearsal (``None``: the model's own).
+
+        As with :attr:`rehearsal_epochs`, the first consolidation trains a
+        fresh network (the model's ``learning_rate``); every later one
+        rehearses a trained network and takes the model's
+        ``params.rehearsal_learning_rate`` when it has one (every RNNPB back
+        end): restarting Adam at the first training's rate from trained
+        weights kicks what they hold (docs/method.md, "The rehearsal
+        learning rate").
+        """
+        if not self.memory.entries:
+            return None
+        rate = getattr(getattr(self.model, "params", None), "rehearsal_learning_rate", None)
+        return None if rate is None else float(rate)
+
     # -- the turn's events: sent to observers once the turn is committed -----------
     @property
     def queued_events(self) -> list[tuple[str, Any]]:
@@ -240,7 +257,8 @@ class Learner(Recognizer):
         """
         result = rehearsal.rehearse(self.model, entries, new_pattern,
                                     None if new_entry is None else new_entry.pb,
-                                    epochs=self.rehearsal_epochs, reason=reason,
+                                    epochs=self.rehearsal_epochs,
+                                    learning_rate=self.rehearsal_learning_rate, reason=reason,
                                     progress=self.on_progress)
         updated = [e.copy() for e in entries] + ([] if new_entry is None else [new_entry])
         rehearsal.apply(result, updated)

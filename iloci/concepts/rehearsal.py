@@ -135,7 +135,8 @@ def regenerate(model: PerceptualModel, entries: Sequence[Entry]) -> list[np.ndar
 
 def rehearse(model: PerceptualModel, entries: Sequence[Entry],
              new_pattern: np.ndarray | None = None, new_pb: np.ndarray | None = None, *,
-             epochs: int | None = None, reason: str = "",
+             epochs: int | None = None, learning_rate: float | None = None,
+             reason: str = "",
              progress: Callable[[RehearsalProgress], None] | None = None) -> RehearsalResult:
     """Rehearse the memory, optionally consolidating one new pattern.
 
@@ -153,6 +154,11 @@ def rehearse(model: PerceptualModel, entries: Sequence[Entry],
         Starting PB of the new pattern (e.g. its PB_obs); zeros by default.
     epochs : int, optional
         Training epochs; the model's configured number when ``None``.
+    learning_rate : float, optional
+        The weights' learning rate of this training, passed to the model's
+        ``train`` (RNNPB back ends: in place of ``params.learning_rate``,
+        for this call only); ``None``: the model's own, and ``train`` is
+        called without it (a model that takes no such argument).
     reason : str
         Passed on in the progress reports.
     progress : callable, optional
@@ -182,7 +188,12 @@ def rehearse(model: PerceptualModel, entries: Sequence[Entry],
     if not patterns:
         raise ValueError("rehearsal needs at least one entry or a new pattern")
     report("train")
-    pbs = np.asarray(model.train(patterns, np.array(pb_init), epochs), dtype=np.float64)
+    if learning_rate is None:
+        trained = model.train(patterns, np.array(pb_init), epochs)
+    else:
+        trained = model.train(patterns, np.array(pb_init), epochs,  # type: ignore[call-arg]
+                              learning_rate=learning_rate)
+    pbs = np.asarray(trained, dtype=np.float64)
     report("recognize")
     # recognition restarts from the learned PBs, so each pattern's PB_rec is
     # found in the basin its own PB lies in rather than from zero

@@ -43,7 +43,7 @@ unconstrained ``u`` and ``pb = pb_bound * tanh(u)``, so every PB lies in
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import fields
+from dataclasses import fields, replace
 from typing import Any
 
 import numpy as np
@@ -270,11 +270,13 @@ class RNNPBBase:
         return X, mask, per_seq
 
     def train(self, sequences: Sequence[np.ndarray], pbs_init: np.ndarray | None = None,
-              epochs: int | None = None) -> np.ndarray:
+              epochs: int | None = None, *, learning_rate: float | None = None
+              ) -> np.ndarray:
         """Train the weights and one PB per sequence, continuing from the current weights.
 
-        Full-batch Adam (``learning_rate`` for weights, ``pb_learning_rate``
-        for PBs) on the mean over sequences of each sequence's mean squared
+        Full-batch Adam (``learning_rate`` for weights, or the argument of
+        that name for this call; ``pb_learning_rate`` for PBs) on the mean
+        over sequences of each sequence's mean squared
         prediction error, run at ``closed_loop`` (1: the network's own
         output is its next input), back-propagated through time over every
         sequence at once (different lengths are masked). The weight
@@ -290,6 +292,13 @@ class RNNPBBase:
         epochs : int, optional
             Full-batch steps; defaults to ``params.epochs``. 0 leaves the
             model unchanged.
+        learning_rate : float, optional
+            The weights' Adam learning rate of this call only, in place of
+            ``params.learning_rate`` (which is left as it is): the memory's
+            rehearsal passes ``params.rehearsal_learning_rate`` here
+            (:func:`iloci.concepts.rehearsal.rehearse`). Every back end
+            reads it as it reads ``params.learning_rate``: the same result
+            as a model built with that ``learning_rate``.
 
         Returns
         -------
@@ -300,7 +309,8 @@ class RNNPBBase:
         ------
         InvalidInputError
             Empty list, NaN or inf, wrong width, a sequence shorter than 2
-            steps, ``pbs_init`` of the wrong shape, negative ``epochs``.
+            steps, ``pbs_init`` of the wrong shape, negative ``epochs``, a
+            ``learning_rate`` that is not a number > 0.
         """
         seqs = check_sequences(sequences, self.input_size)
         b = len(seqs)
@@ -311,13 +321,27 @@ class RNNPBBase:
         n = self.params.epochs if epochs is None else epochs
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise InvalidInputError(f"epochs must be an integer >= 0, got {epochs!r}.")
+        params = self.params
+        if learning_rate is not None:
+            if (isinstance(learning_rate, bool)
+                    or not isinstance(learning_rate, (int, float, np.integer, np.floating))
+                    or not 0 < float(learning_rate) < float("inf")):
+                raise InvalidInputError(f"learning_rate must be a number > 0, got "
+                                        f"{learning_rate!r}.")
+            params = replace(params, learning_rate=float(learning_rate))
         # training pads to the next multiple only: its cost grows with the
         # padded rows over every epoch, which outweighs a compilation
         X, mask, per_seq = self._padded(seqs, geometric=False, multiple=self._train_multiple())
         u = np.zeros((X.shape[1], self.pb_size))
         u[:b] = pb_to_u(pbs0, self.params.pb_bound)
         if n > 0:
-            u, self.train_loss_ = self._train_kernel(X, mask, per_seq / b, u, int(n))
+            # the kernels read self.params: this call's settings are put in
+            # place for the call only (nothing else depends on the rate)
+            kept, self.params = self.params, params
+            try:
+                u, self.train_loss_ = self._train_kernel(X, mask, per_seq / b, u, int(n))
+            finally:
+                self.params = kept
         pbs = u_to_pb(u[:b], self.params.pb_bound)
         self.pbs_ = pbs.copy()
         return pbs
