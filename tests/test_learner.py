@@ -261,6 +261,34 @@ def test_rehearsal_regenerates_entries_and_retrains_from_current_weights(lasa):
     assert len(agent.memory) == 2                           # rehearse() alone changes no entry
 
 
+@pytest.mark.parametrize("rate", [None, 0.002])
+def test_rehearsals_of_a_trained_network_take_the_rehearsal_learning_rate(lasa, rate,
+                                                                          monkeypatch):
+    """The founding of the first concept trains a fresh network at ``learning_rate``;
+    every later training rehearses it at ``rehearsal_learning_rate`` (passed to train)."""
+    agent = (make_agent() if rate is None else
+             iloci.build({**small_config(), "perceptual_model": {
+                 **small_config()["perceptual_model"], "rehearsal_learning_rate": rate}}))
+    model = agent.perceptual_model
+    calls: list = []
+    train = model.train
+
+    def recording(*args, **kwargs):
+        calls.append(kwargs.get("learning_rate"))
+        return train(*args, **kwargs)
+
+    monkeypatch.setattr(model, "train", recording)
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    expected = 0.001 if rate is None else rate
+    assert model.params.learning_rate == 0.005
+    assert calls[0] is None and len(calls) >= 3
+    assert calls[1:] == [expected] * (len(calls) - 1)
+    # the same rule for a memory rehearsed by hand through the learner
+    before = len(calls)
+    agent.learner.rehearse("clustering", list(agent.memory.entries))
+    assert calls[before:] == [expected]
+
+
 # -- inference ----------------------------------------------------------------------
 
 def test_recognize_before_learning_is_a_not_fitted_error(lasa):

@@ -304,6 +304,21 @@ def test_the_worker_process_gives_the_same_results_and_its_network_comes_back(la
     assert recognized.concept == local.recognize(lasa["GShape/2"]).concept
 
 
+def test_the_worker_models_params_follow_a_loaded_state(lasa):
+    """The learner reads the rehearsal's rate from the model's params: a state loaded
+    into the worker brings its own, and the worker's stand-in says so."""
+    agent = make_agent()
+    agent.learn(lasa["GShape/0"])
+    st = dict(agent.perceptual_model.state())
+    st["param.rehearsal_learning_rate"] = np.array(0.0025)
+    with agent.start_worker():
+        model = agent.perceptual_model
+        assert model.params.rehearsal_learning_rate == 0.001
+        model.load_state(st)
+        assert model.params.rehearsal_learning_rate == 0.0025
+        assert agent.learner.rehearsal_learning_rate == 0.0025
+
+
 def test_an_error_in_the_worker_reaches_the_caller_as_itself(lasa):
     agent = make_agent()
     with agent.start_worker():

@@ -105,6 +105,39 @@ def test_warmup_protects_trained_weights_at_the_start_of_a_rehearsal(make):
     assert losses[50] < losses[0]
 
 
+def test_a_calls_learning_rate_trains_as_a_model_built_with_it(make):
+    """train(learning_rate=...) (a rehearsal's rate) is params.learning_rate for that call."""
+    seqs = _seqs(3)
+    given = make(seed=0, epochs=40)
+    built = make(seed=0, epochs=40, learning_rate=0.001)
+    pbs = given.train(seqs, learning_rate=0.001)
+    np.testing.assert_array_equal(pbs, built.train(seqs))
+    assert given.train_loss_ == built.train_loss_
+    for k in WEIGHT_NAMES:
+        np.testing.assert_array_equal(_weights(given)[k], _weights(built)[k])
+    assert given.params.learning_rate == 0.005          # the model's own rate is kept
+    # and a different rate gives different weights: the argument is read
+    other = make(seed=0, epochs=40)
+    other.train(seqs, learning_rate=0.02)
+    assert not np.array_equal(_weights(other)["w_in"], _weights(built)["w_in"])
+    for bad in (0.0, -0.001, float("nan"), float("inf"), "0.001", True):
+        with pytest.raises(InvalidInputError, match="learning_rate"):
+            given.train(seqs, epochs=1, learning_rate=bad)
+
+
+def test_a_state_saved_before_rehearsal_learning_rate_takes_the_loading_models(make):
+    m = make(seed=2, epochs=10)
+    m.train(_seqs(2))
+    st = m.state()
+    assert float(st["param.rehearsal_learning_rate"]) == 0.001
+    old = {k: v for k, v in st.items() if k != "param.rehearsal_learning_rate"}
+    other = make(seed=0, rehearsal_learning_rate=0.002)
+    other.load_state(old)
+    assert other.params.rehearsal_learning_rate == 0.002
+    other.load_state(st)                                # a newer state brings its own
+    assert other.params.rehearsal_learning_rate == 0.001
+
+
 def test_pbs_stay_inside_the_bound(make):
     m = make(seed=0, epochs=200, pb_bound=0.3, pb_learning_rate=0.5)
     pbs = m.train(_seqs(4), pbs_init=np.full((4, 4), 5.0))  # starts beyond the bound
@@ -304,7 +337,8 @@ def test_bad_arguments_raise_one_clear_error(make):
 
 def test_bad_parameters_raise_one_clear_error(make):
     for kw in ({"hidden": 0}, {"closed_loop": 1.5}, {"dtype": "float16"},
-               {"learning_rate": -1.0}, {"no_such_setting": 1}):
+               {"learning_rate": -1.0}, {"rehearsal_learning_rate": 0.0},
+               {"no_such_setting": 1}):
         with pytest.raises(InvalidInputError):
             make(**kw)
     with pytest.raises(InvalidInputError):
