@@ -8,8 +8,9 @@ Data sets (each run through ``iloci.evaluation.evaluate.evaluate``, what
     LASA, 26 shapes / 22 concepts, 5 folds per shape (the paper's protocol).
 ``unipen``
     UNIPEN ``train_r01_v07`` single-stroke isolated digits: the writers who
-    drew every digit in one stroke (19), one sample of each digit from each
-    (190 samples, :func:`iloci.data.unipen.balanced_subset`, seed 0; of a
+    drew every digit in one stroke (15 persons; IBM's session ids ``rNN-WW``
+    of one person ``WW`` are one writer), one sample of each digit from each
+    (150 samples, :func:`iloci.data.unipen.balanced_subset`, seed 0; of a
     drawing the release stores twice only the first copy is read, see
     :func:`iloci.data.unipen.read_unipen`),
     exported as a folder per digit with a sub-folder per writer and read by
@@ -67,7 +68,9 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     stores twice is exported once (:func:`iloci.data.unipen.read_unipen`
     keeps its first copy). An earlier export in ``out`` (one with a
     ``SOURCE.json``) of other samples is removed first, so no stale file
-    stays beside the new ones.
+    stays beside the new ones. The sub-folder is the writer (the person,
+    ``UnipenSample.writer``); ``SOURCE.json``'s ``writer_ids`` lists the
+    ids the files give each one (IBM's session ids).
     """
     import shutil
 
@@ -95,6 +98,9 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
                    fmt="%.6g")
     info = {"source": str(root), "samples": len(samples),
             "writers": len({s.writer for s in samples}), "checksum": digest,
+            "writer_ids": {w.replace("/", "-"): sorted({s.writer_id for s in samples
+                                                        if s.writer == w})
+                           for w in sorted({s.writer for s in samples})},
             "selection": "balanced_subset(unipen_digits(root), per=1, seed=0)"}
     stamp.write_text(json.dumps(info, indent=1))
     return info

@@ -185,8 +185,8 @@ def unipen(seed: int, runs: Path, root: str) -> dict[str, Any]:
         os.path.expanduser("~"), ".cache", "iloci")
     data_dir = Path(cache_root) / "unipen-digits"
     export_unipen(root, data_dir)
-    # train_r01_v07 holds some drawings twice (the same ibm writer in several
-    # releases, e.g. ibm/r01-12 and ibm/r03-12), and the data set reader
+    # train_r01_v07 holds some drawings twice (one ibm writer's session files
+    # share ink, e.g. ibm/r01-12 and ibm/r03-12), and the data set reader
     # refuses a drawing in two files: the later copies are left out here (the
     # export drops them itself since read_unipen(drop_copies=True); this
     # step then removes nothing, and familiarity.json predates it)

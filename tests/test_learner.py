@@ -785,6 +785,41 @@ def test_default_regeneration_compares_positions_and_displacements_warped(lasa):
         iloci.build(small_config(compare="path"))
 
 
+def test_the_kept_distance_weight_is_the_one_of_the_memory_as_it_is_now(lasa, monkeypatch):
+    """compare = "both-distances" keeps its weight (two M x M DTWs over the regenerated
+    patterns) for the memory state it was computed on: given again while the memory is
+    unchanged, computed afresh after a rehearsal (same entries, another network)."""
+    from iloci.concepts import inference
+    agent = make_agent(tilts=())
+    agent.teach([lasa["GShape/0"], lasa["Angle/0"], lasa["Sine/0"]])
+    seq = agent._encode(agent.motion(lasa["GShape/2"]))[0]
+    learner, mem = agent.learner, agent.memory
+    computed = []
+    real = inference.pattern_distances
+
+    def counting(sequences, patterns, warp=0, compare="displacements"):
+        computed.append(compare)
+        return real(sequences, patterns, warp, compare)
+
+    monkeypatch.setattr(inference, "pattern_distances", counting)
+    monkeypatch.setattr(inference, "_LAST_WEIGHT", None)
+    first = learner.regeneration_distances([seq])
+    assert computed.count("positions") == 1
+    np.testing.assert_array_equal(learner.regeneration_distances([seq]), first)
+    assert computed.count("positions") == 1            # same memory: the weight kept
+    old = inference._distance_weight(regenerated_patterns(agent.perceptual_model, mem), 8)
+    learner.rehearse("test", list(mem.entries))        # same entries, retrained network
+    assert len(mem) == 3
+    after = learner.regeneration_distances([seq])
+    assert computed.count("positions") == 2            # another memory: computed afresh
+    patterns = regenerated_patterns(agent.perceptual_model, mem)
+    assert inference._distance_weight(patterns, 8) != old
+    monkeypatch.setattr(inference, "_LAST_WEIGHT", None)
+    fresh = learner.regeneration_distances([seq])
+    np.testing.assert_array_equal(after, fresh)        # bit for bit what no keeping gives
+    assert not np.array_equal(after, first)
+
+
 def _naive_dtw(x: np.ndarray, y: np.ndarray, band: int) -> float:
     """Textbook DTW (Sakoe and Chiba 1978, symmetric steps, band) of summed squared steps."""
     n = len(x)

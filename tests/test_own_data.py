@@ -165,6 +165,31 @@ def test_unipen_drawing_stored_twice_is_read_once_keeping_the_first(tmp_path):
                                                                  labels="1")}
 
 
+def test_unipen_ibm_session_ids_of_one_person_are_one_writer():
+    """IBM's ibm0 set names its files' writers ``rNN-WW``: 12 writers (its ibm0.doc), three
+    sessions each, and session files of one ``WW`` share recorded ink. Real strokes: the
+    slice's r01-04 and r02-04 (one person, sharing drawings) and r01-12 (another)."""
+    from iloci.data.unipen import balanced_subset, person
+
+    root = UNIPEN.parent / "ibm" / "train_r01_v07"
+    every = unipen_digits(root, drop_copies=False)
+    assert {s.writer_id for s in every} == {"ibm/r01-04", "ibm/r02-04", "ibm/r01-12"}
+    by_id = {s.writer_id: s.writer for s in every}
+    assert by_id["ibm/r01-04"] == by_id["ibm/r02-04"] == "ibm/writer-04"
+    assert by_id["ibm/r01-12"] == "ibm/writer-12"
+    assert person("aga", "greghunt") == "aga/greghunt"
+    assert person("ibm", "kem11") == "ibm/kem11"   # ibm1's ids are not session ids
+    # the two sessions share real drawings: the copies are dropped, both writer ids stay
+    digits = unipen_digits(root)
+    assert len(digits) < len(every)
+    assert {s.writer_id for s in digits} == {"ibm/r01-04", "ibm/r02-04", "ibm/r01-12"}
+    # a person is picked once, from all their sessions' drawings (so writer-disjoint
+    # folds, which deal writers, never teach a person and test them under another id)
+    eights = balanced_subset(digits, per=2, seed=0, labels="8")  # one 8 in each session
+    assert [s.writer for s in eights] == ["ibm/writer-04"] * 2
+    assert {s.writer_id for s in eights} == {"ibm/r01-04", "ibm/r02-04"}
+
+
 def test_unipen_letters_and_clear_errors():
     letters = unipen_letters(UNIPEN)
     assert letters and {s.label for s in letters} <= set("acelos")

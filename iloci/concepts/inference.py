@@ -293,6 +293,11 @@ def _position_weight(patterns: Sequence[np.ndarray]) -> float:
     return float(disp / pos) if pos > 0 and np.isfinite(pos) and np.isfinite(disp) else 1.0
 
 
+#: The last :func:`_distance_weight` computed: ``(key, weight)``, the key
+#: being the band and every pattern's shape and bytes (see there).
+_LAST_WEIGHT: tuple[tuple[int, tuple[tuple[int, ...], ...], bytes], float] | None = None
+
+
 def _distance_weight(patterns: Sequence[np.ndarray], warp: int) -> float:
     """The positions' weight that gives both halves the same median distance over the patterns.
 
@@ -301,14 +306,32 @@ def _distance_weight(patterns: Sequence[np.ndarray], warp: int) -> float:
     displacements' distance over that of the centred positions (each by
     :func:`pattern_distances` with ``warp``), square-rooted (the distances
     are squared differences); 1 with fewer than two patterns or a zero median.
+
+    Two M x M banded DTWs: the memory's patterns do not change between the
+    rankings of one memory state (a batch's readings, the tilt search, the
+    turns between two rehearsals), so the last weight is kept with the
+    exact bytes of the patterns it was computed on and given again only
+    for byte-identical patterns and the same ``warp``: a memory that
+    changed in any way (rehearsal, new entry, other network or file)
+    regenerates other patterns and gets its weight computed afresh. Same
+    inputs, same arithmetic: the kept weight is the one a new computation
+    would give, bit for bit.
     """
+    global _LAST_WEIGHT
     pats = [np.asarray(p, dtype=np.float64) for p in patterns]
     if len(pats) < 2:
         return 1.0
+    key = (int(warp), tuple(p.shape for p in pats),
+           b"".join(np.ascontiguousarray(p).tobytes() for p in pats))
+    last = _LAST_WEIGHT   # one read: another thread may replace it meanwhile
+    if last is not None and last[0] == key:
+        return last[1]
     off = ~np.eye(len(pats), dtype=bool)
     dp = float(np.median(pattern_distances(pats, pats, warp, "positions")[off]))
     dd = float(np.median(pattern_distances(pats, pats, warp, "displacements")[off]))
-    return float(np.sqrt(dd / dp)) if dp > 0 and dd > 0 and np.isfinite(dp + dd) else 1.0
+    w = float(np.sqrt(dd / dp)) if dp > 0 and dd > 0 and np.isfinite(dp + dd) else 1.0
+    _LAST_WEIGHT = (key, w)
+    return w
 
 
 def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:

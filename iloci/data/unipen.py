@@ -24,8 +24,30 @@ components by number, ``3``, ``3-4``, ``3,5``, or with point ranges
 file order (the pen-up markers of this release carry no points; counting
 them too makes half the digits point at empty pen-ups).
 
-A *writer* is ``"<contributor>/<WRITER_ID>"`` (e.g. ``aga/crlmtchl``), so
-writer-disjoint splits never put one person on both sides.
+A *writer* is the person: ``"<contributor>/<WRITER_ID>"`` (e.g.
+``aga/crlmtchl``), except for IBM's ``ibm0`` set, whose ``WRITER_ID`` is
+``rNN-WW`` and whose person is ``WW``: ``ibm/r01-04``, ``ibm/r02-04``,
+``ibm/r03-04`` and ``ibm/r04-04`` are one writer, ``ibm/writer-04``. So
+writer-disjoint splits never put one person on both sides. The file's own id
+stays in :attr:`UnipenSample.writer_id`. The evidence for the IBM rule, all in
+the release:
+
+- ``include/ibm/ibm0.doc`` says "Number of Writer(s): 12" and "Number of
+  sessions: three per writer"; its 22 files ``r0007`` ... ``r0414`` hold
+  exactly 12 distinct ``WW`` (04 05 06 07 08 09 11 12 13 14 15 16), in 1 to 4
+  files each.
+- Files of one ``WW`` share recorded ink: of the pen-down strokes of 8 or
+  more points, 14-45 % of one file's recur bit for bit in another file of the
+  same ``WW`` (e.g. 176 of ``r01-04``'s 405 in ``r02-04``), in all 15 such
+  pairs; no stroke recurs between files of different ``WW``.
+- The 170 digits stored under two or more writer ids in category ``1a``
+  pair only ids of one ``WW`` (and ``gmd/alek`` with ``gmd/kast``, below).
+
+Not grouped: ``gmd/kast``'s file repeats 268 of ``gmd/alek``'s 476 strokes,
+but the release does not say whether one person wrote both (``gmd.doc``
+names 8 writers and ships 3); :func:`read_unipen` drops the repeated
+drawings, and neither id drew every digit in one stroke, so the benchmark's
+subset (:func:`balanced_subset`) has neither.
 """
 
 from __future__ import annotations
@@ -43,8 +65,8 @@ from iloci.data.datasets import drawing_key
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
-__all__ = ["UnipenSample", "read_unipen", "unipen_digits", "unipen_letters", "unipen_root",
-           "balanced_subset", "samples_checksum", "UNIPEN_CITATION"]
+__all__ = ["UnipenSample", "read_unipen", "person", "unipen_digits", "unipen_letters",
+           "unipen_root", "balanced_subset", "samples_checksum", "UNIPEN_CITATION"]
 
 #: How to cite the data set (reports and the benchmark print it).
 UNIPEN_CITATION = ("UNIPEN train_r01_v07 (Guyon et al. 1994, doi:10.1109/ICPR.1994.576870; "
@@ -62,7 +84,8 @@ class UnipenSample:
     label : str
         The segment's text, e.g. ``"7"``.
     writer : str
-        ``"<contributor>/<WRITER_ID>"``.
+        The person who wrote it: ``"<contributor>/<WRITER_ID>"``, or for
+        IBM's session ids ``rNN-WW``, ``"ibm/writer-WW"`` (module docstring).
     path : str
         The ``data/`` file, relative to the data set's root.
     strokes : tuple of ndarray
@@ -74,6 +97,9 @@ class UnipenSample:
         Sampling rate from ``.POINTS_PER_SECOND``, when given.
     quality : str
         The segment's quality field (``?`` unknown, ``OK``, ...).
+    writer_id : str
+        ``"<contributor>/<WRITER_ID>"`` as the file names it (e.g.
+        ``"ibm/r02-04"``); empty means the same as ``writer``.
     """
 
     label: str
@@ -82,6 +108,7 @@ class UnipenSample:
     strokes: tuple[np.ndarray, ...]
     points_per_second: float | None = None
     quality: str = "?"
+    writer_id: str = ""
     _key: tuple = field(default=(), repr=False, compare=False)
 
     @property
@@ -217,9 +244,23 @@ class _Parser:
             if not strokes:
                 continue
             first = parts[0][0]
-            yield UnipenSample(label=label, writer=f"{self.contributor}/{self.writers[first]}",
+            yield UnipenSample(label=label, writer=person(self.contributor, self.writers[first]),
                                path=self.rel, strokes=tuple(strokes),
-                               points_per_second=self.rates[first], quality=quality)
+                               points_per_second=self.rates[first], quality=quality,
+                               writer_id=f"{self.contributor}/{self.writers[first]}")
+
+
+_IBM_SESSION = re.compile(r"r\d\d-(\d\d)")
+
+
+def person(contributor: str, writer_id: str) -> str:
+    """The writer (the person) of a file: ``"<contributor>/<writer_id>"``, except IBM's
+    session ids ``rNN-WW``, one person per ``WW``: ``person("ibm", "r02-04")`` is
+    ``"ibm/writer-04"`` (evidence in the module docstring)."""
+    m = _IBM_SESSION.fullmatch(writer_id)
+    if contributor == "ibm" and m:
+        return f"ibm/writer-{m.group(1)}"
+    return f"{contributor}/{writer_id}"
 
 
 def _positive(text: str) -> float | None:
@@ -343,11 +384,13 @@ def balanced_subset(samples: Iterable[UnipenSample], *, per: int = 1, seed: int 
                     labels: Iterable[str] | None = None) -> list[UnipenSample]:
     """``per`` samples of every label from each writer who drew every label.
 
-    The benchmark's UNIPEN digits (benchmarks/datasets.py): the writers who
-    drew each of the ten digits in one stroke at least ``per`` times (19 in
-    train_r01_v07 for ``per=1``, counted after :func:`read_unipen` dropped
-    the 354 copies: no writer loses a digit by it), ``per`` samples of each
-    digit from each, drawn at random (seeded). Every writer draws every
+    The benchmark's UNIPEN digits (benchmarks/datasets.py): the writers
+    (persons, ``UnipenSample.writer``: IBM's session ids of one person count
+    as one) who drew each of the ten digits in one stroke at least ``per``
+    times (15 in train_r01_v07 for ``per=1``, counted after
+    :func:`read_unipen` dropped the 354 copies; 19 when IBM's session ids
+    were counted as writers), ``per`` samples of each digit from each, drawn
+    at random (seeded) from all of that person's samples. Every writer draws every
     concept, so writer-disjoint folds can learn every concept in each fold.
     A writer left short of a label (e.g. one whose digits were all copies of
     another writer's, kept under that one) is not picked. Identical samples
