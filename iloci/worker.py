@@ -82,7 +82,8 @@ def _serve(conn: Any) -> None:  # pragma: no cover - runs in the worker process
         method, args, kwargs = message
         try:
             value = getattr(model, method)(*args, **kwargs)
-            extra = {"train_loss_": float(getattr(model, "train_loss_", float("nan")))}
+            extra: dict[str, Any] = {
+                "train_loss_": float(getattr(model, "train_loss_", float("nan")))}
             if method == "load_state":   # a state brings its own settings
                 extra["params"] = getattr(model, "params", None)
             reply = (True, value, extra)
