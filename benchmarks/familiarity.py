@@ -24,18 +24,29 @@ known against outside (0.5: no better than chance), and the share answered
     recognizes (a digit it names wrongly is a drawing unlike what it was
     taught, like a letter).
 
-Beside each, a reference that is *not* the method (it compares with stored
-raw demonstrations): the normalised-DTW distance of each drawing to the
-nearest learning demonstration of the fold (``dtw_normalised``'s paths),
-as a familiarity; it says how far the raw data themselves separate the two
-sets.
+Beside each, the baselines (:data:`BASELINES`): *not* the method, they
+compare each drawing with the fold's stored raw learning demonstrations (the
+taught drawings), and minus the distance to the nearest one is the novelty
+score: DTW 1-NN on normalised paths resampled in time
+(``baseline_dtw_normalised``, the paths of the recognition baseline
+``dtw_normalised``) or by arc length (``baseline_dtw_arclength``), and
+iloci's own pen-path distance to the taught drawings as encoded
+(``baseline_pen_path``: the regenerated patterns replaced by the drawings
+they were learned from). On the same memories and drawings, in the same
+run, they say how far a method gets on these data without the network.
+
+And the ablation (:data:`VARIANTS`, ``variant_*``): other familiarities
+from what the network encodes and regenerates (PB distances, regeneration
+from PB_obs, interpolated PBs, per-entry scales, combinations of the path
+and regeneration distances), none with a constant fitted to these drawings.
 
 Writes ``benchmarks/results/familiarity.json``: per seed the tables above;
 ``summary``: per part, subset and familiarity the AUROC per seed and its
 mean; ``targets``: issue 25's (AUROC >= 0.95 with the default familiarity
 on Multi_Models all 28 and on UNIPEN letters all 260, every seed), met or
-not; ``config``: the learner settings and back ends the memories were
-learned and read with (the default config), and the commit.
+not, and the default against the best baseline per seed; ``config``: the
+learner settings and back ends the memories were learned and read with
+(the default config), and the commit.
 
 Run: ``python benchmarks/familiarity.py [--unipen PATH] [--seeds 0 1 2]
 [--runs DIR]``; ``--merge A.json B.json ...`` writes one file from runs
@@ -83,13 +94,24 @@ def _fold0(config, demos: list, path: Path) -> tuple[list, list, str, bool]:
     return learn, test, _sha(path / "fold-0.npz"), reused
 
 
-def _reference(learn: list, drawings: list) -> list[float]:
-    """Minus the normalised-DTW distance to the nearest learning demonstration (not the method)."""
+def _arclength_path(demo) -> np.ndarray:
+    """50 points equally spaced along the path ($1's step 1, Wobbrock et al. 2007), centred,
+    larger bounding-box side 1 (the normalisation of ``normalise_path``)."""
+    from iloci.evaluation.baselines import DTW_POINTS, dollar1_resample
+
+    p = dollar1_resample(np.asarray(demo.positions, dtype=np.float64), DTW_POINTS)
+    p = p - p.mean(axis=0)
+    size = float(np.max(np.ptp(p, axis=0)))
+    return p / size if size > 0 else p
+
+
+def _dtw_nearest(learn: list, drawings: list, normalise) -> list[float]:
+    """Minus the DTW distance (dtaidistance, no band) of each drawing's normalised path to the
+    nearest learning demonstration's (not the method)."""
     from dtaidistance import dtw_ndim
 
-    from iloci.evaluation.baselines import normalise_path
-    ref = [np.ascontiguousarray(normalise_path(d), dtype=np.float64) for d in learn]
-    query = [np.ascontiguousarray(normalise_path(d), dtype=np.float64) for d in drawings]
+    ref = [np.ascontiguousarray(normalise(d), dtype=np.float64) for d in learn]
+    query = [np.ascontiguousarray(normalise(d), dtype=np.float64) for d in drawings]
     n = len(ref)
     block = ((0, n), (n, n + len(query)))
     dist = np.asarray(dtw_ndim.distance_matrix_fast(ref + query, block=block,
@@ -97,11 +119,105 @@ def _reference(learn: list, drawings: list) -> list[float]:
     return [-float(x) for x in dist.min(axis=1)]
 
 
+def _encoded(agent, demos: list) -> list[np.ndarray]:
+    """The demonstrations as the agent's network sees them (its preprocessing and encoder)."""
+    return [agent._encode(agent.motion(d))[0] for d in demos]
+
+
+def _baselines(agent, learn: list, drawings: list) -> dict[str, list[float]]:
+    """:data:`BASELINES`' novelty scores (higher: more familiar) of ``drawings``."""
+    from iloci.concepts.inference import path_distances
+    from iloci.evaluation.baselines import normalise_path
+
+    pen = path_distances(_encoded(agent, drawings), _encoded(agent, learn)).min(axis=1)
+    return {"baseline_dtw_normalised": _dtw_nearest(learn, drawings, normalise_path),
+            "baseline_dtw_arclength": _dtw_nearest(learn, drawings, _arclength_path),
+            "baseline_pen_path": [-float(x) for x in pen]}
+
+
+#: The baselines: novelty by the nearest taught drawing (module docstring).
+BASELINES = ("baseline_dtw_normalised", "baseline_dtw_arclength", "baseline_pen_path")
+
+#: The ablation's familiarities, each from the memory's network (higher: more familiar).
+VARIANTS = {
+    "variant_path_2_nearest": "mean path distance to the 2 nearest entries",
+    "variant_path_concept_mean": "path distance to the nearest concept, mean over its entries",
+    "variant_path_density": "log of sum over entries of exp(-path distance / path_scale)",
+    "variant_path_per_entry_scale": "path distance to each entry over that entry's distance "
+                                    "to the nearest entry of another concept; the lowest",
+    "variant_path_plus_regeneration": "path distance / path_scale + regeneration distance / "
+                                      "regeneration_scale, each the lowest over entries",
+    "variant_path_max_regeneration": "the larger of the two, each on its memory scale",
+    "variant_path_with_interpolations": "path distance to the entries' regenerations and "
+                                        "to those of PB midpoints of two entries of one "
+                                        "concept",
+    "variant_self_path": "path distance of the drawing to the network's regeneration from "
+                         "its own PB_obs",
+    "variant_self_regeneration_to_entries": "path distance of the regeneration from PB_obs "
+                                            "to the nearest entry's",
+    "variant_pb_distance": "PB_obs's distance to the nearest PB_rec",
+}
+
+
+def _variants(agent, drawings: list) -> dict[str, list[float]]:
+    """:data:`VARIANTS`' familiarities of ``drawings`` on ``agent``'s memory."""
+    from scipy.spatial.distance import cdist
+
+    from iloci.concepts.inference import (path_distances, path_scale, pattern_distances,
+                                          regenerated_patterns)
+    learner = agent.learner
+    memory, model, pol = learner.memory, learner.model, learner.policies
+    seqs = _encoded(agent, drawings)
+    pats = regenerated_patterns(model, memory)
+    labels = np.asarray(memory.concept_labels)
+    other = labels[:, None] != labels[None, :]
+    path = path_distances(seqs, pats)                                   # (B, M)
+    regen = pattern_distances(seqs, pats, pol.warp, pol.compare)
+    s_path = path_scale(pats, labels)
+    between = np.where(other, pattern_distances(pats, pats, pol.warp, pol.compare),
+                       np.inf).min(axis=1)
+    s_regen = float(np.median(between[np.isfinite(between)]))
+    entry_other = np.where(other, path_distances(pats, pats), np.inf).min(axis=1)
+    concepts = sorted(set(labels.tolist()))
+    out = {
+        "variant_path_2_nearest": -np.sort(path, axis=1)[:, :2].mean(axis=1),
+        "variant_path_concept_mean": -np.stack(
+            [path[:, labels == c].mean(axis=1) for c in concepts], axis=1).min(axis=1),
+        "variant_path_density": np.log(np.exp(-path / s_path).sum(axis=1)),
+        "variant_path_per_entry_scale": -(path / entry_other[None, :]).min(axis=1),
+        "variant_path_plus_regeneration": -(path.min(axis=1) / s_path
+                                            + regen.min(axis=1) / s_regen),
+        "variant_path_max_regeneration": -np.maximum(path.min(axis=1) / s_path,
+                                                     regen.min(axis=1) / s_regen),
+    }
+    ents = memory.entries
+    pairs = [(i, j) for i in range(len(ents)) for j in range(i + 1, len(ents))
+             if ents[i].concept == ents[j].concept]
+    mid = path.min(axis=1)
+    if pairs:
+        made = model.generate(
+            np.stack([(ents[i].pb + ents[j].pb) / 2 for i, j in pairs]),
+            np.stack([(ents[i].initial_input + ents[j].initial_input) / 2 for i, j in pairs]),
+            [round((ents[i].num_steps + ents[j].num_steps) / 2) for i, j in pairs])
+        mid = np.minimum(mid, path_distances(seqs, [np.asarray(g) for g in made]).min(axis=1))
+    out["variant_path_with_interpolations"] = -mid
+    pb_obs = learner.recognize_pbs(seqs)
+    own = [np.asarray(g) for g in model.generate(pb_obs, np.stack([q[0] for q in seqs]),
+                                                  [len(q) for q in seqs])]
+    out["variant_self_path"] = -np.array([path_distances([q], [g])[0, 0]
+                                          for q, g in zip(seqs, own)])
+    out["variant_self_regeneration_to_entries"] = -path_distances(own, pats).min(axis=1)
+    out["variant_pb_distance"] = -cdist(pb_obs, memory.pbs_rec).min(axis=1)
+    return {k: [float(x) for x in v] for k, v in out.items()}
+
+
 def _scores(path: Path, known: list, outside: list, learn: list
             ) -> tuple[dict[str, list[float]], list]:
     fam = rec._familiarity(path / "fold-0.npz", known, outside)
-    fam["reference_dtw_nearest_learning_demo"] = _reference(learn, list(known) + list(outside))
     agent = rec._agent(path / "fold-0.npz", {})
+    drawings = list(known) + list(outside)
+    fam |= _baselines(agent, learn, drawings)
+    fam |= _variants(agent, drawings)
     return fam, agent.recognize(list(known))
 
 
@@ -111,7 +227,7 @@ def _table(fam: dict[str, list[float]], n: int, subsets: dict[str, list[int]]
     for name, values in fam.items():
         k, o = values[:n], values[n:]
         row: dict[str, Any] = {s: rec._auroc(k, [o[i] for i in idx]) for s, idx in subsets.items()}
-        if not name.startswith("reference"):
+        if name in rec.FAMILIARITIES:   # on the familiarity scale: "unknown" at 0.8
             row[f"known_unknown_below_{rec.UNKNOWN_BELOW}"] = float(
                 np.mean(np.asarray(k) < rec.UNKNOWN_BELOW))
             row[f"outside_unknown_below_{rec.UNKNOWN_BELOW}"] = float(
@@ -272,6 +388,13 @@ def summarize(runs: list[dict[str, Any]], default: str) -> tuple[dict[str, Any],
                     cell["seeds"][str(r["seed"])] = v
     for part in summary.values():
         for subset in part.values():
+            names = [b for b in BASELINES if b in subset]
+            if names:   # the best baseline of each seed, on the same drawings
+                seeds = subset[names[0]]["seeds"]
+                subset["best_baseline"] = {"seeds": {k: max(subset[b]["seeds"][k]
+                                                            for b in names) for k in seeds},
+                                           "which": {k: max(names, key=lambda b: subset[b][
+                                               "seeds"][k]) for k in seeds}}
             for cell in subset.values():
                 cell["mean"] = float(np.mean(list(cell["seeds"].values())))
     targets: dict[str, Any] = {}
@@ -281,6 +404,12 @@ def summarize(runs: list[dict[str, Any]], default: str) -> tuple[dict[str, Any],
             targets[f"{part}_{subset}_ge_{floor}"] = {
                 "familiarity": default, "value": cell["seeds"],
                 "met": all(v >= floor for v in cell["seeds"].values())}
+            best = summary[part][subset].get("best_baseline")
+            if best:
+                targets[f"{part}_{subset}_ge_best_baseline"] = {
+                    "familiarity": default, "value": cell["seeds"],
+                    "best_baseline": best["seeds"],
+                    "met": all(v >= best["seeds"][k] for k, v in cell["seeds"].items())}
     return summary, targets
 
 
@@ -324,7 +453,8 @@ def main(argv: list[str] | None = None) -> dict:
                k: config[k]["name"] for k in ("perceptual_model", "clusterer", "teacher",
                                               "ik", "simulator")}},
            "summary": summary, "targets": targets,
-           "familiarities": list(rec.FAMILIARITIES), "unknown_below": rec.UNKNOWN_BELOW,
+           "familiarities": list(rec.FAMILIARITIES), "baselines": list(BASELINES),
+           "variants": VARIANTS, "unknown_below": rec.UNKNOWN_BELOW,
            "redrawn_multi_models": sorted(rec.REDRAWN),
            "digit_like_letters": sorted(rec.DIGIT_LIKE), "runs": runs,
            "wall_seconds": time.perf_counter() - t0,

@@ -20,8 +20,8 @@ import iloci
 from iloci import hookimpl
 from iloci.agent import SkippedDemonstrationWarning
 from iloci.concepts import rehearsal
-from iloci.concepts.inference import (PATH_WARP, as_positions, path_distances, path_scale,
-                                      pen_path)
+from iloci.concepts.inference import (COMPARES, PATH_WARP, as_positions, path_distances,
+                                      path_scale, pen_path)
 from iloci.concepts.learner import (novelty_scale, pattern_distances,
                                     regenerated_patterns, regeneration_scale)
 from iloci.concepts.memory import entries_equal
@@ -882,6 +882,30 @@ def test_pattern_distances_as_positions_both_and_warp_against_a_plain_loop():
                         _naive_dtw(f(s), f(q), band) / (7 * f(s).shape[1]), rel=1e-10)
     with pytest.raises(iloci.errors.InvalidInputError, match="compare must be one of"):
         pattern_distances(seqs, pats, compare="path")
+
+
+def test_the_patterns_against_themselves_are_aligned_once_per_pair_bit_for_bit():
+    """pattern_distances(pats, pats) (the memory's own scales, the both-distances weight)
+    aligns each unordered pair once, in a layout of its own: the same bits as the
+    (B, M) alignment of every ordered pair, for any band, length and feature count
+    (the einsum's summation order of 1 to 17 features, zeros of either sign)."""
+    from iloci.concepts.inference import _warped, _warped_itself
+    rng = np.random.default_rng(7)
+    for m, t, d, band in [(1, 5, 2, 3), (2, 0, 6, 8), (5, 1, 1, 2), (7, 12, 3, 1), (9, 20, 6, 8),
+                          (4, 9, 8, 30), (6, 15, 9, 4), (3, 11, 12, 5), (8, 16, 17, 8),
+                          (40, 10, 2, 3)]:
+        P = rng.normal(size=(m, t, d)) * 10.0 ** rng.integers(-3, 4, size=(m, 1, 1))
+        if t:
+            P[:, :, 0] = 0.0
+            P[:, ::2, -1] = -0.0
+        if m > 2:
+            P[2] = P[1]
+        assert _warped_itself(P, band).tobytes() == _warped(P, P, band).tobytes(), (m, t, d, band)
+    pats = [np.cumsum(rng.normal(size=(49, 6)), axis=0) * 0.01 for _ in range(12)]
+    for compare in COMPARES:
+        for warp in (0, 8):
+            assert (pattern_distances(pats, pats, warp, compare).tobytes()
+                    == pattern_distances(pats, list(pats), warp, compare).tobytes())
 
 
 def test_pattern_distances_and_regeneration_scale():

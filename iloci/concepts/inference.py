@@ -251,6 +251,8 @@ def pattern_distances(sequences: Sequence[np.ndarray],
     if compare not in COMPARES:
         raise InvalidInputError(f"compare must be one of {', '.join(COMPARES)}; got "
                                 f"{compare!r}.")
+    # the patterns against themselves (the memory's own scales): a symmetric matrix
+    itself = sequences is patterns
     seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
     pats = [np.asarray(p, dtype=np.float64) for p in patterns]
     if compare == "positions":
@@ -272,6 +274,9 @@ def pattern_distances(sequences: Sequence[np.ndarray],
         P = np.stack([_on_steps(p, n) for p in pats])                # (M, T, D)
         if warp <= 0:
             out[rows] = ((S[:, None] - P[None]) ** 2).mean(axis=(2, 3))
+        elif itself and len(rows) == len(pats):
+            # every pattern has n steps: S is P, each pair is aligned once
+            out[rows] = _warped_itself(S, int(warp)) / (n * S.shape[2])
         else:
             out[rows] = _warped(S, P, int(warp)) / (n * S.shape[2])
     return out
@@ -358,6 +363,116 @@ def _warped(S: np.ndarray, P: np.ndarray, band: int) -> np.ndarray:
             row[j] = cost[j - lo] + np.minimum(np.minimum(prev[j], row[j - 1]), prev[j - 1])
         prev = row
     return prev[t]
+
+
+#: Pairs :func:`_warped_pairs` aligns together (its arrays stay within a
+#: core's cache: about 20 arrays of ``T x 512`` floats).
+_PAIRS_AT_ONCE = 512
+
+
+def _lanes(d: int) -> tuple[list[int], list[int]]:
+    """The order in which :func:`_warped`'s ``np.einsum`` adds a dot product's ``d`` terms.
+
+    numpy's einsum sums a contiguous dot product (``sum_of_products_contig_contig_outstride0_two``,
+    numpy/_core/src/multiarray/einsum_sumprod.c.src, built for the baseline
+    SIMD: two float64 lanes, multiply then add, not fused) in two lanes,
+    features ``k`` with ``k % 2`` equal to the lane, in blocks of 8
+    (features 6, 4, 2, 0 of the block, lane by lane) and then pairs; the
+    result is lane 0 + lane 1. Per lane, the features in the order added.
+    """
+    lanes: tuple[list[int], list[int]] = ([], [])
+    k = 0
+    while d - k >= 8:
+        for lane in (0, 1):
+            lanes[lane].extend(k + 2 * v + lane for v in (3, 2, 1, 0))
+        k += 8
+    for j in range(k, d):
+        lanes[j % 2].append(j)
+    return lanes
+
+
+def _warped_itself(S: np.ndarray, band: int) -> np.ndarray:
+    """:func:`_warped` of ``S`` against itself, (M, M), each unordered pair aligned once.
+
+    The DTW of ``(a, b)`` is that of ``(b, a)`` bit for bit: the step
+    costs are the same products summed in the same order, and the
+    recursion takes the minimum of the same three sums (never -0: costs
+    are clipped at +0), which is the same whichever order they come in.
+    """
+    m = S.shape[0]
+    rows, cols = np.triu_indices(m)
+    d = np.empty(len(rows))
+    for c in range(0, len(rows), _PAIRS_AT_ONCE):
+        part = slice(c, c + _PAIRS_AT_ONCE)
+        d[part] = _warped_pairs(S, S, rows[part], cols[part], band)
+    out = np.empty((m, m))
+    out[rows, cols] = d
+    out[cols, rows] = d
+    return out
+
+
+def _warped_pairs(S: np.ndarray, P: np.ndarray, si: np.ndarray, pi: np.ndarray,
+                  band: int) -> np.ndarray:
+    """:func:`_warped` of the pairs ``(S[si[k]], P[pi[k]])``, shape (K,), bit for bit.
+
+    The same arithmetic, arranged for few Python steps: the step costs
+    are computed one band diagonal at a time for every pair (the products
+    and their sum in :func:`_lanes`' order, then ``(s2 + p2) - 2 dot``
+    clipped at 0, as :func:`_warped` computes them), and the recursion one
+    anti-diagonal of the alignment at a time (its cells depend on the two
+    anti-diagonals before only). ``D[i, o + 1]`` holds the cell ``(i, j =
+    i + o - band)``; columns 0 and ``2 band + 2`` stay infinite (outside the
+    band), so the cells of an anti-diagonal and each of their three
+    predecessors are evenly spaced in ``D``'s flat rows.
+    """
+    t, d = S.shape[1], S.shape[2]
+    k = len(si)
+    band = max(0, min(int(band), t))
+    width = 2 * band + 3
+    X = S[si].transpose(2, 1, 0).copy()                    # (d, T, K)
+    Y = P[pi].transpose(2, 1, 0).copy()
+    x2 = (S * S).sum(-1)[si].T                             # (T, K)
+    y2 = (P * P).sum(-1)[pi].T
+    lanes = _lanes(d)
+    D = np.full((t + 1, width, k), np.inf)
+    D[0, band + 1] = 0.0
+    acc = np.empty((2, t, k))
+    tmp = np.empty((t, k))
+    for o in range(2 * band + 1):
+        i0, i1 = max(1, band + 1 - o), min(t, t + band - o)
+        if i0 > i1:
+            continue
+        n = i1 - i0 + 1
+        xs, ys = slice(i0 - 1, i1), slice(i0 - 1 + o - band, i1 + o - band)
+        for lane, order in enumerate(lanes):
+            if order:
+                a = acc[lane, :n]
+                np.multiply(X[order[0], xs], Y[order[0], ys], out=a)
+                for f in order[1:]:
+                    np.multiply(X[f, xs], Y[f, ys], out=tmp[:n])
+                    np.add(tmp[:n], a, out=a)
+        dot = acc[0, :n]
+        np.add(dot, acc[1, :n] if lanes[1] else 0.0, out=dot)
+        cost = D[i0:i1 + 1, o + 1]
+        np.add(x2[xs], y2[ys], out=cost)
+        np.subtract(cost, np.multiply(dot, 2.0, out=dot), out=cost)
+        np.maximum(cost, 0.0, out=cost)
+    flat = D.reshape(-1, k)
+    step = width - 2
+    low = tmp
+    for diag in range(2, 2 * t + 1):
+        i0 = max(1, diag - t, (diag - band + 1) // 2)
+        i1 = min(t, diag - 1, (diag + band) // 2)
+        if i0 > i1:
+            continue
+        a, b = i0 * step + diag + band + 1, i1 * step + diag + band + 2
+        cell = flat[a:b:step]
+        lo = low[:len(cell)]
+        # cost + min(min(D[i-1, j], D[i, j-1]), D[i-1, j-1]), as in _warped
+        np.minimum(flat[a - width + 1:b - width + 1:step], flat[a - 1:b - 1:step], out=lo)
+        np.minimum(lo, flat[a - width:b - width:step], out=lo)
+        np.add(cell, lo, out=cell)
+    return D[t, band + 1].copy()
 
 
 def regeneration_scale(patterns: Sequence[np.ndarray], labels: Sequence[str],

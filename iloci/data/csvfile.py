@@ -22,7 +22,7 @@ from iloci import validation
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.progress import long_step
 
-__all__ = ["read_csv", "check_times"]
+__all__ = ["read_csv", "check_times", "decode_text"]
 
 
 #: Header names of a time column (lower case, unit suffix removed) -> unit in s.
@@ -40,8 +40,37 @@ _NUMBER_RE = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(nan|inf|in
 _DECIMAL_COMMA_RE = re.compile(r"[+-]?\d+,\d+([eE][+-]?\d+)?")
 
 
-def _decode(raw: bytes, name: str) -> tuple[str, str]:
-    """The text of a CSV file and the encoding it was read with."""
+def decode_text(raw: bytes, name: str) -> tuple[str, str]:
+    """The text of a text file people save (a trajectory CSV, a manifest) and its encoding.
+
+    The encoding is found, not asked for: a byte-order mark says UTF-32,
+    UTF-8 or UTF-16 (Excel's "Unicode text" is UTF-16 with one); zero
+    bytes in the first 64 without a mark say UTF-16 of the byte order whose
+    odd or even bytes hold more zeros; else UTF-8, and Latin-1 when the
+    bytes are not valid UTF-8 (every byte is a Latin-1 character). The
+    byte-order mark is not part of the text.
+
+    Parameters
+    ----------
+    raw : bytes
+        The file's content.
+    name : str
+        The file as the user knows it, for the error message.
+
+    Returns
+    -------
+    text : str
+    encoding : str
+        The codec it was decoded with (``"utf-8"``, ``"utf-8-sig"``,
+        ``"utf-16"``, ``"utf-16-le"``, ``"utf-16-be"``, ``"utf-32"`` or ``"latin-1"``).
+
+    Raises
+    ------
+    InvalidInputError
+        Not text: a workbook (.xlsx, .ods, .xls), a numpy array or other
+        binary data (a control byte), named as such; or not valid text in
+        the encoding its byte-order mark or zero bytes announce.
+    """
     for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),  # noqa: B007 (enc: the one found, used after the loop)
                      (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
                      (codecs.BOM_UTF16_BE, "utf-16")):
@@ -198,7 +227,7 @@ def read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
                ) -> tuple[np.ndarray, np.ndarray | None]:
-    text, encoding = _decode(raw, p.name)
+    text, encoding = decode_text(raw, p.name)
     # a big file's dialect is found on its first 64 kB (whole lines): the rest is
     # checked row by row below, with the line named
     sample = text if len(text) <= _SAMPLE else text[:text.rfind("\n", 0, _SAMPLE) + 1] or text

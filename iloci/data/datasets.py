@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from iloci.data.csvfile import _decode
+from iloci.data.csvfile import decode_text
 from iloci.data.files import load_trajectory
 from iloci.errors import InvalidInputError, TimeUnitWarning
 from iloci.interfaces import Demonstration
@@ -200,7 +200,7 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
     except OSError as exc:
         raise InvalidInputError(f"cannot read manifest {path}: {exc.strerror or exc}.") from None
     try:  # UTF-8 with or without a byte-order mark, UTF-16/32 (Excel's "Unicode text"), Latin-1
-        text = _decode(raw, str(path))[0].lstrip("\ufeff")
+        text = decode_text(raw, str(path))[0].lstrip("\ufeff")
     except InvalidInputError as exc:
         raise InvalidInputError(f"manifest {exc}") from None
     rows: list[dict[str, Any]]
