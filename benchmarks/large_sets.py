@@ -52,8 +52,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-# benchmarks/golden.py: this folder is on sys.path when run
+# benchmarks/golden.py and rehearsal.py: this folder is on sys.path when run
 from golden import git_head
+from rehearsal import parse_variant
 
 RESULTS = Path(__file__).resolve().parent / "results" / "large_sets.json"
 
@@ -61,23 +62,6 @@ DEFAULT_VARIANTS: dict[str, dict[str, dict[str, Any]]] = {
     "default": {},
     "rehearsal-0.005": {"perceptual_model": {"rehearsal_learning_rate": 0.005}},
 }
-
-
-def parse_variant(text: str) -> tuple[str, dict]:
-    """``NAME=section.key=value,...`` -> (name, {section: {key: value}}); values as TOML scalars."""
-    import tomllib
-
-    name, _, rest = text.partition("=")
-    if not name or not rest:
-        raise SystemExit(f"--variant {text!r}: expected NAME=SECTION.KEY=VALUE[,...]")
-    out: dict[str, dict] = {}
-    for item in rest.split(","):
-        dotted, _, value = item.partition("=")
-        section, _, key = dotted.partition(".")
-        if not (section and key and value):
-            raise SystemExit(f"--variant {text!r}: bad item {item!r}")
-        out.setdefault(section, {})[key] = tomllib.loads(f"v = {value}")["v"]
-    return name, out
 
 
 def matches(metrics: dict, overrides: dict, data: Path, folds: list[int], seed: int) -> bool:
