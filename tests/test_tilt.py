@@ -94,9 +94,11 @@ def test_a_turned_drawing_is_read_turned_back(taught, demos):
     # tilt_gate = "pb_distance": the drawings turned by +15 degrees that lie
     # beyond tilt_beyond from every PB_rec are read turned back (by -8 or -16
     # degrees, never the wrong way); the others are read as drawn
+    # (both kinds must occur, so both branches below are checked: with
+    # rehearsal_learning_rate = 0.001 2 of these 10 lie beyond, at 0.005 5 did)
     beyond = default.tilt_beyond
     far = [p.distance > beyond for p in plain]
-    assert sum(far) >= 5, [round(p.distance, 3) for p in plain]
+    assert 0 < sum(far) < len(far), [round(p.distance, 3) for p in plain]
     for r, p, f in zip(searched, plain, far):
         if f:
             # turned back, the network reproduces it better (PB_obs's error)
