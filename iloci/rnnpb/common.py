@@ -220,12 +220,15 @@ class RNNPBBase:
         raise NotImplementedError
 
     def _train_kernel(self, X: np.ndarray, mask: np.ndarray, weight: np.ndarray,
-                      u: np.ndarray, epochs: int) -> tuple[np.ndarray, float]:
+                      u: np.ndarray, epochs: int, params: RNNPBParams | None = None
+                      ) -> tuple[np.ndarray, float]:
         """Full-batch Adam on weights and PBs; returns the new ``u`` and final loss.
 
         ``X`` (T, R, D), ``mask`` (T - 1, R), ``weight`` (R,) per-sequence
         factor of the loss (``1 / (T_i - 1) / B``, 0 for padding rows),
-        ``u`` (R, P). Updates the weights in place.
+        ``u`` (R, P). ``params``: this call's settings (:meth:`train`'s
+        ``learning_rate`` in place), ``self.params`` when ``None``. Updates
+        the weights in place.
         """
         raise NotImplementedError
 
@@ -335,13 +338,7 @@ class RNNPBBase:
         u = np.zeros((X.shape[1], self.pb_size))
         u[:b] = pb_to_u(pbs0, self.params.pb_bound)
         if n > 0:
-            # the kernels read self.params: this call's settings are put in
-            # place for the call only (nothing else depends on the rate)
-            kept, self.params = self.params, params
-            try:
-                u, self.train_loss_ = self._train_kernel(X, mask, per_seq / b, u, int(n))
-            finally:
-                self.params = kept
+            u, self.train_loss_ = self._train_kernel(X, mask, per_seq / b, u, int(n), params)
         pbs = u_to_pb(u[:b], self.params.pb_bound)
         self.pbs_ = pbs.copy()
         return pbs

@@ -303,8 +303,8 @@ class JaxRNNPB(RNNPBBase):
     def _cast(self, *arrays: np.ndarray) -> list:
         return [jnp.asarray(a, self._dtype) for a in arrays]
 
-    def _train_kernel(self, X, mask, weight, u, epochs):
-        p = self.params
+    def _train_kernel(self, X, mask, weight, u, epochs, params=None):
+        p = self.params if params is None else params
         with jax.enable_x64(self._x64):
             Xj, mj, wj, uj = self._cast(X, mask, weight, u)
             w, u_new, loss = _train(self._w, uj, Xj, mj, wj, epochs, p.learning_rate,

@@ -192,9 +192,9 @@ class NativeRNNPB(RNNPBBase):
     def _weight_args(self, w: Mapping[str, np.ndarray]) -> dict[str, int]:
         return {k: w[k].ctypes.data for k in WEIGHT_NAMES}
 
-    def _train_kernel(self, X, mask, weight, u, epochs):
+    def _train_kernel(self, X, mask, weight, u, epochs, params=None):
         lib = self._lib()
-        p = self.params
+        p = self.params if params is None else params
         mw = mask * weight[None, :]
         if lib is None:
             res = train(self._w, u, X, mw, p, epochs)

@@ -348,8 +348,8 @@ class TorchRNNPB(RNNPBBase):
     def _t(self, a: np.ndarray, dtype: torch.dtype | None = None) -> torch.Tensor:
         return torch.from_numpy(np.ascontiguousarray(a)).to(dtype or self._dtype)
 
-    def _train_kernel(self, X, mask, weight, u, epochs):
-        p = self.params
+    def _train_kernel(self, X, mask, weight, u, epochs, params=None):
+        p = self.params if params is None else params
         net = self._net
         backup = net.flat.clone()
         Xt, mw = self._t(X), self._t(mask * weight[None, :])
