@@ -289,6 +289,28 @@ def test_rehearsals_of_a_trained_network_take_the_rehearsal_learning_rate(lasa, 
     assert calls[before:] == [expected]
 
 
+def test_a_model_whose_train_takes_no_learning_rate_rehearses_at_its_own(lasa, monkeypatch):
+    """A third-party model may reuse RNNPBParams (so it has a rehearsal_learning_rate)
+    and define train with the interface's three arguments alone: teaching works, says
+    once that the setting is not honoured, and calls train without the keyword."""
+    agent = make_agent()
+    model = agent.perceptual_model
+    calls: list = []
+    train = model.train
+
+    def three_arguments(sequences, pbs_init=None, epochs=None):
+        calls.append(epochs)
+        return train(sequences, pbs_init, epochs)
+
+    monkeypatch.setattr(model, "train", three_arguments)
+    with pytest.warns(RuntimeWarning, match="takes no learning_rate.*rehearsal_learning_rate"):
+        agent.teach([lasa["GShape/0"], lasa["Angle/0"]])
+    assert len(calls) >= 2 and len(agent.memory) == 2
+    assert rehearsal.takes_learning_rate(agent.perceptual_model) is False
+    monkeypatch.undo()
+    assert rehearsal.takes_learning_rate(agent.perceptual_model) is True
+
+
 # -- inference ----------------------------------------------------------------------
 
 def test_recognize_before_learning_is_a_not_fitted_error(lasa):

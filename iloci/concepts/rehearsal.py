@@ -22,14 +22,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+import inspect
 import time
+import warnings
 
 import numpy as np
 
 from iloci.concepts.memory import Entry
 from iloci.interfaces import PerceptualModel
 
-__all__ = ["RehearsalProgress", "RehearsalResult", "regenerate", "rehearse", "apply"]
+__all__ = ["RehearsalProgress", "RehearsalResult", "regenerate", "rehearse", "apply",
+           "takes_learning_rate"]
 
 #: The phases of a rehearsal, in order (:attr:`RehearsalProgress.phase`).
 PHASES = ("regenerate", "train", "recognize", "evaluate", "done")
@@ -133,6 +136,23 @@ def regenerate(model: PerceptualModel, entries: Sequence[Entry]) -> list[np.ndar
     return [p for p in out if p is not None]
 
 
+def takes_learning_rate(model: PerceptualModel) -> bool:
+    """Whether ``model.train`` takes a keyword ``learning_rate`` (or ``**kwargs``).
+
+    The keyword is optional in :class:`~iloci.interfaces.PerceptualModel`:
+    a third-party model that reuses :class:`iloci.params.RNNPBParams` (and
+    so has a ``rehearsal_learning_rate``) may still define ``train`` with
+    the three arguments alone. A signature Python cannot read counts as
+    taking it.
+    """
+    try:
+        parameters = inspect.signature(model.train).parameters.values()
+    except (TypeError, ValueError):
+        return True
+    return any(p.name == "learning_rate" and p.kind is not p.POSITIONAL_ONLY
+               or p.kind is p.VAR_KEYWORD for p in parameters)
+
+
 def rehearse(model: PerceptualModel, entries: Sequence[Entry],
              new_pattern: np.ndarray | None = None, new_pb: np.ndarray | None = None, *,
              epochs: int | None = None, learning_rate: float | None = None,
@@ -188,6 +208,14 @@ def rehearse(model: PerceptualModel, entries: Sequence[Entry],
     if not patterns:
         raise ValueError("rehearsal needs at least one entry or a new pattern")
     report("train")
+    if learning_rate is not None and not takes_learning_rate(model):
+        warnings.warn(
+            f"{type(model).__name__}.train takes no learning_rate: this rehearsal trains at "
+            f"the model's own learning rate, not at {learning_rate:g} "
+            "([perceptual_model] rehearsal_learning_rate). To honour that setting, give "
+            "train a keyword argument learning_rate (iloci.interfaces.PerceptualModel.train).",
+            RuntimeWarning, stacklevel=2)
+        learning_rate = None
     if learning_rate is None:
         trained = model.train(patterns, np.array(pb_init), epochs)
     else:

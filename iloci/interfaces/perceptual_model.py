@@ -43,6 +43,16 @@ class PerceptualModel(Protocol):
         -------
         ndarray, shape (B, P)
             The learned PB of each sequence.
+
+        Notes
+        -----
+        A model may also take a keyword ``learning_rate`` (float): the
+        weights' learning rate of this call only. The learner passes it
+        to rehearse a trained network, and only to a model whose
+        ``params`` has a ``rehearsal_learning_rate`` (every first-party
+        RNNPB back end: ``[perceptual_model] rehearsal_learning_rate``,
+        docs/method.md, "The rehearsal learning rate"); a model without
+        such a field is called with the three arguments above.
         """
         ...
 
