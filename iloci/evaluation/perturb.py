@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci.linalg import matmul
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
@@ -106,7 +107,7 @@ def rotate(demo: Demonstration, degrees: float, rng: np.random.Generator) -> Dem
     c, s = np.cos(a), np.sin(a)
     p = demo.positions
     centre = (p.min(axis=0) + p.max(axis=0)) / 2
-    return _with(demo, (p - centre) @ np.array([[c, s], [-s, c]]) + centre, _times(demo))
+    return _with(demo, matmul(p - centre, np.array([[c, s], [-s, c]])) + centre, _times(demo))
 
 
 def stretch(demo: Demonstration, x: float = 1.0, y: float = 1.0) -> Demonstration:

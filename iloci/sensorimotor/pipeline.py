@@ -15,6 +15,7 @@ import hashlib
 
 import numpy as np
 
+from iloci.linalg import matmul
 from iloci.config import Config, SensorimotorConfig
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration, IKSolver
@@ -198,7 +199,7 @@ def tilted(motion: Motion, degrees: float, ik: IKSolver, robot: Robot | None = N
     robot = _robot(ik, robot)
     plane = robot.plane
     c, s = np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a))
-    turned = (motion.plane_points - plane.center) @ np.array([[c, s], [-s, c]]) + plane.center
+    turned = matmul(motion.plane_points - plane.center, np.array([[c, s], [-s, c]])) + plane.center
     return _solved(motion.demo_key, fit_to_plane(turned, plane), motion.dt, ik, robot)
 
 

@@ -29,6 +29,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from iloci.linalg import matmul
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Execution
 from iloci.sensorimotor.robots import DrawingPlane, Robot
@@ -318,14 +319,14 @@ def to_world(robot: Robot, points: np.ndarray) -> np.ndarray:
     """Base-frame points (T, 3) -> the URDF root frame, where engines load the robot."""
     T = np.asarray(robot.base_pose, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64)
-    return p if np.array_equal(T, np.eye(4)) else p @ T[:3, :3].T + T[:3, 3]
+    return p if np.array_equal(T, np.eye(4)) else matmul(p, T[:3, :3].T) + T[:3, 3]
 
 
 def to_base(robot: Robot, points: np.ndarray) -> np.ndarray:
     """Root-frame points (T, 3) or (3,) -> the robot's base frame."""
     T = np.asarray(robot.base_pose, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64)
-    return p if np.array_equal(T, np.eye(4)) else (p - T[:3, 3]) @ T[:3, :3]
+    return p if np.array_equal(T, np.eye(4)) else matmul(p - T[:3, 3], T[:3, :3])
 
 
 def camera_for(robot: Robot) -> dict[str, Any]:

@@ -241,3 +241,102 @@ def test_native_kernel_is_built_and_used_where_it_can_be():
     assert importlib.util.find_spec("iloci_native._native") is not None, \
         "iloci_native._native was not compiled at install time"
     assert native_kernel_available()
+
+
+# -- float64 generation: one order of operations on every CPU ---------------------
+
+@needs_native
+@pytest.mark.parametrize("sizes", [{}, {"hidden": 7, "context": 3, "pb": 1}],
+                         ids=["paper", "odd"])
+def test_generation_computes_the_float64_spec_bit_for_bit(sizes):
+    """The kernel's float64 generation (iloci_rnnpb_generate64) is
+    iloci.rnnpb.float64.generate64 bit for bit, and within rounding of numpy's ``@``."""
+    from iloci.rnnpb.float64 import generate64
+    from iloci.rnnpb.reference import reference_outputs
+
+    m = NativeRNNPB(seed=3, epochs=30, **sizes)
+    m.train(synthetic_sequences(5, 6, lengths=(12, 17, 9), seed=2))
+    rng = np.random.default_rng(4)
+    pbs = rng.normal(0.0, 1.0, (5, m.pb_size))
+    x0 = rng.normal(0.0, 0.3, (5, m.input_size))
+    x0[0, 0] = 25.0                                       # a saturated unit: tanh 1
+    got = m._generate_kernel(pbs, x0, 40)
+    want = generate64(m.state(), pbs, x0, 40)
+    assert got.shape == (40, 5, m.input_size)
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+    X = np.zeros((41,) + x0.shape)
+    X[0] = x0
+    np.testing.assert_allclose(got, reference_outputs(m.state(), pbs, X), rtol=0, atol=1e-12)
+
+
+def test_float64_tanh_is_accurate_and_handles_every_value():
+    import math
+
+    from iloci.rnnpb.float64 import tanh64
+
+    x = np.concatenate([np.linspace(-30.0, 30.0, 120001), [0.0, -0.0, 1e-300, -5e-324,
+                                                           21.9, 22.0, 22.1, 1e308]])
+    got = tanh64(x)
+    exact = np.array([math.tanh(v) for v in x])
+    ulps = np.abs(got - exact) / np.spacing(np.abs(exact))
+    assert ulps.max() <= 4.0         # iloci/rnnpb/float64.py: at most 4 on 1.2M points
+    assert np.array_equal(np.signbit(got), np.signbit(x))            # -0.0 stays -0.0
+    special = tanh64(np.array([np.inf, -np.inf, np.nan]))
+    assert special[0] == 1.0 and special[1] == -1.0 and np.isnan(special[2])
+
+
+@needs_native
+def test_generation_of_special_values_matches_the_spec():
+    """Inf and NaN in a first input go through the kernel as through the spec."""
+    from iloci.rnnpb.float64 import generate64
+
+    m = NativeRNNPB(seed=1)
+    x0 = np.zeros((3, m.input_size))
+    x0[1, 0], x0[2, 1] = np.inf, np.nan
+    pbs = np.zeros((3, m.pb_size))
+    got, want = m._generate_kernel(pbs, x0, 3), generate64(m.state(), pbs, x0, 3)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    np.testing.assert_array_equal(np.nan_to_num(got).view(np.int64),
+                                  np.nan_to_num(want).view(np.int64))
+
+
+#: OpenBLAS kernels to force (``OPENBLAS_CORETYPE``) and the CPU flag each needs.
+CORETYPES = {"Nehalem": "sse4_2", "Haswell": "avx2", "SkylakeX": "avx512f"}
+
+_SESSION = """
+import pathlib, sys, tempfile
+sys.path.insert(0, {tests!r})
+import test_golden
+from iloci.testing.golden import digest
+with tempfile.TemporaryDirectory() as d:
+    print(digest(test_golden.sessions(pathlib.Path(d))))
+"""
+
+
+@needs_native
+def test_the_scripted_sessions_learn_the_same_bits_with_every_blas_kernel():
+    """Same seed, same memory, whatever matrix kernels numpy's OpenBLAS picks for this CPU.
+
+    OpenBLAS chooses its kernels by CPU model; ``OPENBLAS_CORETYPE`` forces one,
+    as another machine would pick it. The golden sessions of tests/test_golden.py
+    (IK, generation, rehearsal, recognition, the saved memory) must give one
+    digest under each kernel this CPU runs; they did not while generation and IK
+    used numpy's ``@`` (found when the golden outputs, recorded on one x86-64
+    machine, did not hold on another).
+    """
+    pytest.importorskip("pinocchio")
+    from pathlib import Path
+
+    flags = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+    cores = [c for c, flag in CORETYPES.items() if f" {flag}" in flags]
+    if len(cores) < 2:
+        pytest.skip(f"this CPU runs {cores or 'none'} of {list(CORETYPES)}: nothing to compare")
+    tests = str(Path(__file__).resolve().parents[1])
+    digests = {}
+    for core in cores:
+        env = {**__import__("os").environ, "OPENBLAS_CORETYPE": core}
+        out = subprocess.run([sys.executable, "-c", _SESSION.format(tests=tests)], env=env,
+                             capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-2000:]
+        digests[core] = out.stdout.strip().splitlines()[-1]
+    assert len(set(digests.values())) == 1, digests

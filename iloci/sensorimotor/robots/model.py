@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from iloci.linalg import matmul
 from iloci.errors import InvalidInputError, did_you_mean
 from iloci.sensorimotor.robots.urdf import (MOVABLE, limits_message, read_urdf, resolve_uri,
                                             urdf_unicode)
@@ -22,7 +23,7 @@ __all__ = ["DrawingPlane", "Robot", "describe_robot"]
 
 def _unit(v: Sequence[float], what: str) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64)
-    n = float(np.linalg.norm(a)) if a.shape == (3,) and np.all(np.isfinite(a)) else 0.0
+    n = float(np.sqrt(matmul(a, a))) if a.shape == (3,) and np.all(np.isfinite(a)) else 0.0
     if n == 0.0:
         raise InvalidInputError(f"{what} must be a non-zero 3-vector, got {v!r}.")
     return a / n
@@ -68,7 +69,7 @@ class DrawingPlane:
                 f"drawing plane needs finite x, y, z and positive width and height, "
                 f"got {vals}.")
         n, up = _unit(self.normal, "plane normal"), _unit(self.up, "plane up")
-        if abs(float(n @ up)) > 1e-6:
+        if abs(float(matmul(n, up))) > 1e-6:
             raise InvalidInputError(f"plane normal {self.normal} and up {self.up} must be "
                                     "orthogonal.")
         object.__setattr__(self, "normal", tuple(float(v) for v in n))
@@ -88,12 +89,12 @@ class DrawingPlane:
     @property
     def distance(self) -> float:
         """Signed distance of the plane from the base origin along ``normal`` (m)."""
-        return float(self.origin @ np.array(self.normal))
+        return float(matmul(self.origin, np.array(self.normal)))
 
     @property
     def center(self) -> np.ndarray:
         """Centre as a 2-D plane point, shape (2,)."""
-        return self.axes[:2] @ self.origin
+        return matmul(self.axes[:2], self.origin)
 
     @property
     def size(self) -> np.ndarray:
@@ -150,7 +151,7 @@ class DrawingPlane:
         ndarray, shape (T, 2)
         """
         p = _as_points(points3d, 3, "3-D points")
-        return p @ self.axes[:2].T
+        return matmul(p, self.axes[:2].T)
 
     def grown(self, margin: float) -> DrawingPlane:
         """The same plane with ``margin`` (m) added on every side."""

@@ -472,6 +472,138 @@ int iloci_rnnpb_errors(iloci_rnnpb_recognize_args *a) {
     }
 }
 
+/* ---- float64 closed-loop generation --------------------------------------
+ *
+ * RNNPBBase.generate (an entry's regenerated pattern: what the robot
+ * performs, what the regeneration decision compares a drawing with, what a
+ * rehearsal trains on) in float64, in the one order of operations that
+ * iloci/rnnpb/float64.py writes in numpy (the spec; tested bit for bit):
+ *
+ *   - z[j] = (sum_k a[k] w[k, j]) + b[j]: acc = +0, k ascending,
+ *     acc = acc + a[k] * w[k, j] (product rounded, then the sum: no fma;
+ *     the module is compiled with -ffp-contract=off), then + b[j];
+ *     pre = (sum_k pb[k] w_in[S + k]) + b_hidden once per row, each step's
+ *     hidden pre-activation (sum_k s[k] w_in[k]) + pre over s = [x, c];
+ *   - tanh64(x) = sign(x) e / (e + 2), e = expm1(2 |x|); 1 for |x| > 22;
+ *     NaN for NaN;
+ *   - expm1(y), 0 <= y <= 44: k = floor(y / ln2 + 1/2), r = (y - k ln2_hi) -
+ *     k ln2_lo, p = r (1 + r (1/2! + r (... + r / 14!))) (Horner),
+ *     2^k p + (2^k - 1) (a product with a power of 2: exact).
+ *
+ * Plain C, one function for every CPU: each operation is a correctly rounded
+ * IEEE double operation, and a vector holds independent j, so the compiler's
+ * vectorisation never changes a sum. numpy's BLAS (its kernels chosen by CPU
+ * model) and numpy's tanh (SIMD code on AVX-512) do not give one result.
+ */
+static const double INV_LN2 = 1.4426950408889634;
+static const double LN2_HI = 6.93147180369123816490e-01;
+static const double LN2_LO = 1.90821492927058770002e-10;
+static const double TANH_ONE = 22.0;
+
+/* tanh64 on two lanes at once (GNU C vectors: one IEEE double operation per
+ * lane, so the vector width changes no bit). Branch-free: floor, 2^k, |x|,
+ * the sign and the selects are exact bit operations or exact additions:
+ *   floor(v), 0 <= v < 2^51: f = (v + 2^52) - 2^52 (v to the nearest
+ *     integer), minus 1 where f > v;
+ *   2^k, 0 <= k <= 64: the bits of k + (1023 + 2^52) shifted left by 52. */
+typedef double v2d __attribute__((vector_size(16)));
+typedef int64_t v2l __attribute__((vector_size(16)));
+
+static inline v2d v2d_select(v2l mask, v2d yes, v2d no) {
+    return (v2d)((mask & (v2l)yes) | (~mask & (v2l)no));
+}
+
+static inline v2d tanh64_v2(v2d x) {
+    /* 1/n! for n = 14 down to 2, rounded to double (as float64.EXPM1_COEFFICIENTS) */
+    static const double c[13] = {1.0 / 87178291200.0, 1.0 / 6227020800.0, 1.0 / 479001600.0,
+                                 1.0 / 39916800.0, 1.0 / 3628800.0, 1.0 / 362880.0,
+                                 1.0 / 40320.0, 1.0 / 5040.0, 1.0 / 720.0, 1.0 / 120.0,
+                                 1.0 / 24.0, 1.0 / 6.0, 1.0 / 2.0};
+    const v2l sign = {INT64_MIN, INT64_MIN};
+    const v2d one = {1.0, 1.0}, big = {TANH_ONE, TANH_ONE}, magic = {0x1p52, 0x1p52};
+    v2d a = (v2d)((v2l)x & ~sign);
+    v2d y = v2d_select(a < big, a, big) * 2.0;          /* NaN: TANH_ONE, replaced below */
+    /* expm1(y), 0 <= y <= 44 */
+    v2d v = y * INV_LN2 + 0.5;
+    v2d f = (v + magic) - magic;
+    v2d k = f - (v2d)((f > v) & (v2l)one);
+    v2d r = (y - k * LN2_HI) - k * LN2_LO;
+    v2d p = {c[0], c[0]};
+    for (int i = 1; i < 13; i++) p = c[i] + r * p;
+    p = 1.0 + r * p;
+    p = r * p;
+    v2d two_k = (v2d)((v2l)(k + (1023.0 + 0x1p52)) << 52);
+    v2d e = p * two_k + (two_k - 1.0);
+    v2d t = v2d_select(a > big, one, e / (e + 2.0));
+    t = (v2d)(((v2l)t & ~sign) | ((v2l)x & sign));
+    return v2d_select(x != x, x, t);
+}
+
+/* dst[j] = tanh64(src[j] + bias[j]), j < n (dst may be src) */
+static void tanh64_add(double *dst, const double *src, const double *bias, int n) {
+    int j = 0;
+    for (; j + 1 < n; j += 2) {
+        v2d z = {src[j] + bias[j], src[j + 1] + bias[j + 1]};
+        v2d t = tanh64_v2(z);
+        dst[j] = t[0];
+        dst[j + 1] = t[1];
+    }
+    if (j < n) {
+        v2d z = {src[j] + bias[j], 0.0};
+        dst[j] = tanh64_v2(z)[0];
+    }
+}
+
+/* Entry point for ctypes: out (steps, R, D) receives the closed-loop outputs
+ * of R rows from PBs pbs (R, P) and first inputs x0 (R, D); the weights as
+ * the reference holds them, float64, row-major: w_in (D + C + P, H),
+ * b_hidden (H), w_out (H, D + C), b_out (D + C). Returns OK, NO_MEMORY or
+ * BAD_ARGS. */
+#if ILOCI_X86 && defined(__GNUC__) && !defined(__clang__)
+/* also compiled for AVX2 and AVX-512 (chosen at load time): wider vectors of
+ * the same per-lane operations, no fma (-ffp-contract=off), the same bits */
+__attribute__((target_clones("avx512f", "avx2", "default")))
+#endif
+int iloci_rnnpb_generate64(int32_t R, int32_t D, int32_t C, int32_t H, int32_t P,
+                           int32_t steps, const double *w_in, const double *b_hidden,
+                           const double *w_out, const double *b_out, const double *pbs,
+                           const double *x0, double *out) {
+    if (R < 0 || D < 1 || C < 0 || H < 1 || P < 0 || steps < 0 || w_in == NULL
+        || b_hidden == NULL || w_out == NULL || b_out == NULL || (R > 0 && (x0 == NULL
+        || out == NULL || (P > 0 && pbs == NULL))))
+        return BAD_ARGS;
+    const int S = D + C;
+    double *mem = malloc(sizeof(double) * (size_t)(2 * H + 2 * S));
+    if (mem == NULL) return NO_MEMORY;
+    double *pre = mem, *h = mem + H, *s = mem + 2 * H, *o = mem + 2 * H + S;
+    for (int r = 0; r < R; r++) {
+        for (int j = 0; j < H; j++) pre[j] = 0.0;
+        for (int k = 0; k < P; k++) {
+            const double a = pbs[(size_t)r * P + k], *w = w_in + (size_t)(S + k) * H;
+            for (int j = 0; j < H; j++) pre[j] = pre[j] + a * w[j];
+        }
+        for (int j = 0; j < H; j++) pre[j] = pre[j] + b_hidden[j];
+        for (int m = 0; m < S; m++) s[m] = m < D ? x0[(size_t)r * D + m] : 0.0;
+        for (int t = 0; t < steps; t++) {
+            for (int j = 0; j < H; j++) h[j] = 0.0;
+            for (int k = 0; k < S; k++) {
+                const double a = s[k], *w = w_in + (size_t)k * H;
+                for (int j = 0; j < H; j++) h[j] = h[j] + a * w[j];
+            }
+            tanh64_add(h, h, pre, H);
+            for (int m = 0; m < S; m++) o[m] = 0.0;
+            for (int k = 0; k < H; k++) {
+                const double a = h[k], *w = w_out + (size_t)k * S;
+                for (int m = 0; m < S; m++) o[m] = o[m] + a * w[m];
+            }
+            tanh64_add(s, o, b_out, S);
+            memcpy(out + ((size_t)t * R + r) * D, s, sizeof(double) * (size_t)D);
+        }
+    }
+    free(mem);
+    return OK;
+}
+
 #ifndef ILOCI_NATIVE_NO_PYTHON
 /* A Python module only so that setuptools builds and installs the library;
  * the functions above are called through ctypes. */

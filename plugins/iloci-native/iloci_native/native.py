@@ -86,7 +86,8 @@ def native_lib() -> ctypes.CDLL | None:
     recognize_size = getattr(lib, "iloci_rnnpb_recognize_args_size", None)
     if (lib.iloci_rnnpb_train_args_size() != ctypes.sizeof(TrainArgs)
             or recognize_size is None or recognize_size() != ctypes.sizeof(RecognizeArgs)
-            or not hasattr(lib, "iloci_rnnpb_errors")):
+            or not hasattr(lib, "iloci_rnnpb_errors")
+            or not hasattr(lib, "iloci_rnnpb_generate64")):
         # a stale build of another layout: never pass it a struct it misreads
         return None
     lib.iloci_rnnpb_train.argtypes = [ctypes.POINTER(TrainArgs)]
@@ -96,6 +97,8 @@ def native_lib() -> ctypes.CDLL | None:
     lib.iloci_rnnpb_errors.argtypes = [ctypes.POINTER(RecognizeArgs)]
     lib.iloci_rnnpb_errors.restype = ctypes.c_int
     lib.iloci_rnnpb_isa_supported.argtypes = [ctypes.c_int]
+    lib.iloci_rnnpb_generate64.argtypes = [ctypes.c_int32] * 6 + [ctypes.c_void_p] * 7
+    lib.iloci_rnnpb_generate64.restype = ctypes.c_int
     return lib
 
 

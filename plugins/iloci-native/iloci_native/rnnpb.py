@@ -8,13 +8,15 @@ gives bit-identical networks, PBs and recognitions on any CPU ("The float32
 arithmetic" in ``_native.c`` defines it; the tests force each instruction set
 and compare bit for bit). Figures: ``benchmarks/results/rnnpb_speed.json``.
 
-Everything else runs the numpy reference (:mod:`iloci.rnnpb.reference`, in
-float64): ``dtype = "float64"``, sizes beyond the kernel (more than 256
-hidden or state units), an install without a C compiler, Adam recognition
-(``recognition_method = "adam"``), generation and :meth:`prediction_error`
-(float64 by contract). A model built on the reference says so once, as a
-:class:`NativeFallbackWarning`. The float64 paths use numpy's BLAS, whose
-last bits may differ between CPUs.
+Generation and :meth:`prediction_error` (float64 by contract) run the
+kernel's float64 code, in the one order of :mod:`iloci.rnnpb.float64`:
+the same bits on every CPU. Everything else runs the numpy reference
+(:mod:`iloci.rnnpb.reference`, in float64): ``dtype = "float64"``, sizes
+beyond the kernel (more than 256 hidden or state units), an install
+without a C compiler (generation too), Adam recognition
+(``recognition_method = "adam"``). A model built on the reference says so
+once, as a :class:`NativeFallbackWarning`. The reference uses numpy's
+BLAS, whose last bits may differ between CPUs.
 
 No torch: the plugin needs numpy and, to build the kernel, a C compiler.
 """
@@ -301,7 +303,9 @@ class NativeRNNPB(RNNPBBase):
     def _error_kernel(self, X, mask, pbs, exact):
         lib = None if exact else self._lib()
         if lib is None:
-            Y = reference_outputs(self._w, pbs, X)
+            # closed loop from each row's first step: generation (float64, the same
+            # bits on every CPU where the kernel is built)
+            Y = self._generate_kernel(pbs, X[0], X.shape[0] - 1)
             se = np.square(Y - X[1:]).mean(axis=2) * mask
             return se.sum(axis=0) / np.maximum(mask.sum(axis=0), 1.0)
         pf = np.array(pbs, np.float32, order="C")
@@ -312,6 +316,19 @@ class NativeRNNPB(RNNPBBase):
         return err.astype(np.float64)
 
     def _generate_kernel(self, pbs, x0, steps):
-        X = np.zeros((steps + 1,) + x0.shape)
-        X[0] = x0
-        return reference_outputs(self._w, pbs, X)
+        lib = native_lib()
+        if lib is None:
+            X = np.zeros((steps + 1,) + x0.shape)
+            X[0] = x0
+            return reference_outputs(self._w, pbs, X)
+        # float64 in the kernel's one order (iloci.rnnpb.float64): the same bits on every CPU
+        w = {k: np.ascontiguousarray(self._w[k], dtype=np.float64) for k in WEIGHT_NAMES}
+        pb = np.ascontiguousarray(pbs, dtype=np.float64)
+        x = np.ascontiguousarray(x0, dtype=np.float64)
+        d, h, c, _ = self._sizes
+        out = np.empty((steps, len(x), d))
+        self._ran(lib.iloci_rnnpb_generate64(
+            len(x), d, c, h, pb.shape[1], steps, w["w_in"].ctypes.data,
+            w["b_hidden"].ctypes.data, w["w_out"].ctypes.data, w["b_out"].ctypes.data,
+            pb.ctypes.data, x.ctypes.data, out.ctypes.data), "generate")
+        return out

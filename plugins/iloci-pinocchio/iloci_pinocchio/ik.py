@@ -29,6 +29,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from iloci.linalg import matmul
 from iloci.errors import InvalidInputError, UnreachableTargetError
 from iloci.sensorimotor.robots import Robot, get_robot
 from iloci.sensorimotor.robots.urdf import urdf_unicode
@@ -147,7 +148,7 @@ class PinocchioIK:
             out[i] = pin.updateFramePlacement(m, d, f).translation
         if self._base_R is not None:  # world -> base frame
             R, t = self._base_R
-            out = (out - t) @ R
+            out = matmul(out - t, R)
         return out[0] if single else out
 
     # ------------------------------------------------------------------ solve
@@ -202,7 +203,8 @@ class PinocchioIK:
                     f"[{np.round(self.lower, 4).tolist()}, {np.round(self.upper, 4).tolist()}].")
             q = q.copy()
         q = self._to_model(q)
-        world = pts if self._base_R is None else pts @ self._base_R[0].T + self._base_R[1]
+        world = (pts if self._base_R is None
+                 else matmul(pts, self._base_R[0].T) + self._base_R[1])
         path = np.empty((len(pts), len(self.joint_names)))
         for i, target in enumerate(world):
             q, err = self._solve_point(target, q)
@@ -252,7 +254,7 @@ class PinocchioIK:
                 # task step plus a pull towards the rest posture projected on the
                 # task's (damped) null space: z - J^+ J z
                 z = gain * (rest - q)
-                dq = z + _dls_step(J, e - J @ z, lam2)
+                dq = z + _dls_step(J, e - _matvec(J.tolist(), z.tolist()), lam2)
             # freeze joints at a limit that the step pushes further out
             blocked = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
             if blocked.any():
@@ -262,7 +264,7 @@ class PinocchioIK:
                     dq = _dls_step(J, e, lam2)
                 else:
                     z = np.where(blocked, 0.0, gain * (rest - q))
-                    dq = z + _dls_step(J, e - J @ z, lam2)
+                    dq = z + _dls_step(J, e - _matvec(J.tolist(), z.tolist()), lam2)
             big = float(np.abs(dq).max())
             if big > _MAX_STEP:
                 dq *= _MAX_STEP / big
@@ -335,13 +337,37 @@ def _reduced_model(robot: Robot) -> tuple[pin.Model, np.ndarray | None]:
     return model, (None if np.array_equal(perm, np.arange(len(perm))) else perm)
 
 
+def _dot(u: list[float], v: list[float]) -> float:
+    """``sum_k u[k] v[k]`` in Python floats, ``k`` ascending from 0.0.
+
+    The IK's small products are written out rather than left to numpy's
+    ``@``: that calls OpenBLAS, whose kernels (chosen by CPU model) sum in
+    other orders, so the same drawing gave joint paths that differed in
+    their last bits from one x86-64 machine to another (and with them the
+    memory learned from them). Python floats are IEEE doubles, one rounding
+    per operation, the same on every machine.
+    """
+    acc = 0.0
+    for x, y in zip(u, v):
+        acc += x * y
+    return acc
+
+
+def _matvec(rows: list[list[float]], v: list[float]) -> np.ndarray:
+    """``A v`` for ``A`` given as its rows, each element by :func:`_dot`."""
+    return np.array([_dot(r, v) for r in rows])
+
+
 def _dls_step(J: np.ndarray, e: np.ndarray, lam2: float) -> np.ndarray:
     """``J^T (J J^T + lam2 I)^-1 e`` for a 3 x n ``J``, with a closed-form 3x3 solve.
 
     numpy's general solver costs ~7 us on a 3x3 system, more than the
-    kinematics; the adjugate formula in Python floats is ~4x cheaper.
+    kinematics; the adjugate formula in Python floats is ~4x cheaper. Every
+    sum in a fixed order (:func:`_dot`): the same bits on every CPU.
     """
-    (a, b, c), (_, d, ee), (_, _, f) = (J @ J.T).tolist()
+    j0, j1, j2 = rows = J.tolist()
+    a, b, c = _dot(j0, j0), _dot(j0, j1), _dot(j0, j2)
+    d, ee, f = _dot(j1, j1), _dot(j1, j2), _dot(j2, j2)
     a += lam2
     d += lam2
     f += lam2
@@ -356,6 +382,6 @@ def _dls_step(J: np.ndarray, e: np.ndarray, lam2: float) -> np.ndarray:
     if det == 0.0:
         return np.zeros(J.shape[1])
     x0, x1, x2 = e.tolist()
-    y = np.array((A * x0 + B * x1 + C * x2, B * x0 + D * x1 + E * x2,
-                  C * x0 + E * x1 + F * x2)) / det
-    return J.T @ y
+    y = [(A * x0 + B * x1 + C * x2) / det, (B * x0 + D * x1 + E * x2) / det,
+         (C * x0 + E * x1 + F * x2) / det]
+    return _matvec([list(col) for col in zip(*rows)], y)
