@@ -33,6 +33,10 @@ and ``compare``; each drawing encoded by the fold's own encoder):
     ``tilt_gate = "ranking"``): the answers it turns, changes, makes wrong
     and makes right.
 
+``variants``
+    the nearest regenerated pattern (and, beside it, the nearest kept
+    demonstration) under each other comparison of :data:`VARIANTS`.
+
 Also the memory: entries, prototypes, exemplars, taught drawings (per
 concept), mean generation error, and how far each entry's regenerated
 pattern lies from its kept demonstration, as a share of the memory's own
@@ -66,6 +70,58 @@ DATASETS = ("unipen", "unipen-writers", "lasa")
 #: The tilt search measured (recognition.py's ``regeneration-tilts`` row).
 TILTS: dict[str, Any] = {"tilts": [8.0, 16.0], "tilt_gate": "ranking"}
 WAYS = ("iloci", "kept", "all_taught", "dtw_normalised")
+#: Other comparisons of a drawing with the memory's patterns, recognition only:
+#: name -> (features of an encoded sequence, ``warp``, ``compare`` of
+#: :func:`~iloci.concepts.inference.pattern_distances`). ``"pen"``: the pen's
+#: two features (``dy, dz``) alone; ``"pen_path"``: its path centred and scaled
+#: to unit RMS radius (:func:`~iloci.concepts.inference.pen_path`);
+#: ``"pen_path_steps"``: that path beside its steps, scaled alike.
+VARIANTS: dict[str, tuple[str, int, str]] = {
+    "default": ("all", 8, "both-distances"),
+    "both-distances-warp-16": ("all", 16, "both-distances"),
+    "both-distances-full-band": ("all", 10_000, "both-distances"),
+    "both-warp-8": ("all", 8, "both"),
+    "positions-warp-8": ("all", 8, "positions"),
+    "positions-warp-16": ("all", 16, "positions"),
+    "pen-both-distances-warp-8": ("pen", 8, "both-distances"),
+    "pen-path-warp-8": ("pen_path", 8, "displacements"),
+    "pen-path-warp-16": ("pen_path", 16, "displacements"),
+    "pen-path-full-band": ("pen_path", 10_000, "displacements"),
+    "pen-path-and-steps-warp-8": ("pen_path_steps", 8, "displacements"),
+}
+
+
+def _features(seq: np.ndarray, kind: str) -> np.ndarray:
+    """An encoded sequence (T, D) as :data:`VARIANTS`' ``kind`` compares it."""
+    from iloci.concepts.inference import pen_path
+
+    s = np.asarray(seq, dtype=np.float64)
+    if kind == "all":
+        return s
+    if kind == "pen":
+        return s[:, :2]
+    p = np.vstack([np.zeros((1, 2)), np.cumsum(s[:, :2], axis=0)])
+    radius = float(np.sqrt(((p - p.mean(axis=0)) ** 2).sum(axis=1).mean())) or 1.0
+    path = pen_path(s)
+    return path if kind == "pen_path" else np.hstack([path[1:], s[:, :2] / radius])
+
+
+def variant_correct(
+    seqs: list, patterns: list, names: np.ndarray, true: np.ndarray
+) -> dict[str, int]:
+    """Correct answers per :data:`VARIANTS` row: the nearest of ``patterns`` (named ``names``)."""
+    from iloci.concepts.inference import pattern_distances
+
+    out = {}
+    for row, (kind, warp, compare) in VARIANTS.items():
+        d = pattern_distances(
+            [_features(x, kind) for x in seqs],
+            [_features(x, kind) for x in patterns],
+            warp,
+            compare,
+        )
+        out[row] = int((names[d.argmin(axis=1)] == true).sum())
+    return out
 
 
 def _config(dataset: str, seed: int, data_dir: Path | None):
@@ -156,6 +212,10 @@ def fold_loss(path: Path, learn: list, test: list) -> dict[str, Any]:
         "kept_right_iloci_wrong": int((right["kept"] & ~right["iloci"]).sum()),
         "iloci_right_dtw_wrong": int((right["iloci"] & ~right["dtw_normalised"]).sum()),
         "dtw_right_iloci_wrong": int((right["dtw_normalised"] & ~right["iloci"]).sum()),
+        "variants": {
+            "regenerated": variant_correct(seqs, regen, entry_names, true),
+            "kept": variant_correct(seqs, kept, entry_names, true),
+        },
         "tilts": {
             "correct": int(t_right.sum()),
             "turned": int(sum(r.tilt not in (None, 0.0) for r in tilted)),
@@ -204,6 +264,10 @@ def run_one(
     tested = sum(r["tested"] for r in rows)
     total = {w: sum(r["correct"][w] for r in rows) for w in WAYS}
     tilts = {key: sum(r["tilts"][key] for r in rows) for key in rows[0]["tilts"]}
+    variants = {
+        src: {v: sum(r["variants"][src][v] for r in rows) / tested for v in VARIANTS}
+        for src in ("regenerated", "kept")
+    }
     return {
         "dataset": dataset,
         "seed": seed,
@@ -211,6 +275,7 @@ def run_one(
         "tested": tested,
         "ccr": {w: total[w] / tested for w in WAYS},
         "ccr_tilts": tilts["correct"] / tested,
+        "ccr_variants": variants,
         "correct": total,
         "tilts": tilts,
         "fit_costs": total["kept"] - total["iloci"],
@@ -236,6 +301,18 @@ def table(runs: list[dict]) -> list[str]:
             f"{100 * c['dtw_normalised']:.2f} | {100 * r['ccr_tilts']:.2f} | "
             f"{t['changed']}, {t['right_to_wrong']}, {t['wrong_to_right']} |"
         )
+    return out
+
+
+def variants_table(runs: list[dict]) -> list[str]:
+    """Markdown: CCR % of each :data:`VARIANTS` row on the regenerated patterns, per run."""
+    heads = [f"{r['dataset']} {r['seed']}" for r in runs]
+    out = ["| comparison | " + " | ".join(heads) + " |", "|---|" + "---|" * len(runs)]
+    for v in VARIANTS:
+        cells = [f"{100 * r['ccr_variants']['regenerated'][v]:.2f}" for r in runs]
+        out.append(f"| {v} | " + " | ".join(cells) + " |")
+    cells = [f"{100 * r['ccr']['dtw_normalised']:.2f}" for r in runs]
+    out.append("| normalised DTW 1-NN | " + " | ".join(cells) + " |")
     return out
 
 
@@ -289,6 +366,7 @@ def main(argv: list[str] | None = None) -> dict:
         "tilt_search": TILTS,
         "runs": runs,
         "table": table(runs),
+        "variants_table": variants_table(runs),
         "wall_seconds": time.perf_counter() - t0,
         "machine": {
             "platform": platform.platform(),
@@ -299,7 +377,7 @@ def main(argv: list[str] | None = None) -> dict:
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
-    print("\n".join(out["table"]))
+    print("\n".join(out["table"] + [""] + out["variants_table"]))
     return out
 
 
