@@ -59,8 +59,10 @@ class LocalExecutor:
     threads do not survive it), with ``OMP_NUM_THREADS=1`` unless it is set,
     and replaces a worker that crashed by raising
     ``joblib.externals.loky.process_executor.TerminatedWorkerError``. The
-    pool is closed (its workers killed) when the calls end, by error or
-    ``KeyboardInterrupt`` too; on Linux a worker also dies with its parent.
+    pool is closed (its workers killed) when the calls end by error or
+    ``KeyboardInterrupt`` too; when they all finish, the workers are told
+    to exit and are not waited for. On Linux a worker also dies with its
+    parent. :meth:`start` starts the workers ahead of the calls.
     """
 
     name = "local"
@@ -69,6 +71,52 @@ class LocalExecutor:
         if jobs < 1:
             raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
         self.jobs = jobs
+        self._started: tuple[Any, Any, Any] | None = None  # (manager, queue, pool)
+
+    def start(self, tasks: int | None = None,
+              warm_up: tuple[Callable[..., Any], tuple] | None = None) -> None:
+        """Start the workers now, so they boot while the caller prepares its calls.
+
+        The next :meth:`run` or :meth:`run_then` uses them; :meth:`close`
+        stops them when no call comes (e.g. the caller failed meanwhile).
+
+        Parameters
+        ----------
+        tasks : int, optional
+            Calls to come: at most that many workers are started.
+        warm_up : (fn, args), optional
+            Called as ``fn(*args, queue)`` once per worker, e.g. to import
+            what the calls will need; its result and errors are ignored (a
+            call that needs what failed raises the error itself).
+        """
+        if self._started is None:
+            self._started = self._open(self.jobs if tasks is None else tasks)
+            if warm_up is not None:
+                _, queue, pool = self._started
+                for _ in range(self.jobs):
+                    pool.submit(warm_up[0], *warm_up[1], queue)
+
+    def _open(self, tasks: int) -> tuple[Any, Any, Any]:
+        import multiprocessing as mp
+        from multiprocessing.managers import SyncManager
+
+        from joblib.externals.loky import get_reusable_executor
+
+        # the queue's server process dies with this one too (_worker_init)
+        manager = SyncManager(ctx=mp.get_context("spawn"))
+        manager.start(_worker_init)
+        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
+        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, tasks)),
+                                     initializer=_worker_init, env=env, reuse=False)
+        return manager, manager.Queue(), pool
+
+    def close(self) -> None:
+        """Stop workers started by :meth:`start` that no call used (killed at once)."""
+        if self._started is not None:
+            manager, _, pool = self._started
+            self._started = None
+            pool.shutdown(wait=False, kill_workers=True)
+            manager.shutdown()
 
     def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
             emit: Callable[[dict], None]) -> Iterator[Any]:
@@ -87,18 +135,8 @@ class LocalExecutor:
         that would otherwise idle while the last long tasks finish.
         Results of every task, first or follow-up, are yielded.
         """
-        import multiprocessing as mp
-        from multiprocessing.managers import SyncManager
-
-        from joblib.externals.loky import get_reusable_executor
-
-        # the queue's server process dies with this one too (_worker_init)
-        manager = SyncManager(ctx=mp.get_context("spawn"))
-        manager.start(_worker_init)
-        queue = manager.Queue()
-        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
-        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, len(tasks))),
-                                     initializer=_worker_init, env=env, reuse=False)
+        started, self._started = self._started, None
+        manager, queue, pool = started or self._open(len(tasks))
         finished = False
         try:
             pending = {pool.submit(fn, *args, queue) for fn, args in tasks}
@@ -114,8 +152,9 @@ class LocalExecutor:
             finished = True
         finally:
             # workers are killed unless every call finished: an error, Ctrl-C,
-            # or a caller that stopped iterating
-            pool.shutdown(wait=finished, kill_workers=not finished)
+            # or a caller that stopped iterating; else they exit on their own
+            # (nothing is left for them to do: not waited for)
+            pool.shutdown(wait=False, kill_workers=not finished)
             manager.shutdown()
 
 
