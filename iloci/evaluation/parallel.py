@@ -221,7 +221,7 @@ def warm_up(config_dict: dict, specs: Sequence[Any] | None, queue: Any = None) -
     """
     pm = _worker_plugins(specs)
     agent = build(load_config(config_dict, registry=get_registry(pm)), plugin_manager=pm)
-    t = np.linspace(0.0, 2.0 * np.pi, 100)
+    t = np.linspace(0.0, 2.0 * np.pi, 400)
     agent.motion(Demonstration(np.column_stack([np.cos(t), np.sin(t)]), t))
 
 
