@@ -85,30 +85,40 @@ class LocalExecutor:
         tasks : int, optional
             Calls to come: at most that many workers are started.
         warm_up : (fn, args), optional
-            Called as ``fn(*args, queue)`` once per worker, e.g. to import
-            what the calls will need; its result and errors are ignored (a
-            call that needs what failed raises the error itself).
+            Called as ``fn(*args, None)`` once per worker (no queue: it
+            reports nothing), e.g. to import what the calls will need; its
+            result and errors are ignored (a call that needs what failed
+            raises the error itself).
         """
         if self._started is None:
-            self._started = self._open(self.jobs if tasks is None else tasks)
+            # the workers first: they boot (and warm up) while the queue's server starts
+            pool = self._pool(self.jobs if tasks is None else tasks)
             if warm_up is not None:
-                _, queue, pool = self._started
                 for _ in range(self.jobs):
-                    pool.submit(warm_up[0], *warm_up[1], queue)
+                    pool.submit(warm_up[0], *warm_up[1], None)
+            try:
+                manager = self._manager()
+            except BaseException:
+                pool.shutdown(wait=False, kill_workers=True)
+                raise
+            self._started = (manager, manager.Queue(), pool)
 
-    def _open(self, tasks: int) -> tuple[Any, Any, Any]:
+    def _pool(self, tasks: int) -> Any:
+        from joblib.externals.loky import get_reusable_executor
+
+        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
+        return get_reusable_executor(max_workers=min(self.jobs, max(1, tasks)),
+                                     initializer=_worker_init, env=env, reuse=False)
+
+    @staticmethod
+    def _manager() -> Any:
         import multiprocessing as mp
         from multiprocessing.managers import SyncManager
-
-        from joblib.externals.loky import get_reusable_executor
 
         # the queue's server process dies with this one too (_worker_init)
         manager = SyncManager(ctx=mp.get_context("spawn"))
         manager.start(_worker_init)
-        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
-        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, tasks)),
-                                     initializer=_worker_init, env=env, reuse=False)
-        return manager, manager.Queue(), pool
+        return manager
 
     def close(self) -> None:
         """Stop workers started by :meth:`start` that no call used (killed at once)."""
@@ -136,7 +146,10 @@ class LocalExecutor:
         Results of every task, first or follow-up, are yielded.
         """
         started, self._started = self._started, None
-        manager, queue, pool = started or self._open(len(tasks))
+        if started is None:
+            manager = self._manager()
+            started = (manager, manager.Queue(), self._pool(len(tasks)))
+        manager, queue, pool = started
         finished = False
         try:
             pending = {pool.submit(fn, *args, queue) for fn, args in tasks}

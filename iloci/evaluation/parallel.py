@@ -52,7 +52,7 @@ from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager, get_registry
 from iloci.sensorimotor.pipeline import MotionCache
 
 __all__ = ["FoldTask", "LocalContext", "ResolvedComponents", "resolved_specs", "run_folds",
-           "run_folds_in_processes"]
+           "run_folds_in_processes", "warm_up"]
 
 
 @dataclass(frozen=True)
