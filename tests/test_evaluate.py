@@ -361,10 +361,12 @@ def test_the_last_learnings_recognition_is_split_over_the_free_workers(small_con
     shapes = list(config.data.shapes)
     learn, test = fold_plan(load_lasa(shapes), config)[1]
     runner, got = Recording(2), []
-    run_folds(config.to_dict(), [FoldTask(1, learn, test)], shapes, runner, baseline=False,
+    demos = load_lasa(shapes)
+    run_folds(config.to_dict(), [FoldTask(1, learn, test)], demos, runner, baseline=False,
               specs=None, emit=lambda msg: None, on_result=got.append)
-    parts = [args[3] for args in runner.follow_ups]  # each part's test indices
-    assert len(parts) == 2 and parts[0] + parts[1] == test and all(parts)
+    parts = [args[3] for args in runner.follow_ups]  # each part's test demonstrations
+    assert len(parts) == 2 and parts[0] + parts[1] == [demos[i] for i in test]
+    assert all(parts)
     _, (serial,) = evaluate(small_config, jobs=1, folds=[1], baseline=False)
     (split,) = got
     assert json.dumps(_timeless(split.to_dict()), sort_keys=True) == \

@@ -30,6 +30,9 @@ def square(x, queue):
 def fail(x, queue):
     raise UnknownComponentError("teacher", "nope", ["oracle"])
 
+def mark(path, queue):
+    open(os.path.join(path, f"warm-{os.getpid()}"), "w").close()
+
 def sleep_forever(path, queue):
     open(os.path.join(path, str(os.getpid())), "w").close()
     time.sleep(120)
@@ -85,6 +88,37 @@ def test_follow_up_tasks_run_after_the_tasks_queued_before_them(worker_module):
 def test_an_iloci_error_in_a_worker_reaches_the_caller_as_itself(worker_module):
     with pytest.raises(UnknownComponentError, match="nope"):
         list(LocalExecutor(2).run(worker_module.fail, [(1,), (2,)], lambda m: None))
+
+
+def test_workers_started_ahead_warm_up_and_then_run_the_calls(tmp_path, worker_module):
+    runner, notes = LocalExecutor(2), []
+    runner.start(5, warm_up=(worker_module.mark, (str(tmp_path),)))
+    out = sorted(runner.run(worker_module.square, [(k,) for k in range(5)], notes.append))
+    assert out == [0, 1, 4, 9, 16]
+    warm = {int(p.name.split("-")[1]) for p in tmp_path.glob("warm-*")}
+    # the warm-up ran in the pool's workers, the ones that ran the calls
+    assert warm and os.getpid() not in warm and warm & {n["pid"] for n in notes}
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc is Linux's")
+def test_workers_started_for_no_call_are_stopped_by_close(tmp_path, worker_module):
+    def pool_workers():
+        return [p for p in worker_module.children(os.getpid())
+                if b"LokyProcess" in Path(f"/proc/{p}/cmdline").read_bytes()]
+
+    runner = LocalExecutor(2)
+    runner.start(2, warm_up=(worker_module.mark, (str(tmp_path),)))
+    deadline = time.monotonic() + 120
+    while len(list(tmp_path.glob("warm-*"))) < 1 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    started = pool_workers()
+    assert started, "no worker started"
+    runner.close()
+    runner.close()  # idempotent
+    deadline = time.monotonic() + 20
+    while set(started) & set(pool_workers()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not set(started) & set(pool_workers()), "close() left the workers running"
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")

@@ -373,6 +373,21 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
         assert set(f["true_concepts"]) == {"circle", "line", "square"}
     report = (out / "report.md").read_text()
     assert "on shapes (writer-disjoint folds)" in report and ds.checksum in report
+    # in worker processes (sent the demonstrations the parent read): the same results
+    out2 = tmp_path / "run2"
+    done = cli("evaluate", "--data", str(root), "--split", "writers", "--config", str(cfg),
+               "--out", str(out2), "--jobs", "2", "--quiet")
+    assert done.returncode == 0, done.stderr
+
+    def timeless(value):
+        if isinstance(value, dict):
+            return {k: timeless(v) for k, v in value.items()
+                    if not k.endswith("seconds") and k not in ("jobs", "versions")}
+        return [timeless(v) for v in value] if isinstance(value, list) else value
+
+    for name in ("metrics.json", "folds.json"):  # as text: NaN equals NaN
+        assert json.dumps(timeless(json.loads((out2 / name).read_text())), sort_keys=True) \
+            == json.dumps(timeless(json.loads((out / name).read_text())), sort_keys=True), name
     assert "$1 recognizer" in report and "best baseline" in report
 
 

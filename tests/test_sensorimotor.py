@@ -458,3 +458,12 @@ def test_motion_cache_converts_each_demonstration_once_and_never_mixes_them_up()
     assert len(cache) == 2 and calls == ["line/0"] * 3 + ["bad/0"]
     with pytest.raises(InvalidInputError):
         MotionCache(max_items=0)
+    # motions one cache converted answer another's lookups of the same demonstrations
+    # only (another process's: the parallel evaluation sends them with its tasks)
+    other = MotionCache()
+    other.add(cache.converted([a, moved, slower]))
+    assert len(other) == 2 and other.get(slower, convert) is cache.get(slower, convert)
+    assert other.get(moved, convert) is cache.get(moved, convert)
+    n = len(calls)
+    other.get(a, convert)  # dropped from the first cache: converted here
+    assert calls[n:] == ["line/0"] and other.misses == 1

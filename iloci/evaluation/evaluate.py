@@ -42,7 +42,8 @@ from iloci.errors import InvalidInputError
 from iloci.evaluation.executors import InProcessExecutor, LocalExecutor, make_executor
 from iloci.evaluation.fold import LearnedFold, learn_fold, run_fold
 from iloci.evaluation.folds import fold_memory_name, fold_plan, untaught_concepts
-from iloci.evaluation.parallel import FoldTask, LocalContext, resolved_specs, run_folds
+from iloci.evaluation.parallel import (FoldTask, LocalContext, resolved_specs, run_folds,
+                                       warm_up)
 from iloci.evaluation.provenance import versions
 from iloci.evaluation.report import BASELINE_MODULES, check_report_extras
 from iloci.evaluation.results import Answer, Evaluation, FoldResult, memory_counts
@@ -175,10 +176,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         dataset = load_dataset_once(config.data.path, warn=True)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
-        # workers (other processes, maybe other machines) read the same files
+        # the config names the files read (workers are sent the demonstrations)
         config = config.replace(data={"path": dataset.source})
     elif config.evaluation.split == "writers":
         fold_plan([], config)  # the error: LASA names no writers
+    if memory_dir:  # before any fold is learned, not when the first one is saved
+        writable_dir(memory_dir, "memory_dir")
     runner: Any = make_executor(executor, jobs, address=address, plugin_manager=pm)
     shapes = list(config.data.shapes)
     context: Any = None  # workers build the default plugin manager
@@ -186,29 +189,35 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         # in this process: the observers see every learning event, and each
         # demonstration is converted once, not once per fold
         runner = InProcessExecutor()
+        context = LocalContext(pm)
     elif plugin_manager is not None:
         # resolved (and checked to pickle) before any data is loaded or fold run
         context = resolved_specs(config, pm)
-    demos = dataset.demos if dataset is not None else load_lasa(shapes or None)
-    if isinstance(runner, InProcessExecutor):
-        context = LocalContext(list(demos), pm)
-    # one (learn, test) pair per fold
-    plan = fold_plan(demos, config, dataset.samples if dataset is not None else None)
-    emit = progress or (lambda msg: None)
-    t0 = time.perf_counter()
-    results: list[FoldResult] = []
+    config_dict = config.to_dict()
+    if isinstance(runner, LocalExecutor):
+        # the workers start (and import what a fold uses) while the data are read
+        runner.start(len(wanted) * (2 if baseline else 1),
+                     warm_up=(warm_up, (config_dict, context)))
+    try:
+        demos = dataset.demos if dataset is not None else load_lasa(shapes or None)
+        # one (learn, test) pair per fold
+        plan = fold_plan(demos, config, dataset.samples if dataset is not None else None)
+        emit = progress or (lambda msg: None)
+        t0 = time.perf_counter()
+        results: list[FoldResult] = []
 
-    def finished(res: FoldResult) -> None:
-        results.append(res)
-        pm.hook.iloci_on_fold_finished(event=_fold_event(res))
-        emit({"kind": "fold_done", "fold": res.fold, "ccr": res.ccr,
-              "seconds": res.wall_seconds})
+        def finished(res: FoldResult) -> None:
+            results.append(res)
+            pm.hook.iloci_on_fold_finished(event=_fold_event(res))
+            emit({"kind": "fold_done", "fold": res.fold, "ccr": res.ccr,
+                  "seconds": res.wall_seconds})
 
-    if memory_dir:  # before any fold is learned, not when the first one is saved
-        writable_dir(memory_dir, "memory_dir")
-    tasks = [FoldTask(k, *plan[k], memory_dir=memory_dir) for k in wanted]
-    run_folds(config.to_dict(), tasks, shapes, runner, baseline=baseline, specs=context,
-              emit=emit, on_result=finished)
+        tasks = [FoldTask(k, *plan[k], memory_dir=memory_dir) for k in wanted]
+        run_folds(config_dict, tasks, demos, runner, baseline=baseline, specs=context,
+                  emit=emit, on_result=finished)
+    finally:
+        if isinstance(runner, LocalExecutor):
+            runner.close()  # the workers started for no fold (run_folds stops its own)
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r.fold)
     metrics = summarize(results, config, wall, jobs, plugin_manager=pm)

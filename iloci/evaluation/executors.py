@@ -59,8 +59,10 @@ class LocalExecutor:
     threads do not survive it), with ``OMP_NUM_THREADS=1`` unless it is set,
     and replaces a worker that crashed by raising
     ``joblib.externals.loky.process_executor.TerminatedWorkerError``. The
-    pool is closed (its workers killed) when the calls end, by error or
-    ``KeyboardInterrupt`` too; on Linux a worker also dies with its parent.
+    pool is closed (its workers killed) when the calls end by error or
+    ``KeyboardInterrupt`` too; when they all finish, the workers are told
+    to exit and are not waited for. On Linux a worker also dies with its
+    parent. :meth:`start` starts the workers ahead of the calls.
     """
 
     name = "local"
@@ -69,6 +71,62 @@ class LocalExecutor:
         if jobs < 1:
             raise InvalidInputError(f"jobs must be >= 1, got {jobs}.")
         self.jobs = jobs
+        self._started: tuple[Any, Any, Any] | None = None  # (manager, queue, pool)
+
+    def start(self, tasks: int | None = None,
+              warm_up: tuple[Callable[..., Any], tuple] | None = None) -> None:
+        """Start the workers now, so they boot while the caller prepares its calls.
+
+        The next :meth:`run` or :meth:`run_then` uses them; :meth:`close`
+        stops them when no call comes (e.g. the caller failed meanwhile).
+
+        Parameters
+        ----------
+        tasks : int, optional
+            Calls to come: at most that many workers are started.
+        warm_up : (fn, args), optional
+            Called as ``fn(*args, None)`` once per worker (no queue: it
+            reports nothing), e.g. to import what the calls will need; its
+            result and errors are ignored (a call that needs what failed
+            raises the error itself).
+        """
+        if self._started is None:
+            # the workers first: they boot (and warm up) while the queue's server starts
+            pool = self._pool(self.jobs if tasks is None else tasks)
+            if warm_up is not None:
+                for _ in range(self.jobs):
+                    pool.submit(warm_up[0], *warm_up[1], None)
+            try:
+                manager = self._manager()
+            except BaseException:
+                pool.shutdown(wait=False, kill_workers=True)
+                raise
+            self._started = (manager, manager.Queue(), pool)
+
+    def _pool(self, tasks: int) -> Any:
+        from joblib.externals.loky import get_reusable_executor
+
+        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
+        return get_reusable_executor(max_workers=min(self.jobs, max(1, tasks)),
+                                     initializer=_worker_init, env=env, reuse=False)
+
+    @staticmethod
+    def _manager() -> Any:
+        import multiprocessing as mp
+        from multiprocessing.managers import SyncManager
+
+        # the queue's server process dies with this one too (_worker_init)
+        manager = SyncManager(ctx=mp.get_context("spawn"))
+        manager.start(_worker_init)
+        return manager
+
+    def close(self) -> None:
+        """Stop workers started by :meth:`start` that no call used (killed at once)."""
+        if self._started is not None:
+            manager, _, pool = self._started
+            self._started = None
+            pool.shutdown(wait=False, kill_workers=True)
+            manager.shutdown()
 
     def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
             emit: Callable[[dict], None]) -> Iterator[Any]:
@@ -87,18 +145,11 @@ class LocalExecutor:
         that would otherwise idle while the last long tasks finish.
         Results of every task, first or follow-up, are yielded.
         """
-        import multiprocessing as mp
-        from multiprocessing.managers import SyncManager
-
-        from joblib.externals.loky import get_reusable_executor
-
-        # the queue's server process dies with this one too (_worker_init)
-        manager = SyncManager(ctx=mp.get_context("spawn"))
-        manager.start(_worker_init)
-        queue = manager.Queue()
-        env = {} if "OMP_NUM_THREADS" in os.environ else {"OMP_NUM_THREADS": "1"}
-        pool = get_reusable_executor(max_workers=min(self.jobs, max(1, len(tasks))),
-                                     initializer=_worker_init, env=env, reuse=False)
+        started, self._started = self._started, None
+        if started is None:
+            manager = self._manager()
+            started = (manager, manager.Queue(), self._pool(len(tasks)))
+        manager, queue, pool = started
         finished = False
         try:
             pending = {pool.submit(fn, *args, queue) for fn, args in tasks}
@@ -114,8 +165,9 @@ class LocalExecutor:
             finished = True
         finally:
             # workers are killed unless every call finished: an error, Ctrl-C,
-            # or a caller that stopped iterating
-            pool.shutdown(wait=finished, kill_workers=not finished)
+            # or a caller that stopped iterating; else they exit on their own
+            # (nothing is left for them to do: not waited for)
+            pool.shutdown(wait=False, kill_workers=not finished)
             manager.shutdown()
 
 

@@ -104,13 +104,28 @@ def matched_names(members: Mapping[str, Sequence[str | None]]) -> dict[str, str 
     dict
         Robot label -> true concept or ``None``.
     """
-    from scipy.optimize import linear_sum_assignment
     counts = _counts(members)
     robots = list(counts)
     truths = list(dict.fromkeys(t for c in counts.values() for t in c))
     out: dict[str, str | None] = dict.fromkeys(robots)
     if not robots or not truths:
         return out
+    # Each robot concept's own majority, when it is strict and no two robot concepts
+    # share one, reaches every row's maximum: the only maximum matching (on the
+    # pairs of positive gain, the ones kept), the Hungarian algorithm's answer.
+    best = {}
+    for r, c in counts.items():
+        top = max(c.values(), default=0)
+        winners = [t for t, n in c.items() if n == top]
+        if top > 0 and len(winners) > 1:
+            break
+        if top > 0:
+            best[r] = winners[0]
+    else:
+        if len(set(best.values())) == len(best):
+            out.update(best)
+            return out
+    from scipy.optimize import linear_sum_assignment
     gain = np.array([[counts[r].get(t, 0) for t in truths] for r in robots], dtype=float)
     rows, cols = linear_sum_assignment(gain, maximize=True)
     for i, j in zip(rows, cols):

@@ -19,9 +19,13 @@ saved agent, each in whichever worker is free; results are those of
 sequential part, so every learning task is queued first and the short
 tasks fill the workers that would otherwise wait for the last learning;
 the last learning to end has its fold's recognition split over the
-workers it leaves free (:func:`run_folds`). A worker converts each
-demonstration (preprocessing + IK) once for all the tasks it runs
-(:class:`~iloci.sensorimotor.pipeline.MotionCache`).
+workers it leaves free (:func:`run_folds`). Each task carries the
+demonstrations it needs (the parent read the data set once; a worker reads
+no file), and a worker converts each demonstration (preprocessing + IK)
+once for all the tasks it runs
+(:class:`~iloci.sensorimotor.pipeline.MotionCache`); a recognition is also
+sent the motions the learnings ended so far converted, so a demonstration
+met in one worker's learning is not converted again in another worker.
 """
 
 from __future__ import annotations
@@ -35,18 +39,20 @@ import tempfile
 import time
 from typing import Any
 
-from iloci.agent import Agent
-from iloci.data import load_lasa
+import numpy as np
+
+from iloci.agent import Agent, build
+from iloci.config import load_config
 from iloci.errors import InvalidInputError
 from iloci.evaluation.fold import LearnedFold, fold_baselines, learn_fold, run_fold
 from iloci.evaluation.folds import fold_memory_name
 from iloci.hookspecs import hookimpl
-from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS
+from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, Demonstration
 from iloci.plugins import DEFAULT_PLUGINS, get_plugin_manager, get_registry
 from iloci.sensorimotor.pipeline import MotionCache
 
 __all__ = ["FoldTask", "LocalContext", "ResolvedComponents", "resolved_specs", "run_folds",
-           "run_folds_in_processes"]
+           "run_folds_in_processes", "warm_up"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +63,8 @@ class FoldTask:
     ----------
     fold : int
     learn : list of int
-        Indices into ``load_lasa(shapes)``, in presentation order.
+        Indices into the demonstrations given to :func:`run_folds`, in
+        presentation order.
     test : list of int
     memory_dir : str, optional
         Save the fold's learned agent there as ``fold-K.npz``.
@@ -160,14 +167,13 @@ _MOTION_CACHES: dict[str, Any] = {}
 
 @dataclass(frozen=True)
 class LocalContext:
-    """What folds run in this process share: the caller's demonstrations and plugin manager.
+    """What folds run in this process share: the caller's plugin manager and a motion cache.
 
     Passed where a worker gets ``specs`` (:class:`~iloci.evaluation.executors.InProcessExecutor`
     needs nothing pickled): the caller's observers see every learning event,
     and the folds share one motion cache.
     """
 
-    demos: list[Any]
     plugin_manager: Any
     motion_cache: MotionCache = field(default_factory=MotionCache)
 
@@ -183,32 +189,40 @@ def _motion_cache(config_dict: dict, specs: Sequence[Any] | LocalContext | None)
     return _MOTION_CACHES[key]
 
 
-def _run_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
-                        specs: Sequence[Any] | LocalContext | None, queue: Any) -> Any:
-    """One fold in an executor's worker; ``queue.put`` receives its progress messages."""
-    demos, pm = _worker_context(config_dict, shapes, specs)
+def _run_fold_in_worker(config_dict: dict, task: FoldTask, learn: list[Any], test: list[Any],
+                        baseline: bool, specs: Sequence[Any] | LocalContext | None,
+                        queue: Any) -> Any:
+    """One fold in an executor's worker (``learn``, ``test``: its demonstrations);
+    ``queue.put`` receives its progress messages."""
+    pm = _worker_plugins(specs)
     send = _fold_started(task, queue)
-    return run_fold(config_dict, task.fold, [demos[i] for i in task.learn],
-                    [demos[i] for i in task.test], send=send, baseline=baseline,
+    return run_fold(config_dict, task.fold, learn, test, send=send, baseline=baseline,
                     plugin_manager=pm, memory_dir=task.memory_dir,
                     motion_cache=_motion_cache(config_dict, specs))
 
 
-def _worker_context(config_dict: dict, shapes: list[str],
-                    specs: Sequence[Any] | LocalContext | None) -> tuple[list[Any], Any]:
-    """A worker's demonstrations and plugin manager (None: the default one)."""
+def _worker_plugins(specs: Sequence[Any] | LocalContext | None) -> Any:
+    """A worker's plugin manager (None: the default one)."""
     if isinstance(specs, LocalContext):
-        return specs.demos, specs.plugin_manager
-    path = (config_dict.get("data") or {}).get("path")
-    if path:  # a data set of the user's own ([data] path), read as the parent read it
-        from iloci.data.datasets import load_dataset_once
-        demos = load_dataset_once(path).demos
-    else:
-        demos = load_lasa(shapes or None)
+        return specs.plugin_manager
     # specs: what the caller's plugin manager resolved; None: the default manager's
-    pm = None if specs is None else get_plugin_manager(
+    return None if specs is None else get_plugin_manager(
         autoload=False, block=DEFAULT_PLUGINS, plugins=[ResolvedComponents(specs)])
-    return demos, pm
+
+
+def warm_up(config_dict: dict, specs: Sequence[Any] | None, queue: Any = None) -> None:
+    """Make a worker ready for fold tasks: import and build what a fold will use.
+
+    Run once per worker while the caller still reads the data set
+    (:meth:`~iloci.evaluation.executors.LocalExecutor.start`): builds the
+    config's agent (the components' modules, the robot) and converts a
+    drawn circle (the preprocessing and IK code); nothing is kept but the
+    imported modules, so the folds' results are the same without it.
+    """
+    pm = _worker_plugins(specs)
+    agent = build(load_config(config_dict, registry=get_registry(pm)), plugin_manager=pm)
+    t = np.linspace(0.0, 2.0 * np.pi, 400)
+    agent.motion(Demonstration(np.column_stack([np.cos(t), np.sin(t)]), t))
 
 
 def _fold_started(task: FoldTask, queue: Any) -> Callable[[dict], None]:
@@ -224,26 +238,36 @@ def _fold_started(task: FoldTask, queue: Any) -> Callable[[dict], None]:
     return send
 
 
-def _learn_fold_in_worker(config_dict: dict, task: FoldTask, shapes: list[str], baseline: bool,
+def _learn_fold_in_worker(config_dict: dict, task: FoldTask, learn: list[Any],
+                          test: list[Any], baseline: bool,
                           specs: Sequence[Any] | LocalContext | None, agent_path: str,
                           queue: Any) -> Any:
-    """A fold's learning in a worker: its LearnedFold; the agent is saved to ``agent_path``.
+    """A fold's learning in a worker: its LearnedFold and the motions of its learning set
+    (:class:`_Learned`); the agent is saved to ``agent_path``.
 
-    ``agent_path`` is the fold's file in ``task.memory_dir`` when the
-    evaluation keeps memories (:func:`~iloci.evaluation.folds.fold_memory_name`),
-    else one in a temporary directory: the agent is saved once, there. The
-    baselines are not run here (:func:`_baselines_in_worker`); ``baseline``
-    still applies to the robustness suite, which needs the learned agent.
+    ``learn``, ``test``: the fold's demonstrations. ``agent_path`` is the
+    fold's file in ``task.memory_dir`` when the evaluation keeps memories
+    (:func:`~iloci.evaluation.folds.fold_memory_name`), else one in a
+    temporary directory: the agent is saved once, there. The baselines are
+    not run here (:func:`_baselines_in_worker`); ``baseline`` still applies
+    to the robustness suite, which needs the learned agent.
     """
-    demos, pm = _worker_context(config_dict, shapes, specs)
+    pm = _worker_plugins(specs)
     send = _fold_started(task, queue)
-    learned, agent = learn_fold(config_dict, task.fold, [demos[i] for i in task.learn],
-                                [demos[i] for i in task.test], send=send, baseline=baseline,
-                                plugin_manager=pm, memory_dir=None,
-                                motion_cache=_motion_cache(config_dict, specs),
-                                defer_baselines=True)
+    cache = _motion_cache(config_dict, specs)
+    learned, agent = learn_fold(config_dict, task.fold, learn, test, send=send,
+                                baseline=baseline, plugin_manager=pm, memory_dir=None,
+                                motion_cache=cache, defer_baselines=True)
     agent.save(agent_path)
-    return learned
+    return _Learned(learned, cache.converted(learn))
+
+
+@dataclass(frozen=True)
+class _Learned:
+    """A fold's learning, and the motions of its learning set (for other workers' caches)."""
+
+    fold: LearnedFold
+    motions: list[Any]
 
 
 @dataclass(frozen=True)
@@ -252,12 +276,9 @@ class _Baselines:
     baselines: dict[str, dict[str, Any]]
 
 
-def _baselines_in_worker(config_dict: dict, task: FoldTask, shapes: list[str],
-                         specs: Sequence[Any] | LocalContext | None, queue: Any) -> Any:
+def _baselines_in_worker(fold: int, learn: list[Any], test: list[Any], queue: Any) -> Any:
     """A fold's baselines in a worker (they need its demonstrations only)."""
-    demos, _ = _worker_context(config_dict, shapes, specs)
-    return _Baselines(task.fold, fold_baselines([demos[i] for i in task.learn],
-                                                [demos[i] for i in task.test]))
+    return _Baselines(fold, fold_baselines(learn, test))
 
 
 @dataclass(frozen=True)
@@ -270,20 +291,22 @@ class _Recognized:
 
 
 def _recognize_part_in_worker(config_dict: dict, fold: int, part: tuple[int, int],
-                              test: list[int], shapes: list[str],
-                              specs: Sequence[Any] | LocalContext | None, agent_path: str,
-                              queue: Any) -> Any:
+                              test: list[Any], specs: Sequence[Any] | LocalContext | None,
+                              agent_path: str, motions: list[Any], queue: Any) -> Any:
     """Recognize part ``part = (k, parts)`` of a fold's test set with its saved agent, in a
-    worker (``test``: that part's indices; ``(0, 1)``: the whole test set)."""
-    demos, pm = _worker_context(config_dict, shapes, specs)
+    worker (``test``: that part's demonstrations; ``(0, 1)``: the whole test set;
+    ``motions``: those of their motions other workers converted)."""
+    pm = _worker_plugins(specs)
     agent = Agent.load(agent_path, config_dict, plugin_manager=pm)
-    agent.motion_cache = _motion_cache(config_dict, specs)
+    cache = _motion_cache(config_dict, specs)
+    cache.add(motions)
+    agent.motion_cache = cache
     t0 = time.perf_counter()
-    recs = agent.recognize([demos[i] for i in test])
+    recs = agent.recognize(test)
     return _Recognized(fold, recs, time.perf_counter() - t0, *part)
 
 
-def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
+def run_folds(config_dict: dict, tasks: Sequence[FoldTask], demos: Sequence[Any],
               runner: Any, *, baseline: bool, specs: Sequence[Any] | LocalContext | None,
               emit: Callable[[dict], None],
               on_result: Callable[[Any], None]) -> None:
@@ -294,8 +317,9 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
     config_dict : dict
         The resolved config (:meth:`Config.to_dict`).
     tasks : sequence of FoldTask
-    shapes : list of str
-        ``[data] shapes``, so each worker loads the same demonstrations.
+    demos : sequence of Demonstration
+        What the tasks' indices refer to (e.g. ``load_lasa(shapes)``); each
+        task is sent the demonstrations it needs, so a worker reads no data.
     runner : FoldExecutor
         :class:`~iloci.evaluation.executors.InProcessExecutor` (this
         process), ``local`` (joblib's loky pool) or a plugin's (e.g. Ray).
@@ -318,10 +342,14 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
         Whatever a fold raised, or KeyboardInterrupt: the executor stops
         its workers first.
     """
+    def pick(indices: Sequence[int]) -> list[Any]:
+        return [demos[i] for i in indices]
+
     for task in tasks:
         emit({"kind": "fold_queued", "fold": task.fold, "total": len(task.learn)})
     if not hasattr(runner, "run_then") or not all(t.test for t in tasks):
-        calls = [(config_dict, task, shapes, baseline, specs) for task in tasks]
+        calls = [(config_dict, task, pick(task.learn), pick(task.test), baseline, specs)
+                 for task in tasks]
         for res in runner.run(_run_fold_in_worker, calls, emit):
             on_result(res)
         return
@@ -341,6 +369,9 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
             return os.path.join(task.memory_dir or tmp, fold_memory_name(task.fold))
 
         by_fold = {task.fold: task for task in tasks}
+        # motions the learnings converted, by demonstration: sent with the recognitions
+        # of other folds (a worker converts only the demonstrations no learning met)
+        motions: dict[str, Any] = {}
         learned: dict[int, LearnedFold] = {}
         baselines: dict[int, dict[str, dict[str, Any]]] = {}
         recognized: dict[int, _Recognized] = {}
@@ -350,15 +381,18 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
 
         def then(res: Any) -> list[tuple[Callable[..., Any], tuple]]:
             running[0] -= 1
-            if not isinstance(res, LearnedFold):
+            if not isinstance(res, _Learned):
                 return []
-            task = by_fold[res.result.fold]
+            motions.update((key[0], (key, motion)) for key, motion in res.motions)
+            task = by_fold[res.fold.result.fold]
             n = min(workers, len(task.test)) if running[0] == 0 else 1
             cut = [len(task.test) * k // n for k in range(n + 1)]
             running[0] += n
+            parts = [pick(task.test[cut[k]:cut[k + 1]]) for k in range(n)]
             return [(_recognize_part_in_worker,
-                     (config_dict, task.fold, (k, n), task.test[cut[k]:cut[k + 1]], shapes,
-                      specs, agent_path(task))) for k in range(n)]
+                     (config_dict, task.fold, (k, n), part, specs, agent_path(task),
+                      [motions[d.key] for d in part if d.key in motions]))
+                    for k, part in enumerate(parts)]
 
         def whole(res: _Recognized) -> _Recognized | None:
             """The fold's recognition once all its parts are in (answers in test order)."""
@@ -375,16 +409,16 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], shapes: list[str],
                                max(p.seconds for p in got))
 
         first: list[tuple[Callable[..., Any], tuple]] = [
-            (_learn_fold_in_worker, (config_dict, task, shapes, baseline, specs,
-                                     agent_path(task))) for task in tasks]
+            (_learn_fold_in_worker, (config_dict, task, pick(task.learn), pick(task.test),
+                                     baseline, specs, agent_path(task))) for task in tasks]
         if baseline:
-            first += [(_baselines_in_worker, (config_dict, task, shapes, specs))
+            first += [(_baselines_in_worker, (task.fold, pick(task.learn), pick(task.test)))
                       for task in tasks]
         running[0] = len(first)
         for res in runner.run_then(first, emit, then):
-            if isinstance(res, LearnedFold):
-                learned[res.result.fold] = res
-                k = res.result.fold
+            if isinstance(res, _Learned):
+                k = res.fold.result.fold
+                learned[k] = res.fold
             elif isinstance(res, _Baselines):
                 baselines[res.fold] = res.baselines
                 k = res.fold

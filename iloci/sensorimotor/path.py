@@ -222,9 +222,11 @@ def _local_linear_block(s: np.ndarray, p: np.ndarray, u: np.ndarray, h: np.ndarr
     idx = np.minimum(idx, n - 1)
     d = s[idx] - u[:, None]
     w = np.where(inside, np.exp(-0.5 * (d / h[:, None]) ** 2) * share[idx], 0.0)
-    s0, s1, s2 = w.sum(1), (w * d).sum(1), (w * d * d).sum(1)
-    t0 = np.einsum("km,kmc->kc", w, p[idx])
-    t1 = np.einsum("km,kmc->kc", w * d, p[idx])
+    wd = w * d
+    pw = p[idx]
+    s0, s1, s2 = w.sum(1), wd.sum(1), (wd * d).sum(1)
+    t0 = np.einsum("km,kmc->kc", w, pw)
+    t1 = np.einsum("km,kmc->kc", wd, pw)
     den = s0 * s2 - s1 * s1
     ok = (s0 > 0) & (den > 1e-12 * np.maximum(s0 * s2, 1e-300))
     safe_den = np.where(ok, den, 1.0)[:, None]

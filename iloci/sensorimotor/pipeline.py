@@ -9,7 +9,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 import hashlib
 
@@ -266,7 +266,30 @@ class MotionCache:
             return motion
         motion = convert(demo)
         self.misses += 1
-        if len(self._items) >= self.max_items:
+        self._keep(key, motion)
+        return motion
+
+    def _keep(self, key: tuple[str, bytes], motion: Motion) -> None:
+        if key not in self._items and len(self._items) >= self.max_items:
             del self._items[next(iter(self._items))]
         self._items[key] = motion
-        return motion
+
+    def converted(self, demos: Sequence[Demonstration]) -> list[tuple[tuple[str, bytes], Motion]]:
+        """The motions of those of ``demos`` this cache holds, for another cache's :meth:`add`.
+
+        Returns
+        -------
+        list of (key, Motion)
+            Keyed as here (the demonstration's key and the digest of its
+            samples), so another cache answers only the same demonstration
+            with them.
+        """
+        keys = (self._key(d) for d in demos)
+        return [(k, self._items[k]) for k in keys if k in self._items]
+
+    def add(self, converted: Sequence[tuple[tuple[str, bytes], Motion]]) -> None:
+        """Keep motions another cache converted (:meth:`converted`), e.g. in another
+        process, under the same conversion settings (its owner's responsibility, as
+        for the motions it converts itself)."""
+        for key, motion in converted:
+            self._keep(key, motion)

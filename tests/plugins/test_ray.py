@@ -13,7 +13,7 @@ import pytest
 pytest.importorskip("iloci_ray")
 pytest.importorskip("ray")
 
-from iloci.errors import ConfigError, InvalidInputError  # noqa: E402
+from iloci.errors import ConfigError, UnknownComponentError  # noqa: E402
 from iloci_ray.sweep import load_spec, plan_runs, run_key, run_sweep, settings  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -167,12 +167,16 @@ def test_evaluate_on_ray_gives_the_local_results(ray_local):
 
 def test_an_iloci_error_in_a_ray_task_reaches_the_caller_as_itself(ray_local):
     from iloci.config import load_config
+    from iloci.data import load_lasa
     from iloci.evaluation.parallel import FoldTask, _run_fold_in_worker
     from iloci_ray.executor import RayExecutor
 
-    # a fold whose data the worker cannot load: the worker raises the error
-    call = (load_config(TINY).to_dict(), FoldTask(0, [0], [1]), ["NoSuchShape"], False, None)
-    with pytest.raises(InvalidInputError, match="unknown LASA shape 'NoSuchShape'"):
+    # a fold whose config names a model the worker does not know: the worker raises
+    config = load_config(TINY).to_dict()
+    config["perceptual_model"] = {"name": "no-such-model"}
+    learn, test = load_lasa("GShape")[:1], load_lasa("GShape")[1:2]
+    call = (config, FoldTask(0, [0], [1]), learn, test, False, None)
+    with pytest.raises(UnknownComponentError, match="unknown perceptual model 'no-such-model'"):
         list(RayExecutor(1).run(_run_fold_in_worker, [call], lambda m: None))
 
 
