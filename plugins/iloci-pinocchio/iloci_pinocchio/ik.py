@@ -249,22 +249,24 @@ class PinocchioIK:
                 break
             J = pin.getFrameJacobian(m, d, f, pin.LOCAL_WORLD_ALIGNED)[:3]
             if rest is None:
-                dq = _dls_step(J, e, lam2)
+                dq = _dls_step(J.tolist(), e, lam2)
             else:
                 # task step plus a pull towards the rest posture projected on the
                 # task's (damped) null space: z - J^+ J z
                 z = gain * (rest - q)
-                dq = z + _dls_step(J, e - _matvec(J.tolist(), z.tolist()), lam2)
+                rows = J.tolist()
+                dq = z + _dls_step(rows, e - _matvec(rows, z.tolist()), lam2)
             # freeze joints at a limit that the step pushes further out
             blocked = ((q <= lo) & (dq < 0)) | ((q >= hi) & (dq > 0))
             if blocked.any():
                 J = J.copy()
                 J[:, blocked] = 0.0
                 if rest is None:
-                    dq = _dls_step(J, e, lam2)
+                    dq = _dls_step(J.tolist(), e, lam2)
                 else:
                     z = np.where(blocked, 0.0, gain * (rest - q))
-                    dq = z + _dls_step(J, e - _matvec(J.tolist(), z.tolist()), lam2)
+                    rows = J.tolist()
+                    dq = z + _dls_step(rows, e - _matvec(rows, z.tolist()), lam2)
             big = float(np.abs(dq).max())
             if big > _MAX_STEP:
                 dq *= _MAX_STEP / big
@@ -358,14 +360,15 @@ def _matvec(rows: list[list[float]], v: list[float]) -> np.ndarray:
     return np.array([_dot(r, v) for r in rows])
 
 
-def _dls_step(J: np.ndarray, e: np.ndarray, lam2: float) -> np.ndarray:
-    """``J^T (J J^T + lam2 I)^-1 e`` for a 3 x n ``J``, with a closed-form 3x3 solve.
+def _dls_step(rows: list[list[float]], e: np.ndarray, lam2: float) -> np.ndarray:
+    """``J^T (J J^T + lam2 I)^-1 e`` for a 3 x n ``J`` given as its 3 rows, with a closed-form
+    3x3 solve.
 
     numpy's general solver costs ~7 us on a 3x3 system, more than the
     kinematics; the adjugate formula in Python floats is ~4x cheaper. Every
     sum in a fixed order (:func:`_dot`): the same bits on every CPU.
     """
-    j0, j1, j2 = rows = J.tolist()
+    j0, j1, j2 = rows
     a, b, c = _dot(j0, j0), _dot(j0, j1), _dot(j0, j2)
     d, ee, f = _dot(j1, j1), _dot(j1, j2), _dot(j2, j2)
     a += lam2
@@ -380,7 +383,7 @@ def _dls_step(J: np.ndarray, e: np.ndarray, lam2: float) -> np.ndarray:
     F = a * d - b * b
     det = a * A + b * B + c * C
     if det == 0.0:
-        return np.zeros(J.shape[1])
+        return np.zeros(len(j0))
     x0, x1, x2 = e.tolist()
     y = [(A * x0 + B * x1 + C * x2) / det, (B * x0 + D * x1 + E * x2) / det,
          (C * x0 + E * x1 + F * x2) / det]
