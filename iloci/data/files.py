@@ -114,8 +114,11 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
                                 f"{TRAJECTORY_FORMATS}.")
     positions, times = reader(p)
     name = shape if shape is not None else shape_name(p)
-    return Demonstration(positions=positions, times=times, shape=name, index=index,
-                         true_concept=true_concept)
+    try:
+        return Demonstration(positions=positions, times=times, shape=name, index=index,
+                             true_concept=true_concept)
+    except InvalidDemonstrationError as exc:  # too few points, zero extent: name the file
+        raise InvalidDemonstrationError(f"{p.name}: {exc}") from None
 
 
 def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:

@@ -341,6 +341,8 @@ class _Reader:
                 points.append([])
                 starts.append(pos)
                 continue
+            if not points[-1]:  # a point is named by the line of its first value
+                starts[-1] = m.start() + len(m.group(0)) - len(m.group(0).lstrip())
             points[-1].append((m.group("prefix"), m.group("num") or m.group("sym"),
                                "sym" if m.group("sym") else "num"))
         if points and not points[-1] and len(points) > 1:
