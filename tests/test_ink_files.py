@@ -16,7 +16,7 @@ from iloci.data.datasets import check_protocol, load_dataset
 from iloci.data.files import TRAJECTORY_READERS, TRAJECTORY_SUFFIXES, load_trajectory
 from iloci.data.streams import resolve_demos
 from iloci.data.unipen import UnipenSample, read_unipen, unipen_digits
-from iloci.errors import InvalidDemonstrationError, InvalidInputError
+from iloci.errors import InvalidDemonstrationError, InvalidInputError, TimeUnitWarning
 
 UNIPEN = Path(__file__).parent / "data" / "unipen" / "train_r01_v07"
 GUIDE = Path(__file__).resolve().parents[1] / "docs" / "guide.md"
@@ -99,6 +99,17 @@ def test_inkml_without_a_time_channel_counts_samples(tmp_path):
     d = load_trajectory(f)
     np.testing.assert_array_equal(d.positions, np.concatenate(s.strokes))
     np.testing.assert_array_equal(d.times, np.arange(len(d.positions), dtype=float))
+
+
+def test_an_inkml_time_channel_without_units_is_read_as_seconds(tmp_path):
+    """As a CSV file's ``t``; milliseconds in it get the TimeUnitWarning that says so."""
+    f = tmp_path / "ms.inkml"
+    f.write_text(_INK.format('<traceFormat><channel name="X"/><channel name="Y"/><channel '
+                             'name="T"/></traceFormat><trace>0 0 9250250, 1 5 9250300, '
+                             "2 0 9250350, 3 5 9250400</trace>"))
+    with pytest.warns(TimeUnitWarning, match="look like milliseconds"):
+        d = load_trajectory(f)
+    np.testing.assert_array_equal(d.times, [9250250, 9250300, 9250350, 9250400])
 
 
 def _encode(values: np.ndarray, modes: str) -> list[str]:

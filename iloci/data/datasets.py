@@ -343,7 +343,8 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
             f"{len(ms)} of {len(samples)} files have time stamps that look like milliseconds, "
             f"not seconds, e.g. {root / ms[0][0].path} ({span.group() if span else ms[0][1]}). "
             "Name the column "
-            "t_ms (or divide the times by 1000); only the robot's drawing speed reads them, "
+            "t_ms (CSV), give the T channel units=\"ms\" (InkML), or divide the times by "
+            "1000; only the robot's drawing speed reads them, "
             "so the evaluation goes on.", TimeUnitWarning, stacklevel=3)
 
 
