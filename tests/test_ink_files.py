@@ -157,7 +157,8 @@ def test_inkml_difference_encodings_decode_to_the_drawing(tmp_path):
 def test_inkml_trace_formats_from_contexts_trace_groups_and_orientation(tmp_path):
     """The trace format comes from the trace's contextRef, its traceGroup's, or the last
     <context> before it; a bare <traceFormat> (as CROHME's files have) counts too; penUp
-    traces are hover, left out; orientation="-ve" negates a channel."""
+    traces are hover, left out, and an empty trace adds nothing; orientation="-ve" negates
+    a channel."""
     f = tmp_path / "ctx.inkml"
     f.write_text("""<ink>
   <definitions>
@@ -170,6 +171,7 @@ def test_inkml_trace_formats_from_contexts_trace_groups_and_orientation(tmp_path
   </definitions>
   <trace>0 0, 1 1</trace>
   <trace type="penUp">50 50, 60 60</trace>
+  <trace/>
   <context contextRef="#a"/>
   <trace>3 2, 5 4</trace>
   <traceGroup contextRef="#c"><trace>6 7</trace></traceGroup>
@@ -323,6 +325,10 @@ _TXYT = ('<traceFormat><channel name="X"/><channel name="Y"/><channel name="T" u
     (".inkml", _INK.format("<trace>0 0, 1 1"), InvalidInputError,
      r"a\.inkml is not an InkML file: .*\(line 3, column 2: mismatched tag\)"),
     (".inkml", "", InvalidInputError, r"a\.inkml is not an InkML file: .*no element found"),
+    (".xml", '<?xml version="1.0" encoding="x-nope"?><Gesture/>', InvalidInputError,
+     r"a\.xml: unknown encoding: x-nope .*Save it as UTF-8"),
+    (".inkml", "<ink>" + "<traceGroup>" * 5000 + "<trace>0 0, 1 1, 2 2</trace>"
+     + "</traceGroup>" * 5000 + "</ink>", InvalidDemonstrationError, r"nested too deeply"),
     # not InkML, or no traces
     (".inkml", '<Gesture Name="x"><Point X="1" Y="2"/></Gesture>', InvalidDemonstrationError,
      r"a\.inkml, line 1: the root element is <Gesture>, not InkML's <ink>"),

@@ -93,7 +93,7 @@ def read_inkml(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
       channel's ``units`` (``s``, ``ms``, ``us``), **seconds when it gives
       none** (as a ``.csv`` file's ``t``). Other channels (``F`` pressure,
       tilt, ...) are ignored. Without ``T`` the times are ``0, 1, ...,
-      N-1`` (as for ``.npy``).
+      N-1`` (as for ``.npy``). An empty ``<trace/>`` adds nothing.
     * **Trace values**: points separated by ``,``, values by white space
       (or juxtaposed where unambiguous, ``3-5``); decimal numbers with an
       optional exponent, ``#`` hexadecimal integers; the prefixes ``!``
@@ -137,7 +137,10 @@ def read_inkml_document(doc: XmlDocument) -> tuple[np.ndarray, np.ndarray | None
     ids = {el.get(_XML_ID) or el.get("id"): el for el in root.iter()
            if el.get(_XML_ID) or el.get("id")}
     reader = _Reader(doc, ids)
-    traces = list(reader.traces(root, _DEFAULT))
+    try:
+        traces = list(reader.traces(root, _DEFAULT))
+    except RecursionError:
+        raise refuse(doc.name, 0, "its <traceGroup>s are nested too deeply to read.") from None
     if not traces:
         inside = any(local_name(t.tag) == "trace" for d in root.iter()
                      if local_name(d.tag) == "definitions" for t in d.iter())
@@ -292,6 +295,8 @@ class _Reader:
         line = self.doc.line(el)
         text = el.text or ""
         label = f"trace {k + 1}"
+        if not text.strip():  # an empty trace draws nothing
+            return np.empty((0, 2)), np.empty(0), lambda j: f"{label}, point {j + 1}"
         t = fmt.index("T")
         if t is not None and el.get("timeOffset") is not None:
             raise refuse(self.doc.name, line,

@@ -19,7 +19,7 @@ from typing import Any
 from xml.etree.ElementTree import Element, ParseError, TreeBuilder
 
 import numpy as np
-from defusedxml import DefusedXmlException, DTDForbidden, EntitiesForbidden
+from defusedxml import DefusedXmlException, EntitiesForbidden
 from defusedxml.ElementTree import DefusedXMLParser
 
 from iloci import validation
@@ -94,7 +94,8 @@ def parse_xml(p: Path, what: str) -> XmlDocument:
     ------
     InvalidInputError
         The file cannot be read, is not well-formed XML (the parser's line
-        and column named), or declares an XML entity or refers to an
+        and column named), names an encoding Python does not know, nests
+        elements too deeply, or declares an XML entity or refers to an
         external one (refused: an entity can expand into gigabytes, and an
         external one reads other files).
     """
@@ -102,9 +103,6 @@ def parse_xml(p: Path, what: str) -> XmlDocument:
         raw = p.read_bytes()
     except OSError as exc:
         raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror or exc}.") from None
-    lines = raw.count(b"\n")
-    if lines > 2 * validation.MAX_POINTS:  # before any parsing: refused at once
-        validation.check_size(lines // 2, f"{p.name} (about {lines:,} lines)")
     target = _LineBuilder()
     parser = DefusedXMLParser(target=target)
     target.expat = parser.parser
@@ -124,8 +122,13 @@ def parse_xml(p: Path, what: str) -> XmlDocument:
             f"{exc.name!r} (<!ENTITY ...>), which is refused: an entity can expand into "
             "gigabytes of text (the 'billion laughs' attack). A trajectory file needs none: "
             "remove its <!DOCTYPE ...> declarations.") from None
-    except DTDForbidden:  # pragma: no cover - DTDs are allowed (forbid_dtd=False)
-        raise InvalidInputError(f"{p.name}: a document type declaration is refused.") from None
+    except LookupError as exc:  # an encoding Python has no codec for
+        raise InvalidInputError(
+            f"{p.name}: {exc} (named in its <?xml ... encoding=...?> declaration). Save it "
+            "as UTF-8.") from None
+    except RecursionError:
+        raise InvalidInputError(f"{p.name}: its elements are nested too deeply to read (a "
+                                "trajectory file nests a few levels).") from None
     except DefusedXmlException as exc:
         raise InvalidInputError(
             f"{p.name}, line {parser.parser.CurrentLineNumber}: refers to an external "
