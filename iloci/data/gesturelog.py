@@ -118,7 +118,9 @@ def _gesture(root: Element, name: str, line_of: Callable[[Element], int]
             v = number(attrs[key])
             if v is None:
                 raise refuse(name, line_of(p), f"<Point> {i + 1}: {key.upper()}="
-                             f"{attrs[key]!r} is not a number.")
+                             f"{attrs[key]!r} is not a number; write positions and times as "
+                             "numbers such as 87, -3.5 or 1.2e3 (a decimal point, not a "
+                             "comma).")
             values[i, c] = v
     if any(timed) and not all(timed):
         i = timed.index(not timed[0])

@@ -379,7 +379,8 @@ class _Reader:
                 v = _value(tok)
                 if not math.isfinite(v):
                     raise refuse(self.doc.name, at, f"{label}, point {j + 1}: channel "
-                                 f"{channel} is {tok!r}, too large for a number.")
+                                 f"{channel} is {tok!r}, too large for a number; give a finite "
+                                 "value.")
                 if prefix:
                     mode = prefix
                 if mode == "!":
