@@ -442,6 +442,18 @@ def test_xml_entity_declarations_are_refused_before_any_expansion(tmp_path, suff
     assert time.perf_counter() - start < 1.0
 
 
+@pytest.mark.parametrize("name, text, message", [
+    ("bomb.inkml", _LAUGHS, "bomb.inkml, line 3: declares the XML entity 'lol'"),
+    ("empty.XML", '<Gesture Name="arrow01"/>', "empty.XML, line 1: the <Gesture> has no"),
+])
+def test_a_bad_ink_file_on_the_command_line_exits_2_without_a_traceback(tmp_path, cli, name,
+                                                                          text, message):
+    f = tmp_path / name
+    f.write_text(text)
+    out = cli("show", str(f), "--out", str(tmp_path / "x.png"))
+    assert out.returncode == 2 and message in out.stderr and "Traceback" not in out.stderr
+
+
 def test_a_doctype_without_entities_is_read(tmp_path):
     f = tmp_path / "dtd.xml"
     f.write_text('<?xml version="1.0"?>\n<!DOCTYPE Gesture>\n<Gesture><Point X="0" Y="0"/>'
