@@ -10,9 +10,10 @@ Two layouts (docs/guide.md, "Your own shapes"):
 
 Each sub-folder of ``PATH`` is a concept (its name); the trajectory files
 in it (every format ``iloci teach`` reads: ``.npy``, ``.csv``, ``.inkml``,
-``.xml``; see :func:`iloci.data.files.load_trajectory`) are its samples. Files directly in
-a concept folder have no writer; a sub-folder of a concept folder names the
-writer of the files in it (deeper folders are read too, the first level
+``.xml``, the suffix in any case; see
+:func:`iloci.data.files.load_trajectory`) are its samples. Files directly
+in a concept folder have no writer; a sub-folder of a concept folder names
+the writer of the files in it (deeper folders are read too, the first level
 naming the writer).
 
 **A manifest**, ``PATH`` a ``.csv`` or ``.json`` file (or a folder holding
