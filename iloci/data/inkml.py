@@ -102,17 +102,18 @@ def read_inkml(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
       minus the previous one), each holding for its channel until the next
       prefix (InkML section 3.2.1). A trailing ``,`` is ignored.
 
-    Positions are as recorded; InkML's ``Y`` grows downwards (screen
-    coordinates) unless its channel says ``orientation="-ve"``: use
-    ``[sensorimotor] y_axis = "down"`` for such files.
+    Positions are as recorded, in the channels' default orientation
+    (``orientation="-ve"`` values negated). Ink recorded on a screen or a
+    tablet has ``Y`` growing downwards: use ``[sensorimotor] y_axis =
+    "down"`` for such files.
 
     Raises
     ------
     InvalidInputError
-        Not readable, not XML (its line and column), an XML entity
-        declaration (refused), or a root other than ``<ink>``.
+        Not readable, not XML (its line and column), an unknown encoding,
+        or an XML entity declaration (refused).
     InvalidDemonstrationError
-        No pen-down trace; a trace format without ``X`` and ``Y``, or with
+        A root other than ``<ink>``; no pen-down trace; a trace format without ``X`` and ``Y``, or with
         them (or ``T``) intermittent; a ``T`` channel of other units; a
         point with more or fewer values than its format has channels; a
         value that is not a number, or ``T``/``F``/``*``/``?`` in ``X``,
