@@ -464,40 +464,6 @@ def test_a_doctype_without_entities_is_read(tmp_path):
 # ---------------------------------------------------------------- the guide
 
 
-def _guide_block(marker: str) -> str:
-    blocks = re.findall(r"```python\n(.*?)```", GUIDE.read_text(), flags=re.S)
-    found = [b for b in blocks if marker in b]
-    assert len(found) == 1, marker
-    return found[0]
-
-
-def test_the_guides_manifest_for_a_tree_of_gesture_logs_runs(tmp_path, monkeypatch):
-    """The guide's few lines turn the $1 logs' s01/fast/arrow01.xml tree into a manifest
-    (writer s01, session fast, concept arrow) that load_dataset reads."""
-    s = _samples()
-    tree = tmp_path / "xml_logs"
-    for w, writer in enumerate(("s01", "s02")):
-        for speed in ("slow", "fast"):
-            for c, name in enumerate(("arrow", "left_sq_bracket")):
-                for n in (1, 2):
-                    f = tree / writer / speed / f"{name}{n:02d}.xml"
-                    f.parent.mkdir(parents=True, exist_ok=True)
-                    sample = s[(w * 4 + c * 2 + n) % len(s)]
-                    text = _gesture_xml(sample, strokes=False)
-                    # every drawing distinct: shifted by its place in the tree
-                    shift = 1000 * w + 100 * (speed == "fast") + 10 * c + n
-                    text = re.sub(r'X="([^"]+)"',
-                                  lambda m, d=shift: f'X="{float(m.group(1)) + d!r}"', text)
-                    f.write_text(text)
-    monkeypatch.chdir(tmp_path)
-    exec(compile(_guide_block("xml_logs"), "guide.md", "exec"), {})
-    ds = load_dataset(tree / "manifest.csv")
-    assert ds.concepts == {"arrow": 8, "left_sq_bracket": 8}
-    assert ds.writers == ["s01", "s02"]
-    assert {smp.session for smp in ds.samples} == {"slow", "fast"}
-    check_protocol(ds, 2, "writers")
-
-
 def test_the_guides_minimal_examples_read_as_shown(tmp_path):
     """The guide's minimal InkML and gesture-log files read, with the times it says."""
     text = GUIDE.read_text()
