@@ -113,15 +113,16 @@ def read_inkml(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
         Not readable, not XML (its line and column), an unknown encoding,
         or an XML entity declaration (refused).
     InvalidDemonstrationError
-        A root other than ``<ink>``; no pen-down trace; a trace format without ``X`` and ``Y``, or with
-        them (or ``T``) intermittent; a ``T`` channel of other units; a
-        point with more or fewer values than its format has channels; a
-        value that is not a number, or ``T``/``F``/``*``/``?`` in ``X``,
-        ``Y`` or ``T``; a difference on a trace's first point (a second
-        difference on its first two); a reference to another file or to no
-        element; a ``timeOffset`` on a trace with ``T`` (its times would be
-        relative to it: not read); some traces timed and some not; a time
-        before the previous point's. Each names the file and the line.
+        A root other than ``<ink>``; no pen-down trace; a trace format
+        without ``X`` and ``Y``, or with them (or ``T``) intermittent; a
+        ``T`` channel of other units; a point with more or fewer values than
+        its format has channels; a value that is not a number, or
+        ``T``/``F``/``*``/``?`` in ``X``, ``Y`` or ``T``; a difference on a
+        trace's first point (a second difference on its first two); a
+        reference to another file or to no element; a ``timeOffset`` on a
+        trace with ``T`` (its times would be relative to it: not read); some
+        traces timed and some not; a time before the previous point's. Each
+        names the file and the line.
     """
     doc = parse_xml(p, "an InkML file")
     return read_inkml_document(doc)
