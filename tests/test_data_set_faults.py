@@ -219,9 +219,12 @@ def test_the_papers_lasa_figure_is_not_shown_beside_a_users_data_set():
     assert "paper" not in own
 
 
-def test_the_guides_recipe_turns_xml_logs_into_a_data_set(digits, tmp_path, monkeypatch):
-    """docs/guide.md, "Your own shapes": its Python block, run on XML logs of real strokes
-    (writer folders inside concept folders, time stamps of a 15.6 ms clock in ms)."""
+def test_the_guides_recipe_turns_a_tree_of_xml_logs_into_a_data_set(digits, tmp_path,
+                                                                     monkeypatch):
+    """docs/guide.md, "Your own shapes": its Python block writes a manifest for a tree of
+    gesture logs laid out as the $1 logs are (writer/speed/gesture+number.xml), run on logs
+    of real strokes (time stamps of a 15.6 ms clock, in ms), which are then read as they
+    are."""
     import re
 
     from conftest import ROOT
@@ -229,24 +232,29 @@ def test_the_guides_recipe_turns_xml_logs_into_a_data_set(digits, tmp_path, monk
     guide = (ROOT / "docs" / "guide.md").read_text(encoding="utf-8")
     section = guide[guide.index("## Your own shapes"):guide.index("## Teaching the robot")]
     (recipe,) = re.findall(r"^```python\n(.*?)^```$", section, re.S | re.M)
+    words = {"2": "two", "3": "three", "6": "six"}
     count: dict[str, int] = {}
     for s in digits:
-        if s.label not in ("2", "3", "6"):
+        if s.label not in words:
             continue
-        count[s.label] = count.get(s.label, 0) + 1
+        count[words[s.label]] = n = count.get(words[s.label], 0) + 1
         xy = np.concatenate(s.strokes) * 40  # pixels
         t = 1_171_743_302_847 + np.floor(np.arange(len(xy)) * 10 / 15.6) * 15.6
         points = "".join(f'<Point X="{x:.0f}" Y="{-y:.0f}" T="{ti:.0f}" />'
                          for (x, y), ti in zip(xy, t))
-        f = tmp_path / "logs" / s.label / s.writer.split("/")[1] / f"{s.label}{count[s.label]}.xml"
+        speed = ("slow", "fast")[n % 2]
+        f = (tmp_path / "xml_logs" / s.writer.split("/")[1] / speed
+             / f"{words[s.label]}{n:02d}.xml")
         f.parent.mkdir(parents=True, exist_ok=True)
-        f.write_text(f'<?xml version="1.0"?><Gesture Name="{s.label}">{points}</Gesture>')
+        f.write_text(f'<?xml version="1.0"?><Gesture Name="{f.stem}">{points}</Gesture>')
     monkeypatch.chdir(tmp_path)
     exec(compile(recipe, "guide.md", "exec"), {})
-    ds = load_dataset(tmp_path / "shapes-csv")
-    assert ds.concepts == count and len(ds.writers) == 3
-    assert all(np.all(np.diff(d.times) > 0) for d in ds.demos)
+    ds = load_dataset(tmp_path / "xml_logs" / "manifest.csv")
+    assert ds.concepts == dict(sorted(count.items())) and len(ds.writers) == 3
+    assert {s.session for s in ds.samples} == {"slow", "fast"}
+    assert all(np.all(np.diff(d.times) > 0) for d in ds.demos)  # the clock's repeats spread
     assert 0.05 < ds.demos[0].times[-1] - ds.demos[0].times[0] < 10  # seconds, from ms
+    check_protocol(ds, 3, "writers")
 
 
 def test_the_pb_space_figure_of_a_large_fold_places_a_seeded_sample():

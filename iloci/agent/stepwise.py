@@ -226,8 +226,9 @@ class Stepwise(AgentBase):
         ----------
         demos : iterable
             Each a :class:`~iloci.interfaces.Demonstration`, a path to a
-            ``.npy`` / ``.csv`` trajectory, or an (N, 2) array. Files of
-            one name in different folders get distinct keys (``circle/0``,
+            trajectory file (``.npy``, ``.csv``, ``.inkml``, ``.xml``), or an
+            (N, 2) array. Files of one name in different folders get distinct
+            keys (``circle/0``,
             ``circle/1``; see :func:`~iloci.data.files.trajectory_files`).
         on_change : callable, optional
             Called with each :class:`~iloci.concepts.learner.LearnOutcome`

@@ -28,9 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", "-c", help="TOML config (default: the paper's settings)")
     p.add_argument("--data", metavar="PATH",
                    help="your own data set instead of LASA: a folder with a sub-folder of "
-                   "trajectory files (.csv, .npy) per concept, optionally a sub-folder per "
-                   "writer in each, or a manifest (.csv/.json: file, concept[, writer, "
-                   "session]) (default: [data] path)")
+                   "trajectory files (.csv, .npy, .inkml, .xml) per concept, optionally a "
+                   "sub-folder per writer in each, or a manifest (.csv/.json: file, "
+                   "concept[, writer, session]) (default: [data] path)")
     p.add_argument("--split", choices=("concepts", "writers"), default=None,
                    help="concepts: k folds per concept (the paper's); writers: teach some "
                    "writers, recognize the others (default: evaluation.split)")

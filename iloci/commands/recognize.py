@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "demonstration's PB. Confidence is 1 - d_best / d_other, the margin to "
                     "the nearest entry of another concept (0: ambiguous, 1: clear).")
     p.add_argument("files", nargs="+", metavar="FILE",
-                   help=".npy/.csv trajectory files, or LASA demonstrations as SHAPE/INDEX")
+                   help="trajectory files (.npy, .csv, .inkml, .xml), or LASA demonstrations as "
+                        "SHAPE/INDEX")
     p.add_argument("--memory", metavar="FILE", required=True,
                    help="memory file written by `iloci teach`")
     p.add_argument("--json", action="store_true", help="print one JSON object per line")

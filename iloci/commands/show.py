@@ -18,7 +18,7 @@ import numpy as np
 
 from iloci.concepts.memory import load_memory
 from iloci.config import load_config
-from iloci.data.files import writable_file, write_atomic
+from iloci.data.files import TRAJECTORY_SUFFIXES, writable_file, write_atomic
 from iloci.data.lasa import DEMOS_PER_SHAPE
 from iloci.data.streams import resolve_demo
 from iloci.errors import InvalidInputError, MissingBackendError
@@ -32,14 +32,14 @@ __all__ = ["plot_motion", "register", "run"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "show", help="plot one demonstration: pen path, fitted path + FK of the IK, joints",
-        description="Plot a LASA demonstration (or a .npy/.csv trajectory file) as the robot "
-                    "sees it: the raw pen path, the path fitted into the drawing plane with "
-                    "the forward kinematics of the IK solution over it, and the joint "
-                    "angles over time.")
+        description="Plot a LASA demonstration (or a trajectory file: .npy, .csv, .inkml, "
+                    ".xml) as the robot sees it: the raw pen path, the path fitted into the "
+                    "drawing plane with the forward kinematics of the IK solution over it, "
+                    "and the joint angles over time.")
     p.add_argument("shape", metavar="DEMO",
                    help="LASA demonstration as SHAPE/INDEX (e.g. GShape/3) or SHAPE (its "
-                        "first, or --demo), or a .npy/.csv trajectory file; or a memory "
-                        "file (.npz) written by `iloci teach`, to print what it holds")
+                        "first, or --demo), or a trajectory file (.npy, .csv, .inkml, .xml); "
+                        "or a memory file (.npz) written by `iloci teach`, to print what it holds")
     p.add_argument("--demo", type=int, default=None, metavar="I",
                    help="demonstration index of a LASA SHAPE, 0..6 (default 0)")
     p.add_argument("--out", metavar="FILE.png",
@@ -55,7 +55,7 @@ def _load_demo(token: str, demo: int | None):
 
     if demo is None:
         return resolve_demo(token)
-    if Path(token).suffix.lower() in (".npy", ".csv") or Path(token).is_file():
+    if Path(token).suffix.lower() in TRAJECTORY_SUFFIXES or Path(token).is_file():
         raise InvalidInputError(f"--demo picks a demonstration of a LASA shape; {token!r} "
                                 "is a trajectory file (drop --demo).")
     if "/" in token:

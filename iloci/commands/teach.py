@@ -117,8 +117,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "change. With an existing --memory file, learning continues from it.")
     p.add_argument("demos", nargs="*", metavar="DEMO",
                    help="LASA demonstrations as SHAPE/INDEX (e.g. GShape/3) or SHAPE (all 7), "
-                        "or .npy/.csv trajectory files; default: a seeded stream of "
-                        "[evaluation] train_fraction of each [data] shape's demonstrations")
+                        "or trajectory files (.npy, .csv, .inkml, .xml); default: a seeded "
+                        "stream of [evaluation] train_fraction of each [data] shape's "
+                        "demonstrations")
     p.add_argument("--config", metavar="FILE",
                    help="TOML config (default: the one saved in --memory, else the defaults)")
     p.add_argument("--teacher", metavar="NAME",

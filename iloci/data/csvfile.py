@@ -8,7 +8,7 @@ named by the file's line.
 from __future__ import annotations
 
 import codecs
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 import csv
 import io
 import math
@@ -364,7 +364,7 @@ def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[
         "and y (time t, time or t_ms; other columns such as pressure are ignored).")
 
 
-def check_times(times: np.ndarray, rows: list[str], name: str) -> np.ndarray:
+def check_times(times: np.ndarray, rows: Sequence[str], name: str) -> np.ndarray:
     """The time stamps, checked: ``times`` with repeated stamps spread, else an error.
 
     A clock coarser than the pen's sampling (15.6 ms on Windows, a browser's
@@ -378,8 +378,8 @@ def check_times(times: np.ndarray, rows: list[str], name: str) -> np.ndarray:
     ----------
     times : ndarray, shape (N,)
         Time stamps (s), in file order.
-    rows : list of str
-        How each row is named in an error (``"line 4"``).
+    rows : sequence of str
+        How each row is named in an error (``"line 4"``; only the row at fault is read).
     name : str
         The file's name, for the error.
 

@@ -9,10 +9,11 @@ Two layouts (docs/guide.md, "Your own shapes"):
         square/    alice/1.csv  bob/1.csv     or one sub-folder per writer
 
 Each sub-folder of ``PATH`` is a concept (its name); the trajectory files
-in it (every format ``iloci teach`` reads: ``.npy``, ``.csv``; see
-:func:`iloci.data.files.load_trajectory`) are its samples. Files directly in
-a concept folder have no writer; a sub-folder of a concept folder names the
-writer of the files in it (deeper folders are read too, the first level
+in it (every format ``iloci teach`` reads: ``.npy``, ``.csv``, ``.inkml``,
+``.xml``, the suffix in any case; see
+:func:`iloci.data.files.load_trajectory`) are its samples. Files directly
+in a concept folder have no writer; a sub-folder of a concept folder names
+the writer of the files in it (deeper folders are read too, the first level
 naming the writer).
 
 **A manifest**, ``PATH`` a ``.csv`` or ``.json`` file (or a folder holding
@@ -47,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from iloci.data.csvfile import decode_text
-from iloci.data.files import load_trajectory
+from iloci.data.files import TRAJECTORY_FORMATS, TRAJECTORY_SUFFIXES, load_trajectory
 from iloci.errors import InvalidInputError, TimeUnitWarning
 from iloci.interfaces import Demonstration
 from iloci.progress import long_step
@@ -55,8 +56,6 @@ from iloci.progress import long_step
 __all__ = ["Sample", "DataSet", "load_dataset", "load_dataset_once", "check_protocol",
            "writer_folds", "demos_checksum", "drawing_key", "TRAJECTORY_SUFFIXES"]
 
-#: File suffixes read as trajectories (what ``iloci teach`` reads).
-TRAJECTORY_SUFFIXES = (".csv", ".npy")
 _MANIFESTS = ("manifest.csv", "manifest.json")
 _FILE_COLS = ("file", "path", "filename", "file_name", "trajectory")
 _CONCEPT_COLS = ("concept", "label", "class", "gesture", "shape", "category")
@@ -168,7 +167,8 @@ def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
                                if str(part) != ".") and _visible(f))
         if not files:
             others = sorted(f.name for f in d.rglob("*") if f.is_file())
-            what = (f"no .csv or .npy files (it holds {', '.join(others[:3])}"
+            what = (f"no trajectory files ({', '.join(TRAJECTORY_SUFFIXES)}; it holds "
+                    f"{', '.join(others[:3])}"
                     f"{', ...' if len(others) > 3 else ''})" if others else "is empty")
             problems.append(f"{d}: concept folder {what}")
             continue
@@ -344,7 +344,8 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
             f"{len(ms)} of {len(samples)} files have time stamps that look like milliseconds, "
             f"not seconds, e.g. {root / ms[0][0].path} ({span.group() if span else ms[0][1]}). "
             "Name the column "
-            "t_ms (or divide the times by 1000); only the robot's drawing speed reads them, "
+            "t_ms (CSV), give the T channel units=\"ms\" (InkML), or divide the times by "
+            "1000; only the robot's drawing speed reads them, "
             "so the evaluation goes on.", TimeUnitWarning, stacklevel=3)
 
 
@@ -401,7 +402,7 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
             elif not (root / s.path).is_file():
                 problems.append(f"{root / s.path}: listed in {manifest.name} but not found")
             elif Path(s.path).suffix.lower() not in TRAJECTORY_SUFFIXES:
-                problems.append(f"{root / s.path}: not a .csv or .npy trajectory file")
+                problems.append(f"{root / s.path}: not a trajectory file ({TRAJECTORY_FORMATS})")
     else:
         root = p
         samples, problems = _scan_folders(p)
@@ -423,7 +424,7 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
         raise _fail(f"data set {p}: {len(problems)} file(s) cannot be used; nothing was "
                     "learned:", problems,
                     "Fix or remove them and run again. Each file must be what `iloci teach` "
-                    "reads: .csv or .npy, N x 2 (x, y) or N x 3 (t, x, y), one drawing.")
+                    f"reads, one drawing: {TRAJECTORY_FORMATS}.")
     if timed[True] and timed[False]:
         raise _fail(f"data set {p} mixes units of time: {len(timed[True])} file(s) have time "
                     f"stamps and {len(timed[False])} have none (their samples are counted "

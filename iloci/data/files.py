@@ -1,14 +1,17 @@
-"""A user's own pen trajectories from ``.npy`` or ``.csv`` files; atomic file writes.
+"""A user's own pen trajectory files (``.npy``, ``.csv``, ``.inkml``, ``.xml``); atomic writes.
 
 Where each part lives: reading a trajectory file (:func:`load_trajectory`,
-``.npy`` here, ``.csv`` in :mod:`iloci.data.csvfile`) and a folder of them
-(:func:`trajectory_files`) here; atomic writes (:func:`write_atomic`,
-:func:`writable_dir`...) in :mod:`iloci.data.writes`, re-exported here.
+which picks the reader by suffix from :data:`TRAJECTORY_READERS`: ``.npy``
+here, ``.csv`` in :mod:`iloci.data.csvfile`, ``.inkml`` in
+:mod:`iloci.data.inkml`, ``.xml`` in :mod:`iloci.data.gesturelog`) and a
+folder of them (:func:`trajectory_files`) here; atomic writes
+(:func:`write_atomic`, :func:`writable_dir`...) in :mod:`iloci.data.writes`,
+re-exported here.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -17,12 +20,15 @@ import numpy as np
 
 from iloci import validation
 from iloci.data.csvfile import check_times, read_csv
+from iloci.data.gesturelog import read_xml
+from iloci.data.inkml import read_inkml
 from iloci.data.writes import writable_dir, writable_file, write_atomic, write_text_atomic
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 from iloci.interfaces import Demonstration
 
 __all__ = ["TrajectoryFile", "load_trajectory", "shape_name", "trajectory_files", "writable_dir",
-           "writable_file", "write_atomic", "write_text_atomic"]
+           "writable_file", "write_atomic", "write_text_atomic", "TRAJECTORY_READERS",
+           "TRAJECTORY_SUFFIXES", "TRAJECTORY_FORMATS"]
 
 def shape_name(path: str | os.PathLike[str]) -> str:
     """The shape name a trajectory file gives its demonstration: the file's stem, as text.
@@ -38,7 +44,7 @@ def shape_name(path: str | os.PathLike[str]) -> str:
 
 def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
                     true_concept: str | None = None, index: int = 0) -> Demonstration:
-    """Read one pen trajectory from a file.
+    """Read one pen trajectory from a file; its suffix (any case) says how.
 
     A ``.npy`` file holds a plain float array (loaded without pickle),
     ``N x 2`` pen positions ``x, y`` (any unit; times default to ``0, 1,
@@ -63,6 +69,16 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
       error names the header.
     * Without a header: 2 columns are ``x, y``, 3 are ``t, x, y``.
 
+    An ``.inkml`` file is W3C InkML (https://www.w3.org/TR/InkML/): its
+    pen-down ``<trace>`` elements joined in order, channels ``X``, ``Y``
+    and optionally ``T`` (see :func:`iloci.data.inkml.read_inkml`).
+
+    An ``.xml`` file is a $1/$N/$P gesture log, ``<Gesture>`` of
+    ``<Point X= Y= T=/>`` (T in ms), strokes joined in order (see
+    :func:`iloci.data.gesturelog.read_gesture_log`), or InkML when its root
+    is ``<ink>``. XML is parsed with :mod:`defusedxml`: entity declarations
+    are refused.
+
     Parameters
     ----------
     path : str or path-like
@@ -80,26 +96,29 @@ def load_trajectory(path: str | os.PathLike[str], *, shape: str | None = None,
     Raises
     ------
     InvalidInputError
-        The file is missing, unreadable or not ``.npy`` / ``.csv``.
+        The file is missing, unreadable, not of a suffix in
+        :data:`TRAJECTORY_SUFFIXES`, or (XML) not well-formed or declaring
+        an entity.
     InvalidDemonstrationError
-        No usable columns (the error names the header), a value that is not
-        a number, NaN or inf, or a time not after the previous one (the
-        error names the file's line), fewer than 3 points or zero extent.
+        No usable columns (the error names the header) or channels, a value
+        that is not a number, NaN or inf, or a time not after the previous
+        one (the error names the file's line), fewer than 3 points or zero
+        extent.
     """
     p = Path(path)
     if not p.is_file():
         raise InvalidInputError(f"trajectory file {str(p)!r} does not exist.")
-    suffix = p.suffix.lower()
+    reader = TRAJECTORY_READERS.get(p.suffix.lower())
+    if reader is None:
+        raise InvalidInputError(f"unsupported trajectory file {p.name!r}: use "
+                                f"{TRAJECTORY_FORMATS}.")
+    positions, times = reader(p)
     name = shape if shape is not None else shape_name(p)
-    if suffix == ".npy":
-        positions, times = _read_npy(p)
-    elif suffix == ".csv":
-        positions, times = read_csv(p)
-    else:
-        raise InvalidInputError(f"unsupported trajectory file {p.name!r}: use .npy or .csv "
-                                "(N x 2 positions, or N x 3 with time first).")
-    return Demonstration(positions=positions, times=times, shape=name, index=index,
-                         true_concept=true_concept)
+    try:
+        return Demonstration(positions=positions, times=times, shape=name, index=index,
+                             true_concept=true_concept)
+    except InvalidDemonstrationError as exc:  # too few points, zero extent: name the file
+        raise InvalidDemonstrationError(f"{p.name}: {exc}") from None
 
 
 def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
@@ -142,6 +161,18 @@ def _read_npy(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
         times = check_times(arr[:, 0], [f"row {i}" for i in range(len(arr))], p.name)
         return arr[:, 1:], times
     return arr, None
+
+
+#: Trajectory file suffix (lower case) -> its reader: positions (N, 2) and times (N,) in
+#: s or None. The one place a suffix is mapped to a format: ``iloci teach``, data-set
+#: folders and manifests read what is here.
+TRAJECTORY_READERS: dict[str, Callable[[Path], tuple[np.ndarray, np.ndarray | None]]] = {
+    ".npy": _read_npy, ".csv": read_csv, ".inkml": read_inkml, ".xml": read_xml}
+#: File suffixes read as trajectories (lower case; matched without case).
+TRAJECTORY_SUFFIXES = tuple(TRAJECTORY_READERS)
+#: The formats, as messages name them.
+TRAJECTORY_FORMATS = (".npy or .csv (N x 2 positions, or N x 3 with time first), .inkml "
+                      "(InkML) or .xml ($1/$N gesture log)")
 
 
 @dataclass(frozen=True)

@@ -15,16 +15,13 @@ from typing import Any
 import numpy as np
 
 from iloci.data.concepts import LASA_SHAPES
-from iloci.data.files import TrajectoryFile, load_trajectory, shared_stems, trajectory_files
+from iloci.data.files import (TRAJECTORY_SUFFIXES, TrajectoryFile, load_trajectory, shared_stems,
+                              trajectory_files)
 from iloci.data.lasa import DEMOS_PER_SHAPE, load_lasa
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
 
 __all__ = ["default_stream", "resolve_demo", "resolve_demos", "shared_stem_notes"]
-
-#: Suffixes of trajectory files (see :func:`~iloci.data.load_trajectory`).
-TRAJECTORY_SUFFIXES = (".npy", ".csv")
-
 
 def _is_file_name(token: str) -> bool:
     path = Path(token)
@@ -39,7 +36,8 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | TrajectoryFile]
     tokens : sequence of str
         ``SHAPE/INDEX`` (one LASA demonstration, ``INDEX`` in
         ``0..DEMOS_PER_SHAPE - 1``), ``SHAPE`` (its 7 demonstrations) or
-        the path of a ``.npy`` / ``.csv`` trajectory file.
+        the path of a trajectory file (``.npy``, ``.csv``, ``.inkml``, ``.xml``;
+        the suffix in any case).
 
     Returns
     -------
