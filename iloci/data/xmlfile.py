@@ -19,8 +19,6 @@ from typing import Any
 from xml.etree.ElementTree import Element, ParseError, TreeBuilder
 
 import numpy as np
-from defusedxml import DefusedXmlException, EntitiesForbidden
-from defusedxml.ElementTree import DefusedXMLParser
 
 from iloci import validation
 from iloci.data.csvfile import check_times
@@ -99,6 +97,14 @@ def parse_xml(p: Path, what: str) -> XmlDocument:
         external one (refused: an entity can expand into gigabytes, and an
         external one reads other files).
     """
+    # imported here: `import iloci` (every fold worker) needs no XML parser
+    try:
+        from defusedxml import DefusedXmlException, EntitiesForbidden
+        from defusedxml.ElementTree import DefusedXMLParser
+    except ImportError:
+        raise InvalidInputError(
+            f"cannot read {p.name}: reading {what} needs defusedxml, a dependency of iloci "
+            "that is not installed here. Install it with: pip install defusedxml") from None
     try:
         raw = p.read_bytes()
     except OSError as exc:
