@@ -272,3 +272,23 @@ def test_no_file_refers_to_a_design_document_outside_the_repository():
                  if p.is_file() and p.suffix in (".py", ".md", ".toml", ".urdf", ".ini", ".c")
                  and name in p.read_text(errors="replace")]
     assert offenders == []
+
+
+def test_install_commands_for_the_defaults_name_the_default_back_ends():
+    """The README's quickstart and the guide's install line for the defaults install
+    exactly the plugins of the default config's components (the guide once installed
+    iloci-torch, which pulls torch, for a default that is native-rnnpb)."""
+    from iloci.config import DEFAULT_NAMES
+
+    wanted = {FIRST_PARTY[(kind, name)] for kind, name in DEFAULT_NAMES.items()
+              if (kind, name) in FIRST_PARTY}
+    assert "iloci-native" in wanted
+    pages = {"README.md": (ROOT / "README.md").read_text(encoding="utf-8"),
+             "docs/guide.md": (ROOT / "docs" / "guide.md").read_text(encoding="utf-8")}
+    lines = {page: [m.group(1) for m in re.finditer(
+        r"pip install \. ((?:\./plugins/[\w.-]+ ?)+)", text)] for page, text in pages.items()}
+    for page, found in lines.items():
+        assert found, f"{page}: no 'pip install . ./plugins/...' line for the defaults"
+        plugins = set(re.findall(r"\./plugins/([\w.-]+)", found[0]))
+        assert plugins == wanted, f"{page}: {found[0]!r} installs {sorted(plugins)}, " \
+                                  f"the defaults need {sorted(wanted)}"
