@@ -23,6 +23,10 @@ WORKER = '''
 import os, time
 from iloci.errors import UnknownComponentError
 
+def nap(x, queue):
+    time.sleep(x)
+    return x
+
 def square(x, queue):
     queue.put({"kind": "note", "x": x, "pid": os.getpid()})
     return x * x
@@ -98,6 +102,22 @@ def test_workers_started_ahead_warm_up_and_then_run_the_calls(tmp_path, worker_m
     warm = {int(p.name.split("-")[1]) for p in tmp_path.glob("warm-*")}
     # the warm-up ran in the pool's workers, the ones that ran the calls
     assert warm and os.getpid() not in warm and warm & {n["pid"] for n in notes}
+
+
+def test_calls_stopped_midway_leave_no_thread_traceback(worker_module, monkeypatch):
+    """Ctrl-C (or any error) while calls are still queued kills the workers without
+    loky's manager thread printing "Exception in thread ExecutorManagerThread ...
+    KeyError" (it did on every Ctrl-C of an evaluation: a fresh user's trial)."""
+    import threading
+
+    seen = []
+    monkeypatch.setattr(threading, "excepthook", seen.append)
+    for _ in range(3):  # the race is loky's: a few tries, as a user pressing Ctrl-C
+        runner = LocalExecutor(2)
+        calls = runner.run(worker_module.nap, [(0.3,)] * 12, lambda m: None)
+        next(calls)              # workers busy, ids still queued
+        calls.close()            # what KeyboardInterrupt in the caller's loop does
+    assert not seen, [f"{a.thread.name}: {a.exc_type.__name__}" for a in seen]
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc is Linux's")

@@ -20,6 +20,7 @@ import concurrent.futures as cf
 import os
 import signal
 import sys
+import threading
 from typing import Any
 
 from iloci.errors import InvalidInputError, PluginError, UnknownComponentError
@@ -29,6 +30,33 @@ from iloci.plugins import get_plugin_manager, get_registry, hook_results, plugin
 
 __all__ = ["FoldExecutor", "InProcessExecutor", "LocalExecutor", "local_executor",
            "make_executor"]
+
+
+def _kill(pool: Any) -> None:
+    """Kill ``pool``'s workers now and drop its queued calls, without a traceback.
+
+    loky's shutdown with ``kill_workers=True`` empties its table of queued
+    calls while their ids are still in its queue; its manager thread then
+    looks one up, and the ``KeyError`` it dies of was printed as "Exception
+    in thread ExecutorManagerThread" on every Ctrl-C during an evaluation
+    (joblib 1.5, loky/process_executor.py, ``add_call_item_to_queue``). The
+    workers are killed before that lookup, so the error is harmless: it is
+    not printed. The shutdown is waited for (the workers are killed, not
+    joined: a fraction of a second), so the filter is removed once that
+    thread has ended; every other thread's exception is printed as before.
+    """
+    previous = threading.excepthook
+
+    def hook(args: Any) -> None:
+        if not (args.thread is not None and args.thread.name == "ExecutorManagerThread"
+                and args.exc_type is KeyError):
+            previous(args)
+
+    threading.excepthook = hook
+    try:
+        pool.shutdown(wait=True, kill_workers=True)
+    finally:
+        threading.excepthook = previous
 
 
 def _worker_init() -> None:
@@ -99,7 +127,7 @@ class LocalExecutor:
             try:
                 manager = self._manager()
             except BaseException:
-                pool.shutdown(wait=False, kill_workers=True)
+                _kill(pool)
                 raise
             self._started = (manager, manager.Queue(), pool)
 
@@ -125,7 +153,7 @@ class LocalExecutor:
         if self._started is not None:
             manager, _, pool = self._started
             self._started = None
-            pool.shutdown(wait=False, kill_workers=True)
+            _kill(pool)
             manager.shutdown()
 
     def run(self, fn: Callable[..., Any], calls: Sequence[tuple],
@@ -167,7 +195,10 @@ class LocalExecutor:
             # workers are killed unless every call finished: an error, Ctrl-C,
             # or a caller that stopped iterating; else they exit on their own
             # (nothing is left for them to do: not waited for)
-            pool.shutdown(wait=False, kill_workers=not finished)
+            if finished:
+                pool.shutdown(wait=False)
+            else:
+                _kill(pool)
             manager.shutdown()
 
 
