@@ -371,3 +371,24 @@ def test_the_last_learnings_recognition_is_split_over_the_free_workers(small_con
     (split,) = got
     assert json.dumps(_timeless(split.to_dict()), sort_keys=True) == \
         json.dumps(_timeless(serial.to_dict()), sort_keys=True)
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_run_on_your_own_data_never_writes_over_lasas_report(tmp_path, cli):
+    """Without --out, `iloci evaluate --data` writes runs/<the data set's name>, not
+    runs/lasa (a fresh user's trial: it overwrote the LASA results), and the start line
+    says why one job runs for one fold."""
+    from test_own_data import TINY, _shapes
+
+    root = _shapes(tmp_path / "lab shapes", per=4)
+    (tmp_path / "tiny.toml").write_text(TINY)
+    (tmp_path / "runs" / "lasa").mkdir(parents=True)
+    (tmp_path / "runs" / "lasa" / "metrics.json").write_text("{}")
+    done = cli("evaluate", "--data", str(root), "--config", "tiny.toml", "--folds", "0",
+               "--no-baseline", "--quiet", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "jobs 1 (one per fold: 1 fold(s) to run" in done.stderr
+    assert json.loads((tmp_path / "runs" / "lab_shapes" / "metrics.json").read_text())[
+        "dataset"]["samples"] == 8
+    assert (tmp_path / "runs" / "lasa" / "metrics.json").read_text() == "{}"
+    assert "wrote runs/lab_shapes/metrics.json" in done.stdout

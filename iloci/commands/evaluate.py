@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import re
 import sys
 
 from iloci.config import load_config
@@ -19,7 +21,20 @@ def _jobs(args: argparse.Namespace, config) -> str:
     if config.evaluation.jobs:
         return str(config.evaluation.jobs)
     folds = len(args.folds) if args.folds else config.evaluation.folds
-    return f"{min(default_jobs(), folds)} (one per CPU core)"
+    cores = default_jobs()
+    if folds < cores:
+        return f"{folds} (one per fold: {folds} fold(s) to run, {cores} CPU cores)"
+    return f"{cores} (one per CPU core)"
+
+
+def _default_out(config) -> str:
+    """``runs/lasa``, or for a data set of one's own ``runs/<its name>``: a run on other
+    data never writes over LASA's report (the data set is read here, checked, and kept
+    for the run: :func:`~iloci.data.datasets.load_dataset_once`)."""
+    if not config.data.path:
+        return os.path.join("runs", "lasa")
+    name = load_dataset_once(config.data.path, warn=True).name
+    return os.path.join("runs", re.sub(r"[^\w.-]+", "_", name).strip("._") or "data")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,8 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--split", choices=("concepts", "writers"), default=None,
                    help="concepts: k folds per concept (the paper's); writers: teach some "
                    "writers, recognize the others (default: evaluation.split)")
-    p.add_argument("--out", "-o", default="runs/lasa", help="output directory "
-                   "(default: runs/lasa)")
+    p.add_argument("--out", "-o", default=None, help="output directory (default: "
+                   "runs/lasa; with --data or [data] path, runs/ and the data set's name)")
     p.add_argument("--jobs", "-j", type=int, default=None,
                    help="folds run at once (default: evaluation.jobs; when that is 0, "
                    "one per CPU core)")
@@ -88,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
     # fail now, not after the first fold: the report's libraries, a writable --out
     check_report_extras(baseline=not args.no_baseline
                         and config.evaluation.protocol != "stream")
+    if args.out is None:
+        args.out = _default_out(config)
     writable_dir(args.out, "--out")
     if args.memories:
         writable_dir(args.memories, "--memories")
