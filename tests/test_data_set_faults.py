@@ -154,6 +154,24 @@ def test_broken_files_are_named_once_each_under_keys_of_their_own(digits, tmp_pa
     assert "at least 3 are needed" in text and "min_points, 5 by default" in text
 
 
+def test_a_file_too_short_to_perceive_is_refused_before_learning_naming_it(digits, tmp_path):
+    """3 or 4 points are read as a file, but perception needs min_points (5): such a
+    sample used to be skipped when taught and to stop the run, unnamed, when recognized."""
+    from iloci.config import load_config
+    from iloci.evaluation.evaluate import check_drawings
+
+    root = _export(digits, tmp_path / "d")
+    short = sorted((root / "2").rglob("*.csv"))[0]
+    short.write_text("t,x,y\n0,1,2\n0.01,1,3\n0.02,2,3\n0.03,3,5\n")  # 4 points
+    ds = load_dataset(root)  # readable: 3 points or more
+    with pytest.raises(InvalidInputError) as err:
+        check_drawings(ds, load_config(None))
+    text = str(err.value)
+    assert f"{short}: 4 point(s)" in text and "min_points = 5" in text
+    assert text.count(".csv") == 1  # the long drawings pass
+    check_drawings(ds, load_config({"sensorimotor": {"min_points": 4}}))
+
+
 def test_a_manifest_called_manifest_names_the_data_set_after_its_folder(digits, tmp_path):
     root = _export(digits, tmp_path / "letters")
     rows = "".join(f"{f.relative_to(root).as_posix()},{f.parts[-3]}\n"
