@@ -9,6 +9,7 @@ manifests) is read.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -131,6 +132,76 @@ def test_the_same_drawing_twice_is_refused_naming_both_files(digits, tmp_path):
     assert f"copy.csv: the same drawing as {first} (labelled '2' there, '3' here)" in text
 
 
+def test_broken_files_are_named_once_each_under_keys_of_their_own(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    two = sorted((root / "2").rglob("*.csv"))
+    two[0].write_text("t,x,y\n0,1,2\n0.01,1,3\n")            # 2 points
+    two[1].write_text("t,x,y\n0,5,6\n")                       # 1 point
+    two[2].write_text("t,x,y\n")                               # a header alone
+    three = sorted((root / "3").rglob("*.csv"))[0]
+    three.write_text("abscisse;ordonnée;pression\n1,5;2;0\n2;3;0\n3;4;0\n")
+    with pytest.raises(InvalidInputError) as err:
+        load_dataset(root)
+    text = str(err.value)
+    for f in (*two[:3], three):
+        assert text.count(str(f)) == 1, f  # each file named, once
+        assert f"{f}: {f.name}:" not in text
+    keys = re.findall(r"demonstration '(2/\d+)'", text)
+    assert len(keys) == len(set(keys)) == 3  # no two files under one key
+    # the header quoted as the file has it, separators and all
+    assert "header 'abscisse;ordonnée;pression'" in text
+    # the two limits, said together: 3 points to read a file, min_points (5) to read a drawing
+    assert "at least 3 are needed" in text and "min_points, 5 by default" in text
+
+
+def test_a_file_too_short_to_perceive_is_refused_before_learning_naming_it(digits, tmp_path):
+    """3 or 4 points are read as a file, but perception needs min_points (5): such a
+    sample used to be skipped when taught and to stop the run, unnamed, when recognized."""
+    from iloci.config import load_config
+    from iloci.evaluation.evaluate import check_drawings
+
+    root = _export(digits, tmp_path / "d")
+    short = sorted((root / "2").rglob("*.csv"))[0]
+    short.write_text("t,x,y\n0,1,2\n0.01,1,3\n0.02,2,3\n0.03,3,5\n")  # 4 points
+    ds = load_dataset(root)  # readable: 3 points or more
+    with pytest.raises(InvalidInputError) as err:
+        check_drawings(ds, load_config(None))
+    text = str(err.value)
+    assert f"{short}: 4 point(s)" in text and "min_points = 5" in text
+    assert text.count(".csv") == 1  # the long drawings pass
+    check_drawings(ds, load_config({"sensorimotor": {"min_points": 4}}))
+
+
+def test_a_manifest_called_manifest_names_the_data_set_after_its_folder(digits, tmp_path):
+    root = _export(digits, tmp_path / "letters")
+    rows = "".join(f"{f.relative_to(root).as_posix()},{f.parts[-3]}\n"
+                   for f in sorted(root.rglob("*.csv")))
+    (root / "manifest.csv").write_text("file,concept\n" + rows)
+    (root / "lab-2026.csv").write_text("file,concept\n" + rows)
+    assert load_dataset(root / "manifest.csv").name == "letters"
+    assert load_dataset(root).name == "letters"
+    assert load_dataset(root / "lab-2026.csv").name == "lab-2026"
+
+
+def test_each_samples_key_leads_to_its_file_concept_and_writer(digits, tmp_path):
+    from iloci.evaluation.report import write_samples_csv
+
+    root = _export(digits, tmp_path / "d")
+    ds = load_dataset(root)
+    table = ds.sample_files()
+    assert list(table) == [d.key for d in ds.demos]
+    for d in ds.demos:
+        s = table[d.key]
+        assert load_trajectory(root / s["file"]).positions.tolist() == d.positions.tolist()
+        assert s["concept"] == d.true_concept == Path(s["file"]).parts[0]
+        assert s["writer"] == Path(s["file"]).parts[1] and s["session"] is None
+    text = write_samples_csv(tmp_path / "samples.csv", table).read_text()
+    first = next(iter(table))
+    assert text.splitlines()[:2] == ["key,file,concept,writer,session",
+                                     f"{first},{table[first]['file']},"
+                                     f"{table[first]['concept']},{table[first]['writer']},"]
+
+
 def test_manifests_from_spreadsheets_are_read_or_named(digits, tmp_path):
     root = _export(digits, tmp_path / "d")
     rows = [(f.relative_to(root).as_posix().replace("/", "\\"), f.parts[-3], f.parts[-2])
@@ -217,6 +288,8 @@ def test_the_papers_lasa_figure_is_not_shown_beside_a_users_data_set():
                                      "concepts": {"a": 1}, "checksum": "0" * 64}})
     assert "paper (Alibeigi et al.) | 91.35" in lasa
     assert "paper" not in own
+    # which std the ± is (numpy's default over the folds, not the sample std)
+    assert "± is the population standard deviation over the folds (ddof=0" in own
 
 
 def test_the_guides_recipe_turns_a_tree_of_xml_logs_into_a_data_set(digits, tmp_path,

@@ -285,7 +285,7 @@ def test_bad_ink_files_in_a_data_set_are_listed_together_before_learning(tmp_pat
     text = str(err.value)
     assert "3 file(s) cannot be used; nothing was learned" in text
     assert "6/broken.xml: broken.xml is not a gesture log" in text
-    assert "7/empty.inkml: empty.inkml: no pen-down trace" in text
+    assert "7/empty.inkml: no pen-down trace" in text  # the file named once
     assert "9/svg.xml: svg.xml, line 1: the root element is <svg>" in text
     assert ".inkml (InkML) or .xml ($1/$N gesture log)" in text
 

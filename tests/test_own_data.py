@@ -3,6 +3,7 @@ manifests with their errors, and the oracle on data that is not LASA."""
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -373,6 +374,30 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
         assert set(f["true_concepts"]) == {"circle", "line", "square"}
     report = (out / "report.md").read_text()
     assert "on shapes (writer-disjoint folds)" in report and ds.checksum in report
+    # each fold names the writers it was taught and those it recognized ...
+    plan = writer_folds(ds.samples, len(folds), seed=metrics["config"]["evaluation"]["seed"])
+    for row, (learn, test) in zip(metrics["folds"], plan):
+        assert row["writers_taught"] == sorted({ds.samples[i].writer for i in learn})
+        assert row["writers_recognized"] == sorted({ds.samples[i].writer for i in test})
+        assert set(row["writers_taught"]).isdisjoint(row["writers_recognized"])
+        assert (f"| {row['fold']} | {', '.join(row['writers_taught'])} | "
+                f"{', '.join(row['writers_recognized'])} |") in report
+    # ... and every key folds.json names a sample by leads to its file
+    assert set(metrics["samples"]) == {d.key for d in ds.demos}
+    for f in folds:
+        for key in f["learn"] + f["test"]:
+            s = metrics["samples"][key]
+            assert (root / s["file"]).is_file() and s["file"].split("/")[0] == s["concept"]
+            assert s["writer"] == s["file"].split("/")[1]
+    with open(out / "samples.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert [(r["key"], r["file"], r["concept"], r["writer"]) for r in table] == [
+        (k, v["file"], v["concept"], v["writer"]) for k, v in metrics["samples"].items()]
+    assert "`samples.csv`" in report and "paths's" not in report
+    assert "± is the population standard deviation over the folds (ddof=0" in report
+    # the code that ran: its version and, from a git checkout (this one), its commit
+    from iloci.evaluation.provenance import code_commit
+    assert metrics["versions"].get("iloci_commit") == code_commit()
     # in worker processes (sent the demonstrations the parent read): the same results
     out2 = tmp_path / "run2"
     done = cli("evaluate", "--data", str(root), "--split", "writers", "--config", str(cfg),
@@ -389,6 +414,26 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
         assert json.dumps(timeless(json.loads((out2 / name).read_text())), sort_keys=True) \
             == json.dumps(timeless(json.loads((out / name).read_text())), sort_keys=True), name
     assert "$1 recognizer" in report and "best baseline" in report
+
+
+def test_the_code_commit_is_recorded_from_a_checkout_and_never_fails_a_run(monkeypatch):
+    import re
+    import subprocess
+
+    from iloci.evaluation import provenance
+
+    sha = provenance.code_commit()
+    root = Path(provenance.__file__).resolve().parents[2]
+    assert (sha is not None) == (root / ".git").exists()
+    if sha is not None:
+        assert re.fullmatch(r"[0-9a-f]{40}", sha)
+        assert provenance.versions()["iloci_commit"] == sha
+
+    def hangs(*args, **kwargs):
+        raise subprocess.TimeoutExpired(args[0], kwargs.get("timeout", 0))
+
+    monkeypatch.setattr(subprocess, "run", hangs)
+    assert provenance.code_commit() is None and "iloci_commit" not in provenance.versions()
 
 
 @pytest.mark.usefixtures("default_back_ends")

@@ -237,7 +237,7 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
     head = _rows(sample, delimiter) if sample is not text else None
     if head and not _numeric_rows(head[:1], decimal_comma):
         head_names = [c.strip() for c in head[0][1]]
-        cols = _columns(head_names, len(head_names), p.name, how)
+        cols = _columns(head_names, len(head_names), p.name, how, _line_at(text, head[0][0]))
         body = text
         for _ in range(head[0][0]):  # the body starts after the header's line
             body = body[body.find("\n") + 1:]
@@ -259,8 +259,10 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
     if not rows:
         raise InvalidDemonstrationError(f"{p.name}: the file holds no rows of numbers.")
     header: list[str] | None = None
+    header_line = ""
     if not _numeric_rows(rows[:1], decimal_comma):
         header = [c.strip() for c in rows[0][1]]
+        header_line = _line_at(text, rows[0][0])
         rows = rows[1:]
     width = len(header) if header is not None else len(rows[0][1])
     for line, fields in rows:
@@ -269,7 +271,7 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
                 f"{p.name}: line {line} has {len(fields)} fields where "
                 f"{'the header has' if header else 'line ' + str(rows[0][0]) + ' has'} "
                 f"{width} ({how}).")
-    cols = _columns(header, width, p.name, how)
+    cols = _columns(header, width, p.name, how, header_line)
     names = header or [("t", "x", "y")[i] if width == 3 else ("x", "y")[i]
                        for i in range(width)]
     used = [c for c in (cols["t"], cols["x"], cols["y"]) if c is not None]
@@ -323,8 +325,24 @@ def _loadtxt(body: str, delimiter: str | None, decimal_comma: bool, width: int
     return values
 
 
-def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[str, Any]:
-    """Indices of the t (or None), x and y columns and the time unit (s)."""
+def _line_at(text: str, n: int) -> str:
+    """Line ``n`` (1-based) of ``text`` as it is in the file, without its line end."""
+    start = 0
+    for _ in range(n - 1):
+        start = text.find("\n", start) + 1
+        if not start:
+            return ""
+    end = text.find("\n", start)
+    return text[start:end if end >= 0 else len(text)].rstrip("\r")
+
+
+def _columns(header: list[str] | None, width: int, name: str, how: str,
+             shown: str = "") -> dict[str, Any]:
+    """Indices of the t (or None), x and y columns and the time unit (s).
+
+    ``shown`` is the header's line as the file has it (its separators), quoted in
+    errors; by default the names joined with commas.
+    """
     if header is None:
         if width == 2:
             return {"t": None, "x": 0, "y": 1, "unit": 1.0}
@@ -336,7 +354,7 @@ def _columns(header: list[str] | None, width: int, name: str, how: str) -> dict[
             f"ignored) ({how}).")
     split = [_split_name(h) for h in header]
     bases = [b for b, _ in split]
-    shown = ",".join(header)
+    shown = shown or ",".join(header)
 
     def find(names: Iterable[str]) -> list[int]:
         return [i for i, b in enumerate(bases) if b in names]

@@ -92,7 +92,8 @@ class DataSet:
     Attributes
     ----------
     name : str
-        The folder's (or manifest's) name.
+        The folder's name; a manifest's file name without its suffix, or its folder's
+        name when the manifest is ``manifest.csv`` / ``manifest.json``.
     root : str
         Absolute path of the folder the sample paths are relative to.
     source : str
@@ -125,6 +126,17 @@ class DataSet:
     def writers(self) -> list[str]:
         """The writers named, sorted (empty when none are)."""
         return sorted({s.writer for s in self.samples if s.writer is not None})
+
+    def sample_files(self) -> dict[str, dict[str, str | None]]:
+        """Each sample's key (``folds.json``'s ``"circle/0"``) -> its ``file`` (relative to
+        :attr:`root`, ``/`` separated, as a manifest names it), ``concept``, ``writer`` and
+        ``session`` (None when not named): ``metrics.json``'s ``samples``."""
+        return {d.key: {"file": s.path, "concept": s.concept, "writer": s.writer,
+                        "session": s.session} for s, d in zip(self.samples, self.demos)}
+
+    def writers_of(self, indices: Sequence[int]) -> list[str]:
+        """The writers (sorted, each once) of the samples at ``indices``."""
+        return sorted({str(w) for i in indices if (w := self.samples[i].writer) is not None})
 
     def summary(self) -> dict[str, Any]:
         """What ``metrics.json``'s ``dataset`` records: name, path, size, checksum, ..."""
@@ -293,6 +305,16 @@ def drawing_key(positions: np.ndarray) -> bytes:
     return hashlib.sha256(np.ascontiguousarray(positions, dtype="<f8").tobytes()).digest()
 
 
+def _naming(f: Path, message: str) -> str:
+    """``message`` about file ``f`` led by its full path, once (a reader's message may
+    already start with the file's name or path)."""
+    for said in (f"{f}: ", f"{f.name}: "):
+        if message.startswith(said):
+            message = message[len(said):]
+            break
+    return f"{f}: {message}"
+
+
 def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstration],
                   counter: Counter[str], timed: dict[bool, list[str]],
                   units: dict[str, list[str]], problems: list[str], h: Any,
@@ -309,13 +331,15 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
     for i, s in enumerate(samples):
         report(i / max(len(samples), 1))
         f = root / s.path
+        # every file takes its number, read or not: two broken files never share a key
+        index = counter[s.concept]
+        counter[s.concept] += 1
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", TimeUnitWarning)
-                d = load_trajectory(f, shape=s.concept, true_concept=s.concept,
-                                    index=counter[s.concept])
+                d = load_trajectory(f, shape=s.concept, true_concept=s.concept, index=index)
         except InvalidInputError as exc:
-            problems.append(f"{f}: {exc}")
+            problems.append(_naming(f, str(exc)))
             continue
         for w in caught:
             if issubclass(w.category, TimeUnitWarning):
@@ -329,7 +353,6 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
             problems.append(f"{f}: the same drawing as {root / first.path}{same}; a copy would "
                             "be taught in one fold and recognized in another: remove one")
             continue
-        counter[s.concept] += 1
         demos.append(d)
         timed[_has_times(d)].append(s.path)
         unit = _position_unit(f)
@@ -394,7 +417,9 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
     if manifest is not None:
         root = manifest.parent
         samples, problems = _read_manifest(manifest)
-        layout, name = "manifest", (p.name if p.is_dir() else manifest.stem)
+        # a manifest called manifest.csv names its folder's data set, not "manifest"
+        layout, name = "manifest", (p.name if p.is_dir() else manifest.parent.resolve().name
+                                    if manifest.name.lower() in _MANIFESTS else manifest.stem)
         for s in samples:
             if (root / s.path).is_dir():
                 problems.append(f"{root / s.path}: listed in {manifest.name} but it is a "

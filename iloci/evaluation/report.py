@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+import csv
+import io
 import json
 from pathlib import Path
 from typing import Any
@@ -106,6 +108,11 @@ def memory_warning(metrics: dict[str, Any]) -> str | None:
             "learning sets).")
 
 
+#: What every "mean ± std" of an evaluation means (:func:`~iloci.evaluation.metrics.mean_std`).
+STD_NOTE = ("the population standard deviation over the folds (ddof=0, numpy's default; the "
+            "sample std, ddof=1, is sqrt(n/(n-1)) times it for n folds)")
+
+
 def headline(metrics: dict[str, Any]) -> str:
     """The headline table (Markdown), also printed by ``iloci evaluate``."""
     rows = [
@@ -129,6 +136,7 @@ def headline(metrics: dict[str, Any]) -> str:
         verb, by = _versus(m["ccr_mean"], bases[best]["ccr_mean"])
         rows += ["", f"best baseline: {BASELINE_LABELS.get(best, best)}; iloci {verb} it"
                  f"{by} on the same folds."]
+    rows += ["", f"± is {STD_NOTE}"]
     d = metrics.get("dataset")
     if d:
         writers = f", {d['writers']} writers" if d.get("writers") else ""
@@ -199,6 +207,24 @@ def _sparse_table(concepts: Sequence[str], conf: np.ndarray, cmat: np.ndarray) -
     return rows
 
 
+def write_samples_csv(path: str | Path, samples: dict[str, dict[str, Any]]) -> Path:
+    """``samples.csv``: one row per sample, ``key,file,concept,writer,session``.
+
+    ``key`` is the name ``folds.json`` gives the sample (``c/35``); ``file`` is
+    relative to the data set's folder, as a manifest names it; an unnamed
+    writer or session is an empty cell. ``samples`` is ``metrics.json``'s
+    ``samples`` (:meth:`~iloci.data.datasets.DataSet.sample_files`).
+    """
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["key", "file", "concept", "writer", "session"])
+    for key, s in samples.items():
+        w.writerow([key, s["file"], s["concept"], s.get("writer") or "",
+                    s.get("session") or ""])
+    write_text_atomic(path, buf.getvalue())
+    return Path(path)
+
+
 def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
                   results: Sequence[FoldResult]) -> Path:
     """Write an evaluation to ``out_dir``; return the path of report.md.
@@ -207,8 +233,9 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     ----------
     out_dir : path-like
         Created if missing. Receives ``metrics.json``, ``folds.json``
-        (:meth:`FoldResult.to_dict` of each fold), ``report.md`` and
-        ``figures/*.png``.
+        (:meth:`FoldResult.to_dict` of each fold), ``report.md``,
+        ``figures/*.png`` and, for a data set of one's own, ``samples.csv``
+        (:func:`write_samples_csv`).
     metrics : dict
         :func:`~iloci.evaluation.summary.summarize`'s result.
     results : sequence of FoldResult
@@ -220,6 +247,10 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     fig_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "metrics.json", metrics)
     write_json_atomic(out / "folds.json", [r.to_dict() for r in results])
+    if metrics.get("samples"):
+        write_samples_csv(out / "samples.csv", metrics["samples"])
+    else:  # no earlier --data run's table beside a LASA run's results
+        (out / "samples.csv").unlink(missing_ok=True)
 
     true = [t for r in results for t in r.true_concepts]
     pred = [p for r in results for p in r.predicted]
@@ -340,6 +371,19 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
                   + f"; read from `{d.get('path', '')}`; SHA-256 `{d['checksum']}`.", "",
                   "Samples per concept: " + ", ".join(f"{c} {n}" for c, n in
                                                        d["concepts"].items()) + ".", ""]
+        if m.get("samples"):
+            lines += ["`samples.csv` (and `metrics.json`'s `samples`) gives each sample's "
+                      "file (relative to the data set's folder), concept and writer under "
+                      "the key `folds.json` names it by (`" + next(iter(m["samples"]))
+                      + "`).", ""]
+        taught = [f for f in m["folds"] if "writers_taught" in f]
+        if taught:
+            lines += ["Writers per fold (writer-disjoint: each fold is taught by one group "
+                      "and recognizes the drawings of the others):", "",
+                      "| fold | writers taught | writers recognized |", "|---|---|---|"]
+            lines += [f"| {f['fold']} | {', '.join(f['writers_taught'])} | "
+                      f"{', '.join(f['writers_recognized'])} |" for f in taught]
+            lines.append("")
     if baseline_rows:
         lines += ["## Baselines", "",
                   "Each baseline stores every learning demonstration with its true concept "
@@ -348,7 +392,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         for name, b in m["baselines"].items():
             lines.append(f"- **{BASELINE_LABELS.get(name, name)}**: {b['method']}; "
                          f"{_pct(b['ccr_mean'])} ± {_pct(b['ccr_std'])} %.")
-        lines += ["", f"The confusion below is {BASELINE_LABELS['dtw_normalised']}'s."]
+        lines += ["", f"The confusion below is that of {BASELINE_LABELS['dtw_normalised']}."]
         lines += baseline_rows
     if m.get("robustness"):
         figures.plot_robustness(m["robustness"], fig_dir / "robustness.png")

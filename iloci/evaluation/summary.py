@@ -35,11 +35,15 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
     -------
     dict
         ``ccr_mean``, ``ccr_std``, ``ccr_folds``, mean and std of every
-        per-fold count, ``folds`` (per-fold rows), ``paper``; when every
+        per-fold count (every std here, a baseline's too, is the population
+        standard deviation over the folds, ddof=0:
+        :func:`~iloci.evaluation.metrics.mean_std`; ``paper``'s is the
+        paper's figure, whichever std it used), ``folds`` (per-fold rows), ``paper``; when every
         fold ran the baselines: ``baselines`` (name -> method, CCR mean,
         std, per fold, seconds), ``best_baseline`` (the name of the highest
         mean CCR) and ``baseline`` (``dtw_normalised``'s entry, as before);
-        ``seed``, ``config``, ``versions``, ``machine``. :func:`evaluate
+        ``seed``, ``config``, ``versions`` (with ``iloci_commit`` when run from a
+        git checkout: :func:`~iloci.evaluation.provenance.versions`), ``machine``. :func:`evaluate
         <iloci.evaluation.evaluate.evaluate>` adds ``dataset`` and ``split``.
     """
     results = [f.to_dict() for f in sorted(folds, key=lambda f: f.fold)]

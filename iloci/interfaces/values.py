@@ -104,7 +104,8 @@ class Demonstration:
         if len(pos) < 3:
             raise InvalidDemonstrationError(
                 f"{label} has {len(pos)} point(s); at least 3 are needed to "
-                "define a motion."
+                "define a motion (and to read it as a drawing, [sensorimotor] min_points, "
+                "5 by default, once the pen's rests are trimmed)."
             )
         bad = ~np.isfinite(pos)
         if bad.any():
