@@ -154,6 +154,7 @@ def test_broken_files_are_named_once_each_under_keys_of_their_own(digits, tmp_pa
     assert "at least 3 are needed" in text and "min_points, 5 by default" in text
 
 
+@pytest.mark.usefixtures("default_back_ends")  # load_config resolves the default model
 def test_a_file_too_short_to_perceive_is_refused_before_learning_naming_it(digits, tmp_path):
     """3 or 4 points are read as a file, but perception needs min_points (5): such a
     sample used to be skipped when taught and to stop the run, unnamed, when recognized."""
