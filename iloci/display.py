@@ -98,11 +98,16 @@ class FoldProgress(Bars):
     """A bar per evaluation fold, fed by evaluate()'s progress messages.
 
     Call it with each message dict (``kind``: ``fold_queued``,
-    ``fold_start``, ``interaction``, ``rehearsal``, ``fold_done``).
+    ``fold_start``, ``interaction``, ``rehearsal``, ``recognition``,
+    ``recognized``, ``fold_done``). The recognition of a fold's test set
+    (a minute or more on a few hundred drawings) gets a line when it
+    starts (``fold 2: recognizing 256 test drawings ...``) and one when it,
+    or each part of it run in another worker, ends.
     """
 
     def __init__(self, stream: TextIO | None = None) -> None:
         super().__init__(stream, unit="demos")
+        self._recognizing: set[Any] = set()  # folds whose recognition was announced
 
     def __call__(self, msg: dict) -> None:
         k, kind = msg["fold"], msg["kind"]
@@ -114,6 +119,15 @@ class FoldProgress(Bars):
             self.update(k, 0, "learning")
         elif kind == "interaction":
             self.update(k, msg["step"] + 1, "learning")
+        elif kind == "recognition" and k not in self._recognizing:
+            self._recognizing.add(k)  # the first part to start: the parts run at once
+            parts = f" in {msg['parts']} parts" if msg["parts"] > 1 else ""
+            self.update(k, self.total(k), f"recognizing {msg['total']} test drawings")
+            self.log(f"fold {k}: recognizing {msg['total']} test drawings{parts} ...")
+        elif kind == "recognized":
+            what = (f"part {msg['part'] + 1} of {msg['parts']} ({msg['drawings']} drawings)"
+                    if msg["parts"] > 1 else f"{msg['drawings']} test drawings")
+            self.log(f"fold {k}: recognized {what} in {msg['seconds']:.0f} s")
         elif kind == "fold_done":
             self.update(k, self.total(k), f"done in {msg['seconds']:.0f} s, "
                                           f"CCR {100 * msg['ccr']:.1f} %", milestone=True)

@@ -141,6 +141,45 @@ def test_parallel_folds_give_the_same_results_as_serial(small_config, run_dir, t
         assert len(agent.memory) == b.entries
 
 
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_progress_tells_when_a_folds_test_set_is_recognized(small_config, jobs):
+    """After a fold's last learning message its test set is recognized (a minute or more
+    on a few hundred drawings): a message when that starts and one when each part ends
+    (jobs=2: the one fold's recognition split over the 2 workers), printed by the
+    command line's progress display; with jobs=1 (in this process) too."""
+    import io
+
+    from iloci.display import FoldProgress
+
+    msgs: list[dict] = []
+    _, (fold,) = evaluate(small_config, jobs=jobs, folds=[0], baseline=False,
+                          progress=msgs.append)
+    n, parts = len(fold.answers), jobs
+    kinds = [m["kind"] for m in msgs]
+    started = [m for m in msgs if m["kind"] == "recognition"]
+    ended = [m for m in msgs if m["kind"] == "recognized"]
+    assert [(m["part"], m["parts"], m["total"]) for m in sorted(started, key=lambda m: m[
+        "part"])] == [(k, parts, n) for k in range(parts)]
+    assert sorted(m["part"] for m in ended) == list(range(parts))
+    assert sum(m["drawings"] for m in ended) == n and all(m["seconds"] > 0 for m in ended)
+    last_learning = max(i for i, k in enumerate(kinds) if k == "interaction")
+    assert last_learning < kinds.index("recognition")
+    assert max(i for i, k in enumerate(kinds) if k == "recognized") < kinds.index("fold_done")
+    log = io.StringIO()
+    with FoldProgress(log) as bars:
+        for m in msgs:
+            bars(m)
+    text = log.getvalue()
+    if parts == 1:
+        assert f"fold 0: recognizing {n} test drawings ...\n" in text
+        assert f"fold 0: recognized {n} test drawings in " in text
+    else:
+        assert text.count(f"fold 0: recognizing {n} test drawings in 2 parts ...\n") == 1
+        for k, m in enumerate(sorted(ended, key=lambda m: m["part"])):
+            assert f"fold 0: recognized part {k + 1} of 2 ({m['drawings']} drawings) in " \
+                in text
+
+
 def test_untaught_concepts_leave_the_learning_set_for_the_test_set(small_config):
     from iloci.config import load_config
     from iloci.data import load_lasa

@@ -21,8 +21,9 @@ This module is the job: what to run and where (:func:`evaluate`,
 - :mod:`iloci.evaluation.summary` and :mod:`iloci.evaluation.provenance`:
   ``metrics.json``.
 
-Progress (per fold and per interaction, with ETA) is reported through a
-callback fed by the ``iloci_on_interaction`` observer hook.
+Progress (per fold and per interaction, with ETA, and the recognition of
+each test set) is reported through a callback fed by the
+``iloci_on_interaction`` observer hook and the fold tasks.
 """
 
 from __future__ import annotations
@@ -93,7 +94,11 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         ``executor="local"`` and ``jobs == 1`` they run in this process.
     progress : callable, optional
         Receives dicts: ``{"kind": "fold_queued"|"fold_start"|"interaction"|
-        "rehearsal"|"fold_done", "fold": k, ...}``.
+        "rehearsal"|"recognition"|"recognized"|"fold_done", "fold": k, ...}``
+        (``recognition`` and ``recognized``: when the recognition of a fold's
+        test set, or of each part of it split over workers, starts and ends;
+        :func:`~iloci.evaluation.fold.recognize_test_set`), with ``jobs == 1``
+        too.
     folds : sequence of int, optional
         Run only these folds (default: all).
     baseline : bool

@@ -30,7 +30,7 @@ from iloci.evaluation.robustness import robustness_suite
 from iloci.hookspecs import hookimpl
 from iloci.plugins import get_plugin_manager, get_registry
 
-__all__ = ["LearnedFold", "fold_baselines", "learn_fold", "run_fold"]
+__all__ = ["LearnedFold", "fold_baselines", "learn_fold", "recognize_test_set", "run_fold"]
 
 
 class _ProgressObserver:
@@ -99,9 +99,55 @@ def run_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seque
                                 details=details, plugin_manager=plugin_manager,
                                 memory_dir=memory_dir, overrides=overrides,
                                 robustness=robustness, motion_cache=motion_cache)
+    recs, seconds = recognize_test_set(agent, fold, test, send=send)
+    return learned.complete(recs, seconds)
+
+
+def recognize_test_set(agent: Agent, fold: int, test: Sequence[Any], *,
+                       send: Callable[[dict], None] | None = None,
+                       part: tuple[int, int] = (0, 1), total: int | None = None
+                       ) -> tuple[list[Any], float]:
+    """Recognize ``test`` (a fold's test set, or part of it) with ``agent``; tell ``send``.
+
+    ``send`` receives ``{"fold": fold, "kind": "recognition", "part": k,
+    "parts": n, "drawings": len(test), "total": total}`` before the
+    recognition and the same with ``"kind": "recognized"`` and
+    ``"seconds"`` after it (nothing for an empty ``test``), so a progress
+    display shows the fold recognizing: on a few hundred drawings it takes
+    a minute or more, after the last learning message.
+
+    Parameters
+    ----------
+    agent : Agent
+        The fold's learned agent.
+    fold : int
+    test : sequence of Demonstration
+    send : callable, optional
+    part : (int, int)
+        ``(k, n)``: ``test`` is part ``k`` (0-based) of ``n`` of the fold's
+        test set (:func:`~iloci.evaluation.parallel.run_folds` splits one
+        over free workers); ``(0, 1)``: the whole test set.
+    total : int, optional
+        Drawings in the fold's whole test set (default ``len(test)``).
+
+    Returns
+    -------
+    (list of Recognition, float)
+        One recognition per drawing of ``test``, in order, and the wall
+        time of the recognition in seconds (the messages not counted).
+    """
+    if not len(test):
+        return [], 0.0
+    msg = {"fold": fold, "part": part[0], "parts": part[1], "drawings": len(test),
+           "total": len(test) if total is None else total}
+    if send is not None:
+        send({**msg, "kind": "recognition"})
     t0 = time.perf_counter()
-    recs = agent.recognize(list(test)) if len(test) else []
-    return learned.complete(recs, time.perf_counter() - t0)
+    recs = agent.recognize(list(test))
+    seconds = time.perf_counter() - t0
+    if send is not None:
+        send({**msg, "kind": "recognized", "seconds": seconds})
+    return recs, seconds
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,6 @@ import json
 import os
 import pickle
 import tempfile
-import time
 from typing import Any
 
 import numpy as np
@@ -44,7 +43,8 @@ import numpy as np
 from iloci.agent import Agent, build
 from iloci.config import load_config
 from iloci.errors import InvalidInputError
-from iloci.evaluation.fold import LearnedFold, fold_baselines, learn_fold, run_fold
+from iloci.evaluation.fold import (LearnedFold, fold_baselines, learn_fold,
+                                  recognize_test_set, run_fold)
 from iloci.evaluation.folds import fold_memory_name
 from iloci.hookspecs import hookimpl
 from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, Demonstration
@@ -291,19 +291,22 @@ class _Recognized:
 
 
 def _recognize_part_in_worker(config_dict: dict, fold: int, part: tuple[int, int],
-                              test: list[Any], specs: Sequence[Any] | LocalContext | None,
+                              test: list[Any], total: int,
+                              specs: Sequence[Any] | LocalContext | None,
                               agent_path: str, motions: list[Any], queue: Any) -> Any:
     """Recognize part ``part = (k, parts)`` of a fold's test set with its saved agent, in a
-    worker (``test``: that part's demonstrations; ``(0, 1)``: the whole test set;
-    ``motions``: those of their motions other workers converted)."""
+    worker (``test``: that part's demonstrations, of ``total`` in the test set; ``(0, 1)``:
+    the whole test set; ``motions``: those of their motions other workers converted).
+    ``queue.put`` receives a message when the part starts and one when it ends
+    (:func:`~iloci.evaluation.fold.recognize_test_set`)."""
     pm = _worker_plugins(specs)
     agent = Agent.load(agent_path, config_dict, plugin_manager=pm)
     cache = _motion_cache(config_dict, specs)
     cache.add(motions)
     agent.motion_cache = cache
-    t0 = time.perf_counter()
-    recs = agent.recognize(test)
-    return _Recognized(fold, recs, time.perf_counter() - t0, *part)
+    send = None if queue is None else queue.put
+    recs, seconds = recognize_test_set(agent, fold, test, send=send, part=part, total=total)
+    return _Recognized(fold, recs, seconds, *part)
 
 
 def run_folds(config_dict: dict, tasks: Sequence[FoldTask], demos: Sequence[Any],
@@ -331,7 +334,9 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], demos: Sequence[Any]
         :class:`LocalContext` for an executor running the folds in this process.
     emit : callable
         Receives every progress message (``fold_queued``, ``fold_start``,
-        ``interaction``, ``rehearsal``), in the parent process.
+        ``interaction``, ``rehearsal``, and ``recognition`` / ``recognized``
+        around the recognition of each test set or part of one:
+        :func:`~iloci.evaluation.fold.recognize_test_set`), in the parent process.
     on_result : callable
         Called in the parent with each :class:`~iloci.evaluation.results.FoldResult`
         as its fold finishes.
@@ -390,7 +395,8 @@ def run_folds(config_dict: dict, tasks: Sequence[FoldTask], demos: Sequence[Any]
             running[0] += n
             parts = [pick(task.test[cut[k]:cut[k + 1]]) for k in range(n)]
             return [(_recognize_part_in_worker,
-                     (config_dict, task.fold, (k, n), part, specs, agent_path(task),
+                     (config_dict, task.fold, (k, n), part, len(task.test), specs,
+                      agent_path(task),
                       [motions[d.key] for d in part if d.key in motions]))
                     for k, part in enumerate(parts)]
 
