@@ -416,6 +416,37 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
     assert "$1 recognizer" in report and "best baseline" in report
 
 
+@pytest.mark.usefixtures("default_back_ends")
+def test_the_stream_protocol_on_a_data_set_says_which_sample_is_which(tmp_path):
+    """--protocol stream on a data set writes samples.csv and metrics.json's samples and
+    dataset, as the folds protocol does: every key stream.json names leads to its file."""
+    from iloci.cli import main
+
+    root = _shapes(tmp_path / "shapes", per=4, writers=("ann", "bob"))
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(TINY)
+    out = tmp_path / "stream"
+    assert main(["evaluate", "--data", str(root), "--protocol", "stream", "--config",
+                 str(cfg), "--out", str(out), "--quiet"]) == 0
+    ds = load_dataset(root)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["samples"] == ds.sample_files()
+    assert metrics["dataset"]["checksum"] == ds.checksum and metrics["dataset"]["samples"] == 8
+    steps = json.loads((out / "stream.json").read_text())
+    assert len(steps) == 8
+    for step in steps:
+        s = metrics["samples"][step["demo"]]
+        assert (root / s["file"]).is_file() and s["concept"] == step["true"]
+        assert s["writer"] == s["file"].split("/")[1]
+    with open(out / "samples.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert [(r["key"], r["file"], r["concept"], r["writer"]) for r in table] == [
+        (k, v["file"], v["concept"], v["writer"]) for k, v in metrics["samples"].items()]
+    report = (out / "report.md").read_text()
+    assert "8 demonstrations of shapes" in report and "`samples.csv`" in report
+    assert "`stream.json` names it by" in report
+
+
 def test_the_code_commit_is_recorded_from_a_checkout_and_never_fails_a_run(monkeypatch):
     import re
     import subprocess

