@@ -293,19 +293,22 @@ def test_the_papers_lasa_figure_is_not_shown_beside_a_users_data_set():
     assert "± is the population standard deviation over the folds (ddof=0" in own
 
 
-def test_the_guides_recipe_turns_a_tree_of_xml_logs_into_a_data_set(digits, tmp_path,
-                                                                     monkeypatch):
-    """docs/guide.md, "Your own shapes": its Python block writes a manifest for a tree of
-    gesture logs laid out as the $1 logs are (writer/speed/gesture+number.xml), run on logs
-    of real strokes (time stamps of a 15.6 ms clock, in ms), which are then read as they
-    are."""
-    import re
-
+def _guide_recipes() -> list[str]:
+    """The Python blocks of docs/guide.md's "Your own shapes" section."""
     from conftest import ROOT
 
     guide = (ROOT / "docs" / "guide.md").read_text(encoding="utf-8")
     section = guide[guide.index("## Your own shapes"):guide.index("## Teaching the robot")]
-    (recipe,) = re.findall(r"^```python\n(.*?)^```$", section, re.S | re.M)
+    return re.findall(r"^```python\n(.*?)^```$", section, re.S | re.M)
+
+
+def test_the_guides_recipe_turns_a_tree_of_xml_logs_into_a_data_set(digits, tmp_path,
+                                                                     monkeypatch):
+    """docs/guide.md, "Your own shapes": its Python block that writes a manifest for a tree of
+    gesture logs laid out as the $1 logs are (writer/speed/gesture+number.xml), run on logs
+    of real strokes (time stamps of a 15.6 ms clock, in ms), which are then read as they
+    are."""
+    (recipe,) = [b for b in _guide_recipes() if "xml_logs" in b]
     words = {"2": "two", "3": "three", "6": "six"}
     count: dict[str, int] = {}
     for s in digits:
@@ -329,6 +332,33 @@ def test_the_guides_recipe_turns_a_tree_of_xml_logs_into_a_data_set(digits, tmp_
     assert all(np.all(np.diff(d.times) > 0) for d in ds.demos)  # the clock's repeats spread
     assert 0.05 < ds.demos[0].times[-1] - ds.demos[0].times[0] < 10  # seconds, from ms
     check_protocol(ds, 3, "writers")
+
+
+def test_the_guides_unipen_recipe_writes_a_data_set_read_the_right_way_up(tmp_path,
+                                                                            monkeypatch):
+    """docs/guide.md, "UNIPEN handwriting as a data set": its Python block, run on the
+    UNIPEN subset under tests/data, writes a folder per digit and writer that is a data set
+    for writer-disjoint folds, each file the sample's points as the reader gives them; read
+    with the default y_axis ("up"), a 7's stroke ends below where it starts."""
+    from iloci.config import load_config
+    from iloci.data.unipen import balanced_subset, unipen_digits
+
+    (recipe,) = [b for b in _guide_recipes() if "unipen" in b]
+    (tmp_path / "train_r01_v07").symlink_to(UNIPEN.resolve(), target_is_directory=True)
+    monkeypatch.chdir(tmp_path)
+    exec(compile(recipe, "guide.md", "exec"), {})
+    ds = load_dataset(tmp_path / "unipen-digits")
+    samples = balanced_subset(unipen_digits(UNIPEN), per=1, seed=0)
+    assert ds.concepts == {str(d): 2 for d in range(10)} and len(ds.samples) == len(samples)
+    assert ds.writers == ["aga-amywldrp", "aga-greghunt"]
+    check_protocol(ds, 2, "writers")
+    by_file = {(s.label, s.writer.replace("/", "-")): s for s in samples}  # per=1
+    for s, d in zip(ds.samples, ds.demos):
+        drawn = by_file[s.concept, s.writer]
+        assert np.allclose(d.positions, np.concatenate(drawn.strokes), rtol=1e-5, atol=1e-5)
+    assert load_config(None).sensorimotor.y_axis == "up"
+    sevens = [d.positions for s, d in zip(ds.samples, ds.demos) if s.concept == "7"]
+    assert all(p[-1, 1] < p[0, 1] - 2.0 for p in sevens)  # mm: drawn downwards, y up
 
 
 def test_the_pb_space_figure_of_a_large_fold_places_a_seeded_sample():
