@@ -162,7 +162,8 @@ def test_evaluate_on_ray_gives_the_local_results(ray_local):
     assert [r.predicted for r in r_ray] == [r.predicted for r in r_loc]
     assert [r.feedbacks for r in r_ray] == [r.feedbacks for r in r_loc]
     kinds = {m["kind"] for m in seen}
-    assert {"fold_queued", "fold_start", "interaction", "fold_done"} <= kinds
+    assert {"fold_queued", "fold_start", "interaction", "recognition", "recognized",
+            "fold_done"} <= kinds
 
 
 def test_an_iloci_error_in_a_ray_task_reaches_the_caller_as_itself(ray_local):
