@@ -276,3 +276,44 @@ def test_every_output_counts_exemplars_and_prototypes_alike(tmp_path, cli):
     assert counts(res.stdout) == want
     per_concept = re.findall(r"(c\d): (\d+) entries \((\d+) prototypes\)", res.stdout)
     assert per_concept == [("c1", "2", "0"), ("c2", "1", "1")]
+
+
+# -- condensing: the medoid replaces only the members it stands for ---------------------
+
+def _two_concepts() -> Memory:
+    """c1: a tight pair (0, 1) and a far exemplar; c2: one entry nearer c1's entry 1 than c1's
+    medoid (entry 0) is."""
+    from iloci.sensorimotor.encoding import SensorimotorEncoder
+    enc = SensorimotorEncoder.from_state({"scale": np.full(6, 0.01), "limit": np.array(0.9)})
+    entries = [entry([0.0, 0.0], "c1", 2, key="A/0"), entry([0.06, 0.0], "c1", 2, key="A/1"),
+               entry([1.0, 1.0], "c1", 2, key="A/2"), entry([-1.0, 1.0], "c1", 1, key="A/3"),
+               entry([0.1, 0.0], "c2", 1, key="B/0")]
+    return Memory(entries, enc, concept_count=2, demonstrations_seen=8)
+
+
+def test_a_medoid_replaces_only_the_members_stands_for_says(clusterer):
+    mem = _two_concepts()
+    paper, n, _ = mem.clustered("c1", clusterer, k_cutoff=0.5, num_threshold=3)
+    assert n == 1 and [e.source for e in paper] == ["A/0", "A/2", "A/3", "B/0"]
+    assert paper[0].prototype and paper[0].num_samples == 4
+    kept, n, _ = mem.clustered("c1", clusterer, k_cutoff=0.5, num_threshold=3,
+                               stands_for=lambda member, medoid: member != 1)
+    assert n == 0 and [e.source for e in kept] == ["A/0", "A/1", "A/2", "A/3", "B/0"]
+    assert not any(e.prototype for e in kept)
+
+
+@pytest.mark.parametrize("condense, sources", [
+    ("paper", ["A/0", "A/2", "A/3", "B/0"]),
+    # A/1 (PB 0.06) lies nearer c2's B/0 (0.04 away) than its medoid A/0 (0.06): kept
+    ("consistent", ["A/0", "A/1", "A/2", "A/3", "B/0"]),
+])
+def test_consistent_condensing_keeps_a_member_the_medoid_would_lose_to_another_concept(
+        clusterer, condense, sources):
+    from iloci.concepts.learner import Learner
+    from iloci.config import LearnerConfig
+
+    learner = Learner(_two_concepts(), None, clusterer, None,
+                      LearnerConfig(decision="pb_distance", condense=condense))
+    entries, n, _ = learner.cluster("c1")
+    assert [e.source for e in entries] == sources
+    assert n == (1 if condense == "paper" else 0)

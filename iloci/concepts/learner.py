@@ -363,5 +363,50 @@ class Learner(Recognizer):
         replaced, D_cutoff)``.
         """
         placement = self.policies.placement
+        stands_for = (self._stands_for(concept) if placement.condense == "consistent"
+                      else None)
         return self.memory.clustered(concept, self.clusterer, k_cutoff=placement.k_cutoff,
-                                     num_threshold=placement.num_threshold)
+                                     num_threshold=placement.num_threshold,
+                                     stands_for=stands_for)
+
+    def _stands_for(self, concept: str) -> Callable[[int, int], bool] | None:
+        """``[learner] condense = "consistent"``: whether a medoid may replace a member.
+
+        Entry ``member`` of ``concept`` (an index into the memory's entries)
+        may be replaced by entry ``medoid`` when, in what ``[learner]
+        decision`` ranks by, the member's kept demonstration (its encoded
+        sequence, ``Entry.pattern``) lies nearer the medoid than every entry
+        of another concept: after the merge the memory still answers that
+        demonstration with its concept (the consistency of Hart's condensed
+        nearest neighbour rule, Hart 1968, doi:10.1109/TIT.1968.1054155;
+        docs/method.md, "Clustering").
+        By PB distance (``decision = "pb_distance"``) the member's PB stands
+        for its demonstration. ``None`` (every member replaced, the paper's
+        rule) when an entry of the concept keeps no demonstration
+        (``rehearse_from = "regenerated"``, or a memory saved without them)
+        or the memory holds one concept.
+        """
+        entries = self.memory.entries
+        labels = np.array([e.concept for e in entries])
+        own = np.flatnonzero(labels == concept)
+        other = labels != concept
+        if not other.any():
+            return None
+        if self.policies.ranking == "pb_distance":
+            pbs = np.asarray(self.memory.pbs, dtype=np.float64)
+            d = np.sqrt(((pbs[own][:, None, :] - pbs[None, :, :]) ** 2).sum(axis=2))
+        else:
+            kept = [entries[i].pattern for i in own]
+            seqs = [p for p in kept if p is not None]
+            if len(seqs) < len(kept):
+                return None
+            d = (self.regeneration_distances(seqs) if self.policies.rank_by_regeneration
+                 else self.entry_errors(seqs))
+        row = {int(i): k for k, i in enumerate(own)}
+        nearest_other = np.where(other[None, :], d, np.inf).min(axis=1)
+
+        def stands_for(member: int, medoid: int) -> bool:
+            k = row[member]
+            return bool(d[k, medoid] < nearest_other[k])
+
+        return stands_for

@@ -173,7 +173,9 @@ class Memory:
         self.revision += 1
 
     def clustered(self, concept: str, clusterer: Any, *, k_cutoff: float,
-                  num_threshold: int) -> tuple[list[Entry], int, float]:
+                  num_threshold: int,
+                  stands_for: Callable[[int, int], bool] | None = None
+                  ) -> tuple[list[Entry], int, float]:
         """The entries with ``concept``'s valid clusters replaced by their medoids.
 
         Works on copies (the memory is unchanged; :meth:`install` the
@@ -181,6 +183,12 @@ class Memory:
         (:func:`~iloci.concepts.clustering.plan_clusters`) keeps its medoid,
         now a prototype whose numSamples is the cluster's sum and whose
         sources are every member's; the other members are dropped.
+
+        ``stands_for(member, medoid)`` (indices into :attr:`entries`), when
+        given, picks the members the medoid replaces (``[learner] condense
+        = "consistent"``); the others stay as they are, and a cluster whose
+        medoid replaces none is not counted. ``None``: every member (the
+        paper's rule).
 
         Returns
         -------
@@ -203,7 +211,14 @@ class Memory:
         if not plan.valid:
             return entries, 0, plan.d_cutoff
         drop: set[int] = set()
+        replaced = 0
         for members, med in zip(plan.valid, plan.medoids):
+            if stands_for is not None:
+                members = tuple(j for j in members
+                                if j == med or stands_for(idx[j], idx[med]))
+                if len(members) < 2:
+                    continue
+            replaced += 1
             keep = own[med]
             others = [own[j] for j in members if j != med]
             keep.num_samples = sum(own[j].num_samples for j in members)
@@ -211,7 +226,7 @@ class Memory:
                 list(keep.sources) + [s for o in others for s in o.sources]))
             keep.prototype = True
             drop.update(idx[j] for j in members if j != med)
-        return [e for i, e in enumerate(entries) if i not in drop], len(plan.valid), plan.d_cutoff
+        return [e for i, e in enumerate(entries) if i not in drop], replaced, plan.d_cutoff
 
     def placed(self, digest: str | None = None) -> None:
         """One demonstration more was learned from (strengthened, exemplar or concept).

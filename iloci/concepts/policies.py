@@ -116,6 +116,9 @@ class Placement:
     num_threshold: int = 3
     #: K_cutoff of D_cutoff = mu - K_cutoff * sigma.
     k_cutoff: float = 0.5
+    #: ``"consistent"``: a valid cluster's medoid replaces only the members it
+    #: stands for (``[learner] condense``); ``"paper"``: every member.
+    condense: str = "consistent"
 
     def strengthens(self, distance: float) -> bool:
         """Whether a reward at this PB distance strengthens (else: new exemplar)."""
@@ -200,7 +203,8 @@ class Policies:
                                       twice_deep=config.confirm_twice_after_novelty),
             novelty=Novelty(below=config.novelty_below, after=config.novelty_after),
             placement=Placement(similarity_threshold=config.similarity_threshold,
-                                num_threshold=config.num_threshold, k_cutoff=config.k_cutoff),
+                                num_threshold=config.num_threshold, k_cutoff=config.k_cutoff,
+                                condense=config.condense),
             rehearsal=Rehearsal(epochs=config.rehearsal_epochs or None,
                                 keep_patterns=config.rehearse_from == "demonstrations"),
             inference=Inference(unknown_below=config.unknown_below,
