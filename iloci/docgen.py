@@ -35,6 +35,7 @@ PAPER: dict[str, str] = {
     "learner.k_cutoff": "K_cutoff = 0.5",
     "learner.num_threshold": "Num_threshold = 3",
     "learner.similarity_threshold": "Similarity_threshold = 0.1",
+    "learner.condense": '"paper" (a valid cluster is replaced by its medoid)',
     "learner.rehearse_from": '"regenerated" (no demonstration is kept)',
     "learner.tilts": "none (each drawing is read as drawn)",
     "sensorimotor.steps": "numSteps + 1 (no value given)",
