@@ -390,22 +390,29 @@ class Learner(Recognizer):
         labels = np.array([e.concept for e in entries])
         own = np.flatnonzero(labels == concept)
         other = labels != concept
-        if not other.any():
+        by_pb = self.policies.ranking == "pb_distance"
+        kept = [entries[i].pattern for i in own]
+        seqs = [p for p in kept if p is not None]
+        if not other.any() or (not by_pb and len(seqs) < len(kept)):
             return None
-        if self.policies.ranking == "pb_distance":
-            pbs = np.asarray(self.memory.pbs, dtype=np.float64)
-            d = np.sqrt(((pbs[own][:, None, :] - pbs[None, :, :]) ** 2).sum(axis=2))
-        else:
-            kept = [entries[i].pattern for i in own]
-            seqs = [p for p in kept if p is not None]
-            if len(seqs) < len(kept):
-                return None
-            d = (self.regeneration_distances(seqs) if self.policies.rank_by_regeneration
-                 else self.entry_errors(seqs))
         row = {int(i): k for k, i in enumerate(own)}
-        nearest_other = np.where(other[None, :], d, np.inf).min(axis=1)
+        found: list[tuple[np.ndarray, np.ndarray]] = []
+
+        def distances() -> tuple[np.ndarray, np.ndarray]:
+            # taken once, at the first member asked about: a concept clustered
+            # without a valid cluster costs nothing
+            if not found:
+                if by_pb:
+                    pbs = np.asarray(self.memory.pbs, dtype=np.float64)
+                    d = np.sqrt(((pbs[own][:, None, :] - pbs[None, :, :]) ** 2).sum(axis=2))
+                else:
+                    d = (self.regeneration_distances(seqs) if self.policies.rank_by_regeneration
+                         else self.entry_errors(seqs))
+                found.append((d, np.where(other[None, :], d, np.inf).min(axis=1)))
+            return found[0]
 
         def stands_for(member: int, medoid: int) -> bool:
+            d, nearest_other = distances()
             k = row[member]
             return bool(d[k, medoid] < nearest_other[k])
 
