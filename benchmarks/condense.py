@@ -54,7 +54,7 @@ ROWS = {
 
 def export_letters(root: str, out: Path, *, writers: int = 10, per: int = 6) -> dict:
     """Write the letters as ``out/<letter>/<writer>/<n>.csv``; returns what was written."""
-    import numpy as np
+    from datasets import write_sample_files  # this folder's benchmarks/datasets.py
 
     from iloci.data.unipen import balanced_subset, samples_checksum, unipen_letters
 
@@ -63,20 +63,7 @@ def export_letters(root: str, out: Path, *, writers: int = 10, per: int = 6) -> 
     picked = balanced_subset(samples, per=per, seed=0, labels=LETTERS)
     keep = sorted({s.writer for s in picked})[:writers]
     picked = [s for s in picked if s.writer in keep]
-    count: dict[tuple[str, str], int] = {}
-    for s in picked:
-        w = s.writer.replace("/", "-")
-        n = count.setdefault((s.label, w), 0)
-        count[(s.label, w)] += 1
-        path = out / s.label / w / f"{n}.csv"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pos = np.concatenate(s.strokes)
-        if s.points_per_second:
-            t = np.arange(len(pos)) / s.points_per_second
-            np.savetxt(path, np.column_stack([t, pos]), delimiter=",", header="t,x,y",
-                       comments="", fmt="%.6g")
-        else:
-            np.savetxt(path, pos, delimiter=",", header="x,y", comments="", fmt="%.6g")
+    write_sample_files(picked, out, times=True)
     return {"samples": len(picked), "writers": keep, "letters": LETTERS,
             "checksum": samples_checksum(picked)}
 

@@ -58,6 +58,27 @@ CACHE = HERE / "results" / "datasets"
 DATASETS = ("lasa", "unipen", "unipen-writers")
 
 
+def write_sample_files(samples, out: Path, *, times: bool = False) -> None:
+    """Write UNIPEN samples as ``out/<label>/<writer>/<n>.csv``: ``x, y`` as the reader gives
+    them, and with ``times`` a ``t`` column (s) first where the file gives a sampling rate."""
+    import numpy as np
+
+    counter: dict[tuple[str, str], int] = {}
+    for s in samples:
+        writer = s.writer.replace("/", "-")
+        n = counter.setdefault((s.label, writer), 0)
+        counter[(s.label, writer)] += 1
+        path = out / s.label / writer / f"{n}.csv"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pos = np.concatenate(s.strokes)
+        if times and s.points_per_second:
+            t = np.arange(len(pos)) / s.points_per_second
+            np.savetxt(path, np.column_stack([t, pos]), delimiter=",", header="t,x,y",
+                       comments="", fmt="%.6g")
+        else:
+            np.savetxt(path, pos, delimiter=",", header="x,y", comments="", fmt="%.6g")
+
+
 def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     """Write the benchmark's UNIPEN digits as ``out/<digit>/<writer>/<n>.csv`` (x, y).
 
@@ -74,7 +95,6 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     """
     import shutil
 
-    import numpy as np
 
     from iloci.data.unipen import balanced_subset, samples_checksum, unipen_digits
 
@@ -87,15 +107,7 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
         for old in out.iterdir():
             if old.is_dir():
                 shutil.rmtree(old)
-    counter: dict[tuple[str, str], int] = {}
-    for s in samples:
-        writer = s.writer.replace("/", "-")
-        n = counter.setdefault((s.label, writer), 0)
-        counter[(s.label, writer)] += 1
-        path = out / s.label / writer / f"{n}.csv"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        np.savetxt(path, np.concatenate(s.strokes), delimiter=",", header="x,y", comments="",
-                   fmt="%.6g")
+    write_sample_files(samples, out)
     info = {"source": str(root), "samples": len(samples),
             "writers": len({s.writer for s in samples}), "checksum": digest,
             "writer_ids": {w.replace("/", "-"): sorted({s.writer_id for s in samples
