@@ -447,6 +447,24 @@ def test_the_stream_protocol_on_a_data_set_says_which_sample_is_which(tmp_path):
     assert "`stream.json` names it by" in report
 
 
+@pytest.mark.usefixtures("default_back_ends")
+def test_the_stream_protocol_refuses_a_drawing_too_short_before_learning(tmp_path, cli):
+    """--protocol stream checks the data set's drawings as the folds protocol does: a file
+    of 4 points (fewer than min_points once read) is named in one error, nothing learned."""
+
+    root = _shapes(tmp_path / "shapes", per=4, writers=("ann", "bob"))
+    short = sorted(root.rglob("*.csv"))[-1]
+    short.write_text("x,y\n1,2\n1,3\n2,3\n3,5\n")
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(TINY)
+    out = tmp_path / "stream"
+    done = cli("evaluate", "--data", str(root), "--protocol", "stream", "--config", str(cfg),
+               "--out", str(out), "--quiet")
+    assert done.returncode != 0
+    assert f"{short}: 4 point(s)" in done.stderr and "nothing was learned" in done.stderr
+    assert "Traceback" not in done.stderr and not (out / "stream.json").exists()
+
+
 def test_the_code_commit_is_recorded_from_a_checkout_and_never_fails_a_run(monkeypatch):
     import re
     import subprocess

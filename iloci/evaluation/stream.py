@@ -125,6 +125,8 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     dataset = None
     if config.data.path:  # a data set of the user's own (read once: the CLI read it too)
         dataset = load_dataset_once(config.data.path, warn=True)
+        from iloci.evaluation.evaluate import check_drawings  # evaluate imports this module's peers
+        check_drawings(dataset, config)  # as the folds protocol: before anything is learned
         demos = dataset.demos
     else:
         demos = load_lasa(list(config.data.shapes) or None)
