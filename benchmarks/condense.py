@@ -52,19 +52,22 @@ ROWS = {
 }
 
 
-def export_letters(root: str, out: Path, *, writers: int = 10, per: int = 6) -> dict:
-    """Write the letters as ``out/<letter>/<writer>/<n>.csv``; returns what was written."""
+def export_letters(root: str, out: Path, *, letters: str = LETTERS, writers: int = 10,
+                   per: int = 6) -> dict:
+    """Write ``per`` single-stroke samples of each of ``letters`` by each of the first
+    ``writers`` writers who drew them all as ``out/<letter>/<writer>/<n>.csv`` (t, x, y);
+    returns what was written (its checksum: :func:`iloci.data.unipen.samples_checksum`)."""
     from datasets import write_sample_files  # this folder's benchmarks/datasets.py
 
     from iloci.data.unipen import balanced_subset, samples_checksum, unipen_letters
 
     samples = [s for s in unipen_letters(root, drop_copies=True)
-               if s.single_stroke and s.label in LETTERS]
-    picked = balanced_subset(samples, per=per, seed=0, labels=LETTERS)
+               if s.single_stroke and s.label in letters]
+    picked = balanced_subset(samples, per=per, seed=0, labels=letters)
     keep = sorted({s.writer for s in picked})[:writers]
     picked = [s for s in picked if s.writer in keep]
     write_sample_files(picked, out, times=True)
-    return {"samples": len(picked), "writers": keep, "letters": LETTERS,
+    return {"samples": len(picked), "writers": keep, "letters": letters,
             "checksum": samples_checksum(picked)}
 
 
