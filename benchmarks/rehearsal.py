@@ -65,7 +65,11 @@ def parse_variant(text: str) -> tuple[str, dict]:
         section, _, key = dotted.partition(".")
         if not (section and key and value):
             raise SystemExit(f"--variant {text!r}: bad item {item!r}")
-        out.setdefault(section, {})[key] = tomllib.loads(f"v = {value}")["v"]
+        try:
+            out.setdefault(section, {})[key] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise SystemExit(f"--variant {text!r}: {value!r} is not a TOML value; quote "
+                             f"strings, e.g. --variant '{name}={dotted}=\"{value}\"'") from None
     return name, out
 
 
