@@ -290,6 +290,52 @@ def test_bad_ink_files_in_a_data_set_are_listed_together_before_learning(tmp_pat
     assert ".inkml (InkML) or .xml ($1/$N gesture log)" in text
 
 
+def _filed_by_writer(tmp_path: Path) -> tuple[Path, list[dict]]:
+    """The digits of :func:`_digit_set` filed as the $1 logs are: writer/speed/gestureNN.xml."""
+    rows = _digit_set(tmp_path / "by_digit", "xml", labels="679", per=4)
+    root = tmp_path / "xml_logs"
+    for r in rows:  # 6/amywldrp/601.xml -> s02/fast/six01.xml
+        label, _, name = r["file"].split("/")
+        writer = f"s0{int(name[1:3]) % 2 + 1}"  # 2 writers, each drew every digit twice
+        word = {"6": "six", "7": "seven", "9": "nine"}[label]
+        text = (tmp_path / "by_digit" / r["file"]).read_text().replace(
+            f'Name="{label}01"', f'Name="{word}{name[1:3]}"')
+        dest = root / writer / "fast" / f"{word}{name[1:3]}.xml"
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text(text)
+    return root, rows
+
+
+def test_gesture_logs_filed_by_writer_are_refused_as_a_data_set_of_folders(tmp_path):
+    """The $1 logs' own layout (writer/speed/gestureNN.xml) read as folders would make each
+    writer a concept and run without an error; the logs' Name attributes show it: one
+    error that says so and points to the manifest, before anything is read or learned.
+    A folder that groups several gestures on purpose (none shared with another) is read."""
+    root, rows = _filed_by_writer(tmp_path)
+    with pytest.raises(InvalidInputError) as err:
+        load_dataset(root)
+    text = str(err.value)
+    assert "gesture logs name other gestures than the folders they are in" in text
+    assert "holds 3 gestures (nine, seven, six" in text and "write a manifest" in text
+    # gestures grouped on purpose: 'round' holds six and nine, 'straight' seven
+    grouped = tmp_path / "grouped"
+    for r in rows:
+        label, writer, name = r["file"].split("/")
+        dest = grouped / ("straight" if label == "7" else "round") / writer / name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text((tmp_path / "by_digit" / r["file"]).read_text())
+    assert load_dataset(grouped).concepts == {"round": 8, "straight": 4}
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_iloci_evaluate_refuses_gesture_logs_filed_by_writer_in_one_error(tmp_path, cli):
+    root, _ = _filed_by_writer(tmp_path)
+    done = cli("evaluate", "--data", str(root), "--quiet")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "gesture logs name other gestures" in done.stderr
+    assert "write a manifest" in done.stderr
+
+
 @pytest.mark.usefixtures("default_back_ends")
 def test_iloci_evaluate_runs_on_a_data_set_of_gesture_logs(tmp_path, cli):
     from test_own_data import TINY

@@ -191,6 +191,75 @@ def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
     return samples, problems
 
 
+#: A gesture log's ``Name`` attribute in the first bytes of its file ($1, $N, $P logs).
+_GESTURE_NAME = re.compile(rb"<Gesture\b[^>]*?\bName\s*=\s*[\"']([^\"']*)[\"']")
+
+
+def _gesture_label(path: Path) -> str | None:
+    """The gesture a $1/$N/$P log names itself (``Name="arrow01"`` -> ``"arrow"``), or None.
+
+    Read from the file's first 4 KiB only (no parse: an unreadable file is
+    reported when it is read); the number the logs append is dropped.
+    """
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    m = _GESTURE_NAME.search(head)
+    if m is None:
+        return None
+    label = re.sub(r"[\W_]*\d+$", "", m.group(1).decode("utf-8", "replace")).strip()
+    return label.casefold() or None
+
+
+def _check_gesture_names(root: Path, samples: Sequence[Sample]) -> None:
+    """Refuse a folder data set whose gesture logs name other gestures than their folders.
+
+    The $1 recognizer's logs are filed as ``writer/speed/gestureNN.xml``; read
+    as a data set of folders, each writer would be a concept and every
+    gesture of a writer one concept's drawings: a run would learn and score
+    nonsense without an error. Such a tree shows itself by the logs' own
+    ``Name`` attributes: folders holding several gestures each, and the same
+    gesture in several folders (a folder that groups gestures on purpose,
+    ``pointy/`` for ``arrow`` and ``caret``, shares none with another).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming a folder, the gestures in it and a gesture found in several
+        folders; pointing to a manifest (docs/guide.md, "Your own shapes").
+    """
+    named: dict[str, set[str]] = {}
+    for s in samples:
+        if s.path.lower().endswith(".xml"):
+            label = _gesture_label(root / s.path)
+            if label is not None:
+                named.setdefault(s.concept, set()).add(label)
+    mixed = sorted(c for c, labels in named.items() if len(labels) > 1)
+    folders: dict[str, list[str]] = {}
+    for c, labels in named.items():
+        for label in labels:
+            folders.setdefault(label, []).append(c)
+    shared = sorted((g for g, cs in folders.items() if len(cs) > 1),
+                    key=lambda g: (-len(folders[g]), g))
+    if len(mixed) < 2 or not shared:
+        return
+    c, g = mixed[0], shared[0]
+    held = sorted(named[c])
+    raise InvalidInputError(
+        f"data set {root}: its gesture logs name other gestures than the folders they are "
+        f"in: folder {c!r} holds {len(held)} gestures ({', '.join(held[:6])}"
+        f"{', ...' if len(held) > 6 else ''}; {len(mixed)} folders hold several), and "
+        f"{g!r} is in {len(folders[g])} folders ({', '.join(sorted(folders[g])[:4])}"
+        f"{', ...' if len(folders[g]) > 4 else ''}). A data set of folders takes each folder "
+        f"under {root} as a concept (and a folder inside it as the writer), so this would "
+        "teach the writers' folders as concepts; nothing was learned. For logs filed by "
+        "writer (the $1 logs' s01/fast/arrow01.xml), write a manifest with each file's "
+        "concept and writer: docs/guide.md, \"Your own shapes\", has the few lines of "
+        "Python that do it.")
+
+
 def _text(name: str) -> str:
     """A folder name as a concept or writer name: bytes that are not UTF-8 (held by Python
     as lone surrogates, which cannot be printed, drawn or saved) written ``\\xNN``, as
@@ -432,6 +501,7 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
         root = p
         samples, problems = _scan_folders(p)
         layout, name = "folders", p.name
+        _check_gesture_names(root, samples)
     dup = [k for k, n in Counter(s.path for s in samples).items() if n > 1]
     problems += [f"{root / k}: listed more than once" for k in dup[:_MAX_LISTED]]
     if problems:
