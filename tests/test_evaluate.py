@@ -431,3 +431,7 @@ def test_a_run_on_your_own_data_never_writes_over_lasas_report(tmp_path, cli):
         "dataset"]["samples"] == 8
     assert (tmp_path / "runs" / "lasa" / "metrics.json").read_text() == "{}"
     assert "wrote runs/lab_shapes/metrics.json" in done.stdout
+    # one fold of the config's 2: the report says which, and shows no spread of one value
+    report = (tmp_path / "runs" / "lab_shapes" / "report.md").read_text()
+    assert "Fold 0 of a 2-fold evaluation (`--folds`: the others were not run) on " in report
+    assert "(one fold)" in report and "± 0.00" not in report

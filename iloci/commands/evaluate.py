@@ -118,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
         names = list(dataset.concepts)
         shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
         what = (f"data set {dataset.name} ({len(dataset.samples)} samples, "
-                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} writers; "
+                f"{len(dataset.concepts)} concepts, {len(dataset.writers)} "
+                f"writer{'' if len(dataset.writers) == 1 else 's'}; "
                 f"concepts: {shown})")
     else:
         what = "LASA"

@@ -526,7 +526,8 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                     "as steps), e.g.:",
                     [f"with times: {root / timed[True][0]}",
                      f"without: {root / timed[False][0]}"],
-                    "Give every file a time column, or none.")
+                    "Give every file time stamps (a CSV time column, InkML's T channel, a "
+                    "gesture log's T attribute), or none.")
     if len(units) > 1:
         raise _fail(f"data set {p} mixes position units:",
                     [f"{u}: {len(fs)} file(s), e.g. {root / fs[0]}" for u, fs in units.items()],

