@@ -414,6 +414,7 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
         assert json.dumps(timeless(json.loads((out2 / name).read_text())), sort_keys=True) \
             == json.dumps(timeless(json.loads((out / name).read_text())), sort_keys=True), name
     assert "$1 recognizer" in report and "best baseline" in report
+    assert "paper" not in metrics  # the paper's CCR is LASA's (docs/guide.md)
 
 
 @pytest.mark.usefixtures("default_back_ends")
