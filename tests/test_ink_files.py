@@ -325,6 +325,16 @@ def test_gesture_logs_filed_by_writer_are_refused_as_a_data_set_of_folders(tmp_p
         dest.parent.mkdir(parents=True, exist_ok=True)
         dest.write_text((tmp_path / "by_digit" / r["file"]).read_text())
     assert load_dataset(grouped).concepts == {"round": 8, "straight": 4}
+    # logs named after their writer (Name="s01_3") in concept/writer folders name no gesture
+    by_name = tmp_path / "writer_names"
+    for i, r in enumerate(rows):
+        label, _, name = r["file"].split("/")
+        writer = f"s0{i % 2 + 1}"
+        dest = by_name / label / writer / name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text((tmp_path / "by_digit" / r["file"]).read_text().replace(
+            f'Name="{label}01"', f'Name="{writer}_{i}"'))
+    assert load_dataset(by_name).concepts == {"6": 4, "7": 4, "9": 4}
 
 
 @pytest.mark.usefixtures("default_back_ends")

@@ -234,7 +234,8 @@ def _check_gesture_names(root: Path, samples: Sequence[Sample]) -> None:
     for s in samples:
         if s.path.lower().endswith(".xml"):
             label = _gesture_label(root / s.path)
-            if label is not None:
+            # a log named after its writer's folder (s01/..., Name="s01_3") names no gesture
+            if label is not None and label != (s.writer or "").casefold():
                 named.setdefault(s.concept, set()).add(label)
     mixed = sorted(c for c, labels in named.items() if len(labels) > 1)
     folders: dict[str, list[str]] = {}
@@ -257,7 +258,8 @@ def _check_gesture_names(root: Path, samples: Sequence[Sample]) -> None:
         "teach the writers' folders as concepts; nothing was learned. For logs filed by "
         "writer (the $1 logs' s01/fast/arrow01.xml), write a manifest with each file's "
         "concept and writer: docs/guide.md, \"Your own shapes\", has the few lines of "
-        "Python that do it.")
+        "Python that do it. (If the folders are the concepts and the logs' names are not "
+        "gesture names, a manifest is read as it says too.)")
 
 
 def _text(name: str) -> str:
