@@ -95,7 +95,6 @@ def export_unipen(root: str, out: Path, *, seed: int = 0) -> dict:
     """
     import shutil
 
-
     from iloci.data.unipen import balanced_subset, samples_checksum, unipen_digits
 
     samples = balanced_subset(unipen_digits(root), per=1, seed=seed)

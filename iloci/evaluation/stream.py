@@ -33,6 +33,7 @@ from iloci.config import Config, load_config
 from iloci.data import load_lasa
 from iloci.data.concepts import GroundTruth, majority_names
 from iloci.data.datasets import load_dataset_once
+from iloci.evaluation.evaluate import check_drawings
 from iloci.evaluation.metrics import mean_std, purity
 from iloci.evaluation.summary import data_set_records
 from iloci.plugins import get_plugin_manager, get_registry
@@ -125,7 +126,6 @@ def run_stream(config: Any = None, *, progress: Callable[[dict], None] | None = 
     dataset = None
     if config.data.path:  # a data set of the user's own (read once: the CLI read it too)
         dataset = load_dataset_once(config.data.path, warn=True)
-        from iloci.evaluation.evaluate import check_drawings  # evaluate imports this module's peers
         check_drawings(dataset, config)  # as the folds protocol: before anything is learned
         demos = dataset.demos
     else:
