@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 import concurrent.futures as cf
+import itertools
 import os
 import signal
 import sys
@@ -180,15 +181,20 @@ class LocalExecutor:
         manager, queue, pool = started
         finished = False
         try:
-            pending = {pool.submit(fn, *args, queue) for fn, args in tasks}
+            # each future with its place in the queue: results that finish
+            # together are handled (then, yield) in the order they were queued,
+            # not in a set's order, so follow-ups queue in a fixed order too
+            order = itertools.count()
+            pending = {pool.submit(fn, *args, queue): next(order) for fn, args in tasks}
             while pending:
-                done, pending = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_COMPLETED)
+                done, _ = cf.wait(pending, timeout=0.2, return_when=cf.FIRST_COMPLETED)
                 while not queue.empty():
                     emit(queue.get())
-                for fut in done:
+                for fut in sorted(done, key=pending.__getitem__):
+                    del pending[fut]
                     result = fut.result()
                     for fn, args in (then(result) if then is not None else ()):
-                        pending.add(pool.submit(fn, *args, queue))
+                        pending[pool.submit(fn, *args, queue)] = next(order)
                     yield result
             finished = True
         finally:
