@@ -30,6 +30,7 @@ __all__ = [
     "MemoryFileError",
     "MemoryConfigError",
     "TimeUnitWarning",
+    "DataSetWarning",
 ]
 
 
@@ -280,6 +281,16 @@ class TimeUnitWarning(UserWarning):
     iloci reads time stamps in seconds; only the robot's drawing speed
     depends on them (the default path reading, ``resample = "arc_length"``,
     does not read them at all), so this is a warning, not an error.
+    """
+
+
+class DataSetWarning(UserWarning):
+    """A data set is read, but not quite as it lies on disk.
+
+    Files left out (names starting with ``_``, formats that are not
+    trajectory files, folders beside a manifest), or names that differ only
+    in case or spaces: what the evaluation scores is not everything the
+    user put there, so it says so once, before anything is learned.
     """
 
 

@@ -360,8 +360,11 @@ class EvaluationConfig:
     """The cross-validation protocol (section ``[evaluation]``)."""
 
     #: Number of folds (paper: 5).
-    folds: int = constrained(5, Interval(2, 7, integer=True,
-                                         note="LASA has 7 demonstrations of each shape"))
+    #: At most the samples of the smallest concept (7 on LASA, 7 demonstrations
+    #: of each shape), or the writers with ``split = "writers"``: checked
+    #: against the data before anything is learned.
+    folds: int = constrained(5, Interval(2, None, integer=True,
+                                         note="a fold needs a sample of every concept"))
     #: Fraction of each ``[data]`` shape's demonstrations in the default
     #: learning stream of ``iloci teach`` (paper: 20 %). ``iloci evaluate``
     #: does not read it: each fold learns from one of ``folds`` partitions.

@@ -9,6 +9,7 @@ manifests) is read.
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import warnings
@@ -20,7 +21,8 @@ import pytest
 from iloci.data import load_trajectory
 from iloci.data.datasets import check_protocol, load_dataset, load_dataset_once
 from iloci.data.unipen import read_unipen
-from iloci.errors import InvalidDemonstrationError, InvalidInputError, TimeUnitWarning
+from iloci.errors import (DataSetWarning, InvalidDemonstrationError, InvalidInputError,
+                          TimeUnitWarning)
 
 UNIPEN = Path(__file__).parent / "data" / "unipen" / "train_r01_v07"
 
@@ -397,3 +399,199 @@ def test_a_fold_whose_network_lost_its_memory_is_pointed_out_under_the_headline(
                                                 "regenerates its memory")
     assert "fold 3: 192 demonstrations learned, 61 entries, 16 of them prototypes" in said
     assert '"Your own shapes" (large learning sets)' in said
+
+
+# ------------------------------------------- a bad-data audit's kinds (2026-12-03)
+# A helper handed `iloci evaluate --data` 138 broken data sets; these are the kinds
+# that were read silently wrong or failed deep inside a library.
+
+def _warned(fn, *args):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = fn(*args)
+    return out, [str(w.message) for w in caught if issubclass(w.category, DataSetWarning)]
+
+
+def test_a_link_to_a_missing_file_is_named_not_passed_over(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    (root / "2" / sorted(p.name for p in (root / "2").iterdir())[0] / "9.csv").symlink_to(
+        tmp_path / "gone.csv")
+    with pytest.raises(InvalidInputError, match=r"9.csv: a link to .*gone.csv, which does "
+                                                r"not exist; restore the file or remove"):
+        load_dataset(root)
+
+
+def test_files_left_out_of_a_data_set_of_folders_are_said_once(digits, tmp_path):
+    """Names starting with "_" are left out, and files of other formats: both were
+    dropped without a word (12 of 30 drawings of an "_p01" writer vanished, exit 0)."""
+    root = _export(digits, tmp_path / "d")
+    before = load_dataset(root).concepts
+    writer = sorted(p for p in (root / "3").iterdir())[0]
+    hid = sorted(f.relative_to(root / "3" / writer.name).as_posix()
+                 for f in writer.rglob("*.csv"))
+    writer.rename(writer.with_name("_" + writer.name))
+    (root / "2" / "notes.json").write_text("{}")
+    (root / "2" / "Thumbs.db").write_bytes(b"\0")  # a file manager's: no note
+    (root / "6" / ".DS_Store").write_bytes(b"\0")
+    ds, said = _warned(load_dataset, root)
+    assert ds.concepts == {**before, "3": before["3"] - len(hid)}
+    assert len(said) == 2
+    assert said[0].endswith(
+        f"{len(hid)} trajectory file(s) left out because a name on their path starts with "
+        f"'_' ({', '.join(f'3/_{writer.name}/{h}' for h in hid)}); iloci leaves such files "
+        "and folders out of a data set. Rename them to include them.")
+    assert "1 file(s) left out that are not trajectory files a data set is read from " \
+           "(.json: 1; e.g. 2/notes.json)" in said[1]
+    # in a folder that is all there is to read, the error says what it holds
+    for f in (root / "6").rglob("*.csv"):
+        f.rename(f.with_suffix(".json"))
+    with warnings.catch_warnings(), pytest.raises(
+            InvalidInputError, match=r"6: concept folder holds no trajectory files \(.*\); "
+                                     r"it holds \d.json, "):
+        warnings.simplefilter("ignore", DataSetWarning)
+        load_dataset(root)
+
+
+def test_a_manifest_says_what_it_leaves_out_and_is_found_in_any_case(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    listed = [f for f in sorted(root.rglob("*.csv")) if f.parts[-3] != "6"]
+    (root / "Manifest.CSV").write_text("file,concept\n" + "".join(
+        f"{f.relative_to(root).as_posix()},{f.parts[-3]}\n" for f in listed))
+    ds, said = _warned(load_dataset, root)
+    assert ds.layout == "manifest" and set(ds.concepts) == {"2", "3"}
+    assert len(said) == 1 and said[0].startswith(
+        f"data set {root}: Manifest.CSV is read, and it does not list "
+        f"{len(list((root / '6').rglob('*.csv')))} trajectory file(s) beside it (6/")
+    assert "they are left out. List them in Manifest.CSV" in said[0]
+
+
+def test_a_json_manifest_naming_a_file_by_a_list_is_a_type_error(tmp_path):
+    (tmp_path / "m.json").write_text(json.dumps([{"file": ["x"], "concept": "a"},
+                                                 {"file": "b.csv", "concept": True}]))
+    with pytest.raises(InvalidInputError) as err:
+        load_dataset(tmp_path / "m.json")
+    assert 'entry 0: file is ["x"], not a path (a string)' in str(err.value)
+    assert "entry 1: concept is true, not a name" in str(err.value)
+
+
+def test_writers_named_alike_are_pointed_out_and_one_writer_cannot_be_split(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    first = sorted((root / "2").iterdir())[0]
+    first.rename(first.with_name(first.name.upper()))
+    ds, said = _warned(load_dataset, root)
+    assert said == [f"data set {root}: the writers '{first.name.upper()}', '{first.name}' "
+                    "differ only in case or spaces; they are counted as different writers, "
+                    "and --split writers could teach one and recognize the other. If they "
+                    "are one person, name them alike."]
+    one = _export(digits, tmp_path / "one")
+    for c in one.iterdir():
+        for w in sorted(c.iterdir())[1:]:
+            shutil.rmtree(w)
+    with pytest.raises(InvalidInputError, match=r"needs at least 2 writers; the data set has "
+                                                r"1 \(.*\)\. Split per concept instead"):
+        check_protocol(load_dataset(one), 2, "writers")
+
+
+@pytest.mark.usefixtures("default_back_ends")  # load_config resolves the default model
+def test_folds_beyond_lasas_seven_are_the_data_sets_to_allow(digits, tmp_path):
+    """[evaluation] folds was capped at 7 (LASA's demonstrations per shape) for every data
+    set: 10 folds of a set with 20 samples per concept were refused naming LASA."""
+    from iloci.config import load_config
+    from iloci.errors import ConfigError
+    from iloci.evaluation.folds import lasa_folds
+    from iloci.data import load_lasa
+
+    assert load_config({"evaluation": {"folds": 10}}).evaluation.folds == 10
+    with pytest.raises(ConfigError, match="folds must be >= 2"):
+        load_config({"evaluation": {"folds": 1}})
+    ds = load_dataset(_export(digits, tmp_path / "d", labels=("3", "6"), per_writer=5))
+    assert ds.concepts == {"3": 9, "6": 9}  # more folds than LASA's 7 are this data set's
+    check_protocol(ds, 9)
+    with pytest.raises(InvalidInputError, match=r"has 7 demonstration\(s\), fewer than the "
+                                                r"8 folds"):
+        lasa_folds(load_lasa(["Angle", "Sine"]), 8)
+
+
+def test_coordinates_no_unit_reaches_and_a_glitch_sample_are_named(digits, tmp_path):
+    from iloci.errors import InvalidDemonstrationError
+    from iloci.interfaces import Demonstration
+    from iloci.sensorimotor.preprocess import lone_outlier
+
+    xy = np.concatenate(digits[0].strokes)
+    with pytest.raises(InvalidDemonstrationError, match=r"a position of [\d.]+e\+20\d \(row "
+                                                        r"\d+\), beyond 1e\+100"):
+        Demonstration(xy * 1e200)
+    with pytest.raises(InvalidDemonstrationError, match=r"points lie within .*e-30\d of each "
+                                                        r"other, too close to tell apart"):
+        Demonstration(xy * 1e-300)
+    assert lone_outlier(xy) is None
+    glitch = xy.copy()
+    glitch[9] = glitch[9] + 1e4 * np.ptp(xy, axis=0).max()
+    row, ratio = lone_outlier(glitch)
+    assert row == 9 and ratio > 1e3
+    # every stroke of the real digits, and LASA's: no false alarm
+    assert not [s for s in digits for st in s.strokes if len(st) > 3 and lone_outlier(st)]
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_glitch_sample_is_named_when_it_makes_a_drawing_too_short(digits, tmp_path):
+    from iloci.config import load_config
+    from iloci.evaluation.evaluate import check_drawings
+
+    root = _export(digits, tmp_path / "d")
+    f = sorted((root / "3").rglob("*.csv"))[0]
+    size = float(np.ptp(load_trajectory(f).positions, axis=0).max())
+    rows = f.read_text().splitlines()
+    t, x, y = rows[10].split(",")
+    rows[10] = f"{t},{float(x) + 1e6},{y}"
+    f.write_text("\n".join(rows) + "\n")
+    with pytest.raises(InvalidInputError) as err:
+        check_drawings(load_dataset(root), load_config(None))
+    assert f"{f}: 3 point(s) once the pen's rests are trimmed" in str(err.value)
+    assert "; sample 9 lies" in str(err.value) and "remove that sample" in str(err.value)
+    rows[10] = f"{t},{float(x) + 30 * size},{y}"  # 30 times the digit's size: read, said
+    f.write_text("\n".join(rows) + "\n")
+    _, said = _warned(check_drawings, load_dataset(root), load_config(None))
+    assert len(said) == 1 and "1 drawing(s) have a sample far outside the rest" in said[0]
+
+
+def test_a_headerless_file_whose_first_column_is_not_time_says_so(tmp_path):
+    f = tmp_path / "a.csv"
+    f.write_text("3,1,0.5\n2,2,0.4\n4,3,0.5\n5,2,0.6\n")  # x, y, pressure: no header
+    with pytest.raises(InvalidDemonstrationError, match=r"time 2 is before the previous "
+                                                        r"row's 3(.|\n)*no header, so its 3 "
+                                                        r"columns were read as t, x, y"):
+        load_trajectory(f)
+    f.write_text("t,x,y\n3,1,0.5\n2,2,0.4\n4,3,0.5\n")
+    with pytest.raises(InvalidDemonstrationError) as err:
+        load_trajectory(f)
+    assert "no header" not in str(err.value)
+
+
+@pytest.mark.usefixtures("default_back_ends")  # the CLI loads the default config
+def test_evaluate_refuses_an_empty_data_path_and_an_output_inside_the_data_set(
+        digits, tmp_path, monkeypatch, capsys):
+    """`--data ""` (an unset shell variable) ran LASA with exit 0; an --out inside a data
+    set of folders was made first, then read back as an empty concept; `cd data &&
+    iloci evaluate --data .` wrote its report into the data set."""
+    from iloci.cli import main
+
+    root = _export(digits, tmp_path / "d")
+    assert main(["evaluate", "--data", "", "--quiet"]) == 2
+    assert "--data is empty (an unset shell variable?)" in capsys.readouterr().err
+    out = root / "results"
+    assert main(["evaluate", "--data", str(root), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out} is inside the data set {root}" in err and "Nothing was run." in err
+    assert not out.exists()
+    monkeypatch.chdir(root)
+    assert main(["evaluate", "--data", ".", "--quiet"]) == 2
+    assert f"--out runs{os.sep}d is inside the data set {root}" in capsys.readouterr().err
+    assert sorted(p.name for p in root.iterdir()) == ["2", "3", "6"]
+    # a run that fails before writing leaves no empty --out behind
+    monkeypatch.chdir(tmp_path)
+    bad = sorted((root / "2").rglob("*.csv"))[0]
+    bad.write_text("t,x,y\n0,1,2\n0.01,1,3\n0.02,2,3\n0.03,3,5\n")  # too short to read
+    assert main(["evaluate", "--data", str(root), "--out", str(tmp_path / "o"),
+                 "--quiet"]) == 2
+    assert "min_points = 5" in capsys.readouterr().err and not (tmp_path / "o").exists()

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 import re
 import sys
 
 from iloci.config import load_config
 from iloci.data.datasets import check_protocol, load_dataset_once
 from iloci.data.files import writable_dir
+from iloci.errors import InvalidInputError
 
 
 def _jobs(args: argparse.Namespace, config) -> str:
@@ -82,9 +84,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # the evaluation's modules and rich: loaded when the command runs, not on every `iloci` start
-    from iloci.evaluation.evaluate import evaluate
-    from iloci.evaluation.report import check_report_extras, headline, write_outputs
-    from iloci.display import FoldProgress
+    from iloci.evaluation.report import check_report_extras
 
     config = load_config(args.config)
     changes = {}
@@ -96,6 +96,10 @@ def run(args: argparse.Namespace) -> int:
         changes["split"] = args.split
     if changes:
         config = config.replace(evaluation=changes)
+    if args.data is not None and not args.data.strip():
+        raise InvalidInputError("--data is empty (an unset shell variable?): give the path "
+                                "of a data set, or leave --data out to evaluate on LASA. "
+                                "Nothing was run.")
     if args.data:
         config = config.replace(data={"path": args.data})
     if args.protocol is not None and args.protocol != config.evaluation.protocol:
@@ -105,16 +109,56 @@ def run(args: argparse.Namespace) -> int:
                         and config.evaluation.protocol != "stream")
     if args.out is None:
         args.out = _default_out(config)
+    for flag, where in (("--out", args.out), ("--memories", args.memories)):
+        _outside_the_data(flag, where, config.data.path)
+    # made only now, and removed again if the run fails before writing into them
+    made = [d for d in (args.out, args.memories) if d and not os.path.exists(d)]
     writable_dir(args.out, "--out")
     if args.memories:
         writable_dir(args.memories, "--memories")
-    if config.evaluation.protocol == "stream":
-        return _run_stream(args, config)
+    try:
+        if config.evaluation.protocol == "stream":
+            return _run_stream(args, config)
+        return _run_folds(args, config)
+    except BaseException:
+        for d in made:
+            try:
+                os.rmdir(d)  # only if still empty: nothing a run wrote is removed
+            except OSError:
+                pass
+        raise
+
+
+def _outside_the_data(flag: str, where: str | None, data: str) -> None:
+    """Refuse an output folder inside a data set of concept folders: the next run would
+    read it as a concept (or its files as drawings)."""
+    if not where or not data:
+        return
+    root = Path(data).expanduser().resolve()
+    if not root.is_dir() or any(f.name.lower() in ("manifest.csv", "manifest.json")
+                                for f in root.iterdir()):
+        return  # a manifest lists its files: a folder beside them is not read
+    out = Path(where).expanduser().resolve()
+    if out == root or root in out.parents:
+        raise InvalidInputError(
+            f"{flag} {where} is inside the data set {root}: every folder there is read as "
+            f"a concept, so this run's own output would be read as drawings. Give {flag} "
+            f"a folder outside it (e.g. {flag} {root.parent / 'runs' / root.name}). Nothing "
+            "was run.")
+
+
+def _run_folds(args: argparse.Namespace, config) -> int:
+    # loaded when the command runs (see run's imports)
+    from iloci.display import FoldProgress
+    from iloci.evaluation.evaluate import check_drawings, evaluate
+    from iloci.evaluation.report import headline, write_outputs
+
     if config.data.path and config.evaluation.protocol == "folds":
         # read and checked before anything runs (evaluate() checks again, cheaply)
         dataset = load_dataset_once(config.data.path, warn=True)
         check_protocol(dataset, config.evaluation.folds, config.evaluation.split,
                        config.evaluation.seed)
+        check_drawings(dataset, config)
         names = list(dataset.concepts)
         shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
         what = (f"data set {dataset.name} ({len(dataset.samples)} samples, "

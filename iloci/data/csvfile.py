@@ -293,7 +293,16 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
     times = None
     if cols["t"] is not None:
         times = values[:, cols["t"]] * cols["unit"]
-        times = check_times(times, [f"line {line}" for line, _ in rows], p.name)
+        try:
+            times = check_times(times, [f"line {line}" for line, _ in rows], p.name)
+        except InvalidDemonstrationError as exc:
+            if header is not None:
+                raise
+            # no header: the first column was taken for time by its place alone
+            raise InvalidDemonstrationError(
+                f"{exc} The file has no header, so its 3 columns were read as t, x, y; if "
+                "they are x, y and another value (pressure, say), add a header line naming "
+                "them (x,y,pressure).") from None
     return positions, times
 
 

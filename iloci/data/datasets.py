@@ -49,7 +49,7 @@ import numpy as np
 
 from iloci.data.csvfile import decode_text
 from iloci.data.files import TRAJECTORY_FORMATS, TRAJECTORY_SUFFIXES, load_trajectory
-from iloci.errors import InvalidInputError, TimeUnitWarning
+from iloci.errors import DataSetWarning, InvalidInputError, TimeUnitWarning
 from iloci.interfaces import Demonstration
 from iloci.progress import long_step
 
@@ -156,11 +156,35 @@ def _visible(p: Path) -> bool:
     return not p.name.startswith((".", "_"))
 
 
+#: Files that file managers and archivers leave in folders: never drawings, passed over
+#: without a note (as are hidden files and a zip's ``__MACOSX`` folder).
+_JUNK = frozenset({"thumbs.db", "desktop.ini", "icon\r", "ehthumbs.db"})
+
+
+def _hidden(rel: Path) -> bool:
+    """A path (relative to the data set) that no one means as data: hidden or archive junk."""
+    return (any(part.startswith(".") or part == "__MACOSX" for part in rel.parts)
+            or rel.name.lower() in _JUNK)
+
+
+def _listed(paths: Sequence[str], n: int = 3) -> str:
+    return ", ".join(paths[:n]) + (", ..." if len(paths) > n else "")
+
+
 def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
+    """The samples of a data set of concept folders, and its problems.
+
+    Files and folders whose names start with ``.`` or ``_`` are left out
+    (a note names the trajectory files that were, :class:`DataSetWarning`),
+    as are files of other formats (a note too, unless they are a file
+    manager's junk: ``Thumbs.db``, ``__MACOSX/``); a link whose file is
+    missing is a problem, not a file passed over.
+    """
     problems: list[str] = []
-    concept_dirs = sorted(d for d in root.iterdir() if d.is_dir() and _visible(d))
-    loose = sorted(f.name for f in root.iterdir()
-                   if f.is_file() and f.suffix.lower() in TRAJECTORY_SUFFIXES)
+    entries = sorted(root.iterdir())
+    concept_dirs = [d for d in entries if d.is_dir() and _visible(d)]
+    loose = sorted(f.name for f in entries
+                   if f.is_file() and f.suffix.lower() in TRAJECTORY_SUFFIXES and _visible(f))
     if not concept_dirs:
         hint = (f" (it holds {len(loose)} trajectory files but no concept folders)"
                 if loose else "")
@@ -170,24 +194,58 @@ def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
             "or give a manifest (.csv or .json: file, concept[, writer, session]).")
     if loose:
         problems.append(f"{root}: trajectory files outside any concept folder "
-                        f"({', '.join(loose[:3])}{', ...' if len(loose) > 3 else ''})")
+                        f"({_listed(loose)})")
     samples: list[Sample] = []
-    for d in concept_dirs:
-        files = sorted(f for f in d.rglob("*") if f.is_file()
-                       and f.suffix.lower() in TRAJECTORY_SUFFIXES
-                       and all(_visible(part) for part in f.relative_to(d).parents
-                               if str(part) != ".") and _visible(f))
+    left_out: list[str] = []     # trajectory files under a name starting with "_"
+    other: list[str] = []        # files of formats the data set is not read from
+    for d in [e for e in entries if e.is_dir() and not _hidden(e.relative_to(root))]:
+        if d not in concept_dirs:  # "_old/": its trajectory files are noted below
+            left_out += [f.relative_to(root).as_posix() for f in sorted(d.rglob("*"))
+                         if f.is_file() and f.suffix.lower() in TRAJECTORY_SUFFIXES
+                         and not _hidden(f.relative_to(root))]
+            continue
+        files, seen = [], []
+        for f in sorted(d.rglob("*")):
+            rel = f.relative_to(root)
+            if _hidden(rel):
+                continue
+            if f.is_symlink() and not f.exists():
+                problems.append(f"{f}: a link to {os.readlink(f)}, which does not exist; "
+                                "restore the file or remove the link")
+                continue
+            if not f.is_file():
+                continue
+            seen.append(f.name)
+            if any(part.startswith("_") for part in rel.parts):
+                if f.suffix.lower() in TRAJECTORY_SUFFIXES:
+                    left_out.append(rel.as_posix())
+            elif f.suffix.lower() in TRAJECTORY_SUFFIXES:
+                files.append(f)
+            else:
+                other.append(rel.as_posix())
         if not files:
-            others = sorted(f.name for f in d.rglob("*") if f.is_file())
-            what = (f"no trajectory files ({', '.join(TRAJECTORY_SUFFIXES)}; it holds "
-                    f"{', '.join(others[:3])}"
-                    f"{', ...' if len(others) > 3 else ''})" if others else "is empty")
+            what = (f"holds no trajectory files ({', '.join(TRAJECTORY_SUFFIXES)}); it holds "
+                    f"{_listed(seen)}" if seen else "is empty")
             problems.append(f"{d}: concept folder {what}")
             continue
         for f in files:
             rel = f.relative_to(d)
             writer = _text(rel.parts[0]) if len(rel.parts) > 1 else None
             samples.append(Sample(f.relative_to(root).as_posix(), _text(d.name), writer))
+    if samples and left_out:
+        warnings.warn(
+            f"data set {root}: {len(left_out)} trajectory file(s) left out because a name "
+            f"on their path starts with '_' ({_listed(left_out)}); iloci leaves such "
+            "files and folders out of a data set. Rename them to include them.",
+            DataSetWarning, stacklevel=3)
+    if samples and other:
+        kinds = Counter(Path(o).suffix.lower() or "no suffix" for o in other)
+        warnings.warn(
+            f"data set {root}: {len(other)} file(s) left out that are not trajectory files "
+            f"a data set is read from ({', '.join(f'{k}: {n}' for k, n in kinds.items())}; "
+            f"e.g. {_listed(other)}). A data set reads {TRAJECTORY_FORMATS}; convert "
+            "drawings of other formats, or ignore this if those files are not drawings.",
+            DataSetWarning, stacklevel=3)
     return samples, problems
 
 
@@ -262,6 +320,11 @@ def _check_gesture_names(root: Path, samples: Sequence[Sample]) -> None:
         "gesture names, a manifest is read as it says too.)")
 
 
+def _manifests_in(folder: Path) -> list[Path]:
+    """``manifest.csv`` / ``manifest.json`` in ``folder``, their names in any case."""
+    return sorted(f for f in folder.iterdir() if f.name.lower() in _MANIFESTS and f.is_file())
+
+
 def _text(name: str) -> str:
     """A folder name as a concept or writer name: bytes that are not UTF-8 (held by Python
     as lone surrogates, which cannot be printed, drawn or saved) written ``\\xNN``, as
@@ -330,6 +393,13 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
     samples, problems = [], []
     for w, r in zip(where, rows):
         f, c = r.get(fcol), r.get(ccol)
+        wrong = [(col, v) for col, v, types in ((fcol, f, (str,)), (ccol, c, (str, int)))
+                 if v is not None and (isinstance(v, bool) or not isinstance(v, types))]
+        if wrong:
+            col, v = wrong[0]
+            problems.append(f"{path}, {w}: {col} is {json.dumps(v)[:60]}, not "
+                            f"{'a path (a string)' if col == fcol else 'a name'}")
+            continue
         if f is None or str(f).strip() == "" or c is None or str(c).strip() == "":
             problems.append(f"{path}, {w}: empty {'file' if not f else 'concept'}")
             continue
@@ -344,6 +414,27 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
     if not samples and not problems:
         problems.append(f"{path}: the manifest lists no samples")
     return samples, problems
+
+
+def _note_unlisted(root: Path, manifest: Path, samples: Sequence[Sample]) -> None:
+    """Warn (:class:`DataSetWarning`) of trajectory files in folders beside ``manifest``
+    that it does not list: a folder holding a manifest is read as the manifest says, not
+    by its folders."""
+    listed = {os.path.normpath(root / s.path) for s in samples}
+    listed.add(os.path.normpath(manifest))
+    # files in folders only: a .csv beside the manifest is as often another table
+    unlisted = sorted(
+        f.relative_to(root).as_posix() for f in root.rglob("*")
+        if f.suffix.lower() in TRAJECTORY_SUFFIXES and len(f.relative_to(root).parts) > 1
+        and not _hidden(f.relative_to(root)) and f.is_file()
+        and os.path.normpath(f) not in listed)
+    if unlisted:
+        warnings.warn(
+            f"data set {root}: {manifest.name} is read, and it does not list "
+            f"{len(unlisted)} trajectory file(s) beside it ({_listed(unlisted)}): they are "
+            f"left out. List them in {manifest.name} to include them (or give the folder "
+            "without the manifest to read it by its concept folders).",
+            DataSetWarning, stacklevel=3)
 
 
 def _position_unit(path: Path) -> str | None:
@@ -479,7 +570,7 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                                     "manifest.")
         manifest = p
     else:
-        found = [p / m for m in _MANIFESTS if (p / m).is_file()]
+        found = _manifests_in(p)
         if len(found) > 1:
             raise InvalidInputError(
                 f"data set {p} holds both {' and '.join(f.name for f in found)}: give the one "
@@ -489,7 +580,8 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
         root = manifest.parent
         samples, problems = _read_manifest(manifest)
         # a manifest called manifest.csv names its folder's data set, not "manifest"
-        layout, name = "manifest", (p.name if p.is_dir() else manifest.parent.resolve().name
+        layout, name = "manifest", (p.resolve().name if p.is_dir()
+                                    else manifest.parent.resolve().name
                                     if manifest.name.lower() in _MANIFESTS else manifest.stem)
         for s in samples:
             if (root / s.path).is_dir():
@@ -499,10 +591,12 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                 problems.append(f"{root / s.path}: listed in {manifest.name} but not found")
             elif Path(s.path).suffix.lower() not in TRAJECTORY_SUFFIXES:
                 problems.append(f"{root / s.path}: not a trajectory file ({TRAJECTORY_FORMATS})")
+        if p.is_dir() and not problems:
+            _note_unlisted(root, manifest, samples)
     else:
         root = p
         samples, problems = _scan_folders(p)
-        layout, name = "folders", p.name
+        layout, name = "folders", p.resolve().name
         _check_gesture_names(root, samples)
     dup = [k for k, n in Counter(s.path for s in samples).items() if n > 1]
     problems += [f"{root / k}: listed more than once" for k in dup[:_MAX_LISTED]]
@@ -541,7 +635,19 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
         if len(names) > 1:
             warnings.warn(f"data set {p}: the concepts {', '.join(map(repr, sorted(names)))} "
                           "differ only in case or spaces; they are scored as different "
-                          "concepts. If they are one, name them alike.", stacklevel=2)
+                          "concepts. If they are one, name them alike.", DataSetWarning,
+                          stacklevel=2)
+    people: dict[str, set[str]] = {}
+    for s in samples:
+        if s.writer is not None:
+            people.setdefault(" ".join(s.writer.split()).casefold(), set()).add(s.writer)
+    for spelt in people.values():
+        if len(spelt) > 1:
+            warnings.warn(f"data set {p}: the writers {', '.join(map(repr, sorted(spelt)))} "
+                          "differ only in case or spaces; they are counted as different "
+                          "writers, and --split writers could teach one and recognize the "
+                          "other. If they are one person, name them alike.", DataSetWarning,
+                          stacklevel=2)
     if len(counter) < 2:
         hint = ""
         if layout == "folders" and len(counter) == 1:
@@ -573,7 +679,7 @@ def _fingerprint(p: Path) -> tuple:
             return (f, -1, -1)
         return (f, st.st_size, st.st_mtime_ns)
 
-    found = [p / m for m in _MANIFESTS if (p / m).is_file()] if p.is_dir() else [p]
+    found = _manifests_in(p) if p.is_dir() else [p]
     if found:  # the manifest and the files it lists (which may lie anywhere)
         files = [str(m) for m in found]
         try:
@@ -600,8 +706,9 @@ def load_dataset_once(path: str | os.PathLike[str], *, warn: bool = False) -> Da
     path : path
         As for :func:`load_dataset`.
     warn : bool
-        Give the data set's :class:`~iloci.errors.TimeUnitWarning` when it is
-        read (workers do not: the evaluation's own process gave it).
+        Give the data set's :class:`~iloci.errors.TimeUnitWarning` and
+        :class:`~iloci.errors.DataSetWarning` when it is read (workers do
+        not: the evaluation's own process gave them).
     """
     p = Path(path).expanduser()
     key = str(p.resolve())
@@ -612,6 +719,7 @@ def load_dataset_once(path: str | os.PathLike[str], *, warn: bool = False) -> Da
     with warnings.catch_warnings():
         if not warn:
             warnings.simplefilter("ignore", TimeUnitWarning)
+            warnings.simplefilter("ignore", DataSetWarning)
         dataset = load_dataset(p)
     _READ.clear()  # one data set kept: a worker serves one evaluation at a time
     _READ[key] = (fp, dataset)
@@ -669,6 +777,11 @@ def writer_folds(samples: Sequence[Sample], folds: int, seed: int
                     "Put each writer's files in a sub-folder of its concept folder "
                     "(circle/alice/1.csv) or give a manifest with a writer column.")
     writers = sorted({str(s.writer) for s in samples})
+    if len(writers) < 2:
+        raise InvalidInputError(
+            f"--split writers teaches some writers and recognizes the others, so it needs "
+            f"at least 2 writers; the data set has {len(writers)} ({', '.join(writers)}). "
+            "Split per concept instead (--split concepts, the default).")
     if len(writers) < folds:
         raise InvalidInputError(f"--split writers with {folds} folds needs at least {folds} "
                                 f"writers; the data set has {len(writers)}. Set [evaluation] folds "

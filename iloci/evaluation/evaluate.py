@@ -34,12 +34,13 @@ import os
 from pathlib import Path
 from typing import Any
 import time
+import warnings
 
 from iloci.config import Config, check_installed, load_config
 from iloci.data import load_lasa
 from iloci.data.datasets import DataSet, check_protocol, load_dataset_once
 from iloci.data.files import writable_dir
-from iloci.errors import InvalidInputError
+from iloci.errors import DataSetWarning, InvalidInputError
 from iloci.evaluation.executors import InProcessExecutor, LocalExecutor, make_executor
 from iloci.evaluation.fold import LearnedFold, learn_fold, run_fold
 from iloci.evaluation.folds import fold_memory_name, fold_plan, untaught_concepts
@@ -52,7 +53,7 @@ from iloci.evaluation.robustness import robustness_suite, summarize_robustness
 from iloci.evaluation.summary import data_set_records, summarize
 from iloci.events import FoldEvent
 from iloci.plugins import get_plugin_manager, get_registry
-from iloci.sensorimotor.preprocess import trim_rests
+from iloci.sensorimotor.preprocess import lone_outlier, outlier_note, trim_rests
 
 # The parts are imported here too, where callers have always found them.
 __all__ = ["Answer", "Evaluation", "FoldResult", "LearnedFold", "default_jobs", "evaluate",
@@ -257,20 +258,33 @@ def check_drawings(dataset: DataSet, config: Config) -> None:
         Naming each such file (its path), the points it has left and the setting.
     """
     cfg = config.sensorimotor
-    short = []
+    short, glitches = [], []
     for s, d in zip(dataset.samples, dataset.demos):
         n = len(trim_rests(d.positions, d.times, cfg.rest_tolerance)[0])
+        glitch = lone_outlier(d.positions)
         if n < cfg.min_points:
             rests = (f" once the pen's rests are trimmed (from {len(d.positions)})"
                      if n < len(d.positions) else "")
-            short.append(f"{Path(dataset.root) / s.path}: {n} point(s){rests}")
+            short.append(f"{Path(dataset.root) / s.path}: {n} point(s){rests}"
+                         + outlier_note(d.positions))
+        elif glitch is not None:
+            glitches.append(f"{s.path} (sample {glitch[0]}, {glitch[1]:.3g} times its "
+                            "size away)")
     if short:
         listed = short[:12] + ([f"... and {len(short) - 12} more"] if len(short) > 12 else [])
         raise InvalidInputError(
             f"data set {dataset.source}: {len(short)} drawing(s) have fewer points than "
             f"[sensorimotor] min_points = {cfg.min_points} (a tap or a click is not a "
-            "drawing); nothing was learned:\n  " + "\n  ".join(listed) + "\nRemove them, "
-            "record them with more points, or lower [sensorimotor] min_points (3 at least).")
+            "drawing); nothing was learned:\n  " + "\n  ".join(listed) + "\nRemove them "
+            "(or the glitch samples named), record them with more points, or lower "
+            "[sensorimotor] min_points (3 at least).")
+    if glitches:
+        warnings.warn(
+            f"data set {dataset.source}: {len(glitches)} drawing(s) have a sample far outside "
+            f"the rest of the drawing, a logger's glitch? ({', '.join(glitches[:3])}"
+            f"{', ...' if len(glitches) > 3 else ''}). It sets the drawing's size, so the "
+            "stroke is read shrunk; remove such samples for a fair score.", DataSetWarning,
+            stacklevel=1)  # one place: said once when the CLI checks before evaluate()
 
 
 def _fold_event(r: FoldResult) -> FoldEvent:

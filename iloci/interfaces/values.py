@@ -15,13 +15,19 @@ import numpy as np
 from iloci.errors import InvalidDemonstrationError, TimeUnitWarning
 from iloci.validation import check_array
 
-__all__ = ["Demonstration", "Execution", "Response", "LONGEST_STROKE_S"]
+__all__ = ["Demonstration", "Execution", "Response", "LONGEST_STROKE_S", "MAX_POSITION"]
 
 
 #: Longest plausible duration of one drawn stroke (s): a person draws a
 #: shape in a few seconds (LASA's take 0.6 to 6 s); longer time stamps
 #: with steps of 1 or more are read as milliseconds.
 LONGEST_STROKE_S = 120.0
+
+#: Largest absolute coordinate a demonstration may have: squares of 1e100 are
+#: 1e200, so a path's length, extents and DTW's squared distances stay finite
+#: in float64 (max about 1.8e308). No drawing's unit comes near it: beyond, a
+#: value is corrupt (the bad-data audit's 1e200 file overflowed in the spline).
+MAX_POSITION = 1e100
 
 
 def _check_time_unit(t: np.ndarray, label: str) -> None:
@@ -114,12 +120,22 @@ class Demonstration:
                 f"{label} contains NaN or inf (first at row {row}); remove or "
                 "interpolate missing samples before teaching."
             )
-        extent = np.ptp(pos, axis=0)
-        if not np.any(extent > 1e-12 * max(1.0, float(np.abs(pos).max()))):
+        size = np.abs(pos).max(axis=1)
+        if float(size.max()) > MAX_POSITION:
+            row = int(np.argmax(size))
             raise InvalidDemonstrationError(
-                f"{label} has zero extent: all {len(pos)} points are equal, so "
-                "there is no motion to imitate."
-            )
+                f"{label} has a position of {float(size[row]):.3g} (row {row}), beyond "
+                f"{MAX_POSITION:.0e}: no unit of a drawing reaches that (its path's length "
+                "would overflow). A corrupt value, or a unit far too small? Remove the "
+                "sample or rescale the drawing.")
+        extent = np.ptp(pos, axis=0)
+        if not np.any(extent > 1e-12 * max(1.0, float(size.max()))):
+            what = (f"all {len(pos)} points are equal, so there is no motion to imitate"
+                    if not np.any(extent > 0) else
+                    f"its {len(pos)} points lie within {float(extent.max()):.3g} of each other, "
+                    "too close to tell apart (below 1e-12 of the drawing's unit or size); "
+                    "rescale it")
+            raise InvalidDemonstrationError(f"{label} has zero extent: {what}.")
         if self.times is None:
             t = np.arange(len(pos), dtype=np.float64)
         else:

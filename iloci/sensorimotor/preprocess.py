@@ -188,6 +188,52 @@ def trim_rests(positions: np.ndarray, times: np.ndarray | None = None,
     return p[i:j + 1], (None if times is None else np.asarray(times)[i:j + 1])
 
 
+def lone_outlier(positions: np.ndarray, factor: float = 20.0) -> tuple[int, float] | None:
+    """A sample far outside the rest of the drawing (a glitch of the logger), or None.
+
+    The sample farthest from the median position (per axis) is an outlier
+    when its distance to the bounding box of all the other samples exceeds
+    ``factor`` times that box's longer side. One such sample sets the
+    drawing's size on its own, so the rests (:func:`trim_rests`, measured
+    against that size) swallow the real stroke and the fit to the plane
+    shrinks it to a dot.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (N, 2)
+    factor : float
+        How many times the others' extent away (20: a stroke's own samples
+        never lie beyond its bounding box).
+
+    Returns
+    -------
+    (row, ratio) or None
+        The sample's row and its distance over the others' extent.
+    """
+    p = as_points(positions)
+    if len(p) < 4:
+        return None
+    r = int(np.argmax(np.abs(p - np.median(p, axis=0)).max(axis=1)))
+    rest = np.delete(p, r, axis=0)
+    lo, hi = rest.min(axis=0), rest.max(axis=0)
+    spread = float((hi - lo).max())
+    gap = float(np.max(np.maximum(lo - p[r], p[r] - hi)))
+    if spread > 0 and gap > factor * spread:
+        return r, gap / spread
+    return None
+
+
+def outlier_note(positions: np.ndarray) -> str:
+    """``""``, or what to say of :func:`lone_outlier`'s sample in an error about the drawing."""
+    found = lone_outlier(positions)
+    if found is None:
+        return ""
+    row, ratio = found
+    return (f"; sample {row} lies {ratio:.3g} times the rest of the drawing's size away from "
+            "it, a glitch? (it alone sets the drawing's size, so its other samples read as "
+            "the pen's rests): remove that sample")
+
+
 def fit_to_plane(points: np.ndarray, plane: DrawingPlane) -> np.ndarray:
     """Scale (aspect ratio kept) and centre a path in the drawing rectangle.
 
@@ -266,10 +312,12 @@ def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_
     if len(positions) < min_points:
         rests = (f" once the pen's rests are trimmed (from {len(demo.positions)})"
                  if len(positions) < len(demo.positions) else "")
+        glitch = outlier_note(demo.positions)
         raise InvalidDemonstrationError(
-            f"demonstration {demo.key!r} has {len(positions)} samples{rests}; at least "
-            f"{min_points} are needed to read a drawing (a tap or a click is not one): "
-            "sample the pen more often or draw a longer stroke ([sensorimotor] min_points).")
+            f"demonstration {demo.key!r} has {len(positions)} samples{rests}{glitch}; at "
+            f"least {min_points} are needed to read a drawing (a tap or a click is not one)"
+            + ("." if glitch else ": sample the pen more often or draw a longer stroke "
+               "([sensorimotor] min_points)."))
     if resample_by == "arc_length":
         if len(positions) < SHOWN_ABOVE:
             path = resample_path(positions, steps, smoothing)
