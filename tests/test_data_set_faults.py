@@ -595,3 +595,21 @@ def test_evaluate_refuses_an_empty_data_path_and_an_output_inside_the_data_set(
     assert main(["evaluate", "--data", str(root), "--out", str(tmp_path / "o"),
                  "--quiet"]) == 2
     assert "min_points = 5" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_concept_names_the_figures_font_lacks_are_said_once(tmp_path):
+    """matplotlib warned once per character and figure (a dozen lines for one concept
+    named in Chinese); the report's figures say it once."""
+    pytest.importorskip("matplotlib", reason="figures need matplotlib (iloci[report])")
+    from iloci.evaluation import figures
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with figures.missing_glyphs_said_once():
+            for name in ("a.png", "b.png"):
+                figures.plot_matrix(np.eye(2), ["之字形", "cercle_été"], tmp_path / name,
+                                    title="t", cbar_label="c")
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and said[0].startswith("the figures' font has no glyph for 之字形 "
+                                                 "(in concept names)")
+    assert (tmp_path / "a.png").is_file() and (tmp_path / "b.png").is_file()

@@ -6,9 +6,12 @@ matplotlib is imported when a figure is drawn, not when iloci is imported.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+import contextlib
 from pathlib import Path
+import re
 from typing import Any
+import warnings
 
 import numpy as np
 
@@ -45,6 +48,38 @@ def _save(fig: Any, path: str | Path) -> Path:
     import matplotlib.pyplot as plt
     plt.close(fig)
     return path
+
+
+@contextlib.contextmanager
+def missing_glyphs_said_once() -> Iterator[None]:
+    """Figures drawn inside say once which characters of their text the font lacks.
+
+    matplotlib warns per character and per figure ("Glyph 20043 (...)
+    missing from font(s) DejaVu Sans."), a dozen lines for one concept
+    named in Chinese; inside this block they become one warning naming the
+    characters. Other warnings pass as they were.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    missing: list[str] = []
+    for w in caught:
+        m = _NO_GLYPH.search(str(w.message))
+        if m is None:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        elif chr(int(m.group(1))) not in missing:
+            missing.append(chr(int(m.group(1))))
+    if missing:
+        warnings.warn(f"the figures' font has no glyph for "
+                      f"{''.join(missing[:8])}{'...' if len(missing) > 8 else ''} (in concept "
+                      "names): those characters show as boxes in the figures; the report's "
+                      "text names them. A font with them (e.g. Noto Sans CJK) installed and "
+                      "named in matplotlib's font.sans-serif draws them.", stacklevel=3)
+
+
+#: matplotlib's warning for a character its fonts lack:
+#: "Glyph 20043 (\\N{CJK UNIFIED IDEOGRAPH-4E4B}) missing from font(s) DejaVu Sans."
+_NO_GLYPH = re.compile(r"Glyph (\d+) .*missing from font")
 
 
 def plot_matrix(matrix: np.ndarray, concepts: Sequence[str], path: str | Path, *,

@@ -263,7 +263,12 @@ def write_outputs(out_dir: str | Path, metrics: dict[str, Any],
     results : sequence of FoldResult
         As :func:`~iloci.evaluation.evaluate.evaluate` returns them.
     """
+    with figures.missing_glyphs_said_once():
+        return _write_outputs(out_dir, metrics, results)
 
+
+def _write_outputs(out_dir: str | Path, metrics: dict[str, Any],
+                   results: Sequence[FoldResult]) -> Path:
     out = Path(out_dir)
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True, exist_ok=True)
