@@ -613,3 +613,17 @@ def test_concept_names_the_figures_font_lacks_are_said_once(tmp_path):
     assert len(said) == 1 and said[0].startswith("the figures' font has no glyph for 之字形 "
                                                  "(in concept names)")
     assert (tmp_path / "a.png").is_file() and (tmp_path / "b.png").is_file()
+
+
+def test_files_beside_writer_folders_and_an_empty_manifest_are_said(digits, tmp_path):
+    root = _export(digits, tmp_path / "d")
+    some = sorted((root / "2").rglob("*.csv"))[0]
+    some.rename(root / "2" / "loose.csv")  # directly in the concept folder: no writer
+    ds, said = _warned(load_dataset, root)
+    assert [s.writer for s in ds.samples if s.path == "2/loose.csv"] == [None]
+    assert len(said) == 1 and said[0].startswith(
+        f"data set {root}: concept folder(s) 2 hold trajectory files both directly and in "
+        "sub-folders; a sub-folder is read as the writer of its files")
+    (tmp_path / "m.json").write_text("[]")
+    with pytest.raises(InvalidInputError, match=r"m.json lists no samples: give one row"):
+        load_dataset(tmp_path / "m.json")

@@ -198,6 +198,7 @@ def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
     samples: list[Sample] = []
     left_out: list[str] = []     # trajectory files under a name starting with "_"
     other: list[str] = []        # files of formats the data set is not read from
+    mixed: list[str] = []        # concept folders with files both in and under them
     for d in [e for e in entries if e.is_dir() and not _hidden(e.relative_to(root))]:
         if d not in concept_dirs:  # "_old/": its trajectory files are noted below
             left_out += [f.relative_to(root).as_posix() for f in sorted(d.rglob("*"))
@@ -232,11 +233,22 @@ def _scan_folders(root: Path) -> tuple[list[Sample], list[str]]:
             rel = f.relative_to(d)
             writer = _text(rel.parts[0]) if len(rel.parts) > 1 else None
             samples.append(Sample(f.relative_to(root).as_posix(), _text(d.name), writer))
+        inside = {len(f.relative_to(d).parts) > 1 for f in files}
+        if len(inside) > 1:
+            mixed.append(d.name)
     if samples and left_out:
         warnings.warn(
             f"data set {root}: {len(left_out)} trajectory file(s) left out because a name "
             f"on their path starts with '_' ({_listed(left_out)}); iloci leaves such "
             "files and folders out of a data set. Rename them to include them.",
+            DataSetWarning, stacklevel=3)
+    if mixed:
+        warnings.warn(
+            f"data set {root}: concept folder(s) {_listed(mixed)} hold trajectory files both "
+            "directly and in sub-folders; a sub-folder is read as the writer of its files "
+            "(circle/alice/1.csv: writer alice), so the files directly in the concept folder "
+            "have no writer (and --split writers refuses them). Move them into a writer's "
+            "folder, or move the sub-folder's files up if it is not a writer.",
             DataSetWarning, stacklevel=3)
     if samples and other:
         kinds = Counter(Path(o).suffix.lower() or "no suffix" for o in other)
@@ -385,6 +397,9 @@ def _read_manifest(path: Path) -> tuple[list[Sample], list[str]]:
                                     "as comma-separated text, one sample a line.") from None
         where = [f"line {i + 2}" for i in range(len(rows))]
     fcol, ccol = _pick(header, _FILE_COLS), _pick(header, _CONCEPT_COLS)
+    if not rows and not header:  # [] or an empty file: nothing to name columns by
+        raise InvalidInputError(f"manifest {path} lists no samples: give one row (or JSON "
+                                "object) per file, with its file and concept.")
     if fcol is None or ccol is None:
         raise InvalidInputError(
             f"manifest {path} needs a 'file' and a 'concept' column (optional: writer, "
