@@ -145,9 +145,33 @@ def _main(argv: Sequence[str] | None) -> int:
     except Exception as exc:  # a failure, not a user error
         if show_tb:
             raise
-        print(f"failed: {type(exc).__name__}: {exc}\n(run with --traceback for details)",
-              file=sys.stderr)
+        print(f"failed: {type(exc).__name__}: {exc}{_whose(args)}\n(run with --traceback "
+              "for details)", file=sys.stderr)
         return 1
+
+
+def _whose(args: argparse.Namespace) -> str:
+    """``""`` for iloci's own commands; for a plugin's, which plugin's it is (to report
+    the failure to, or block)."""
+    module = getattr(args.func, "__module__", "") or ""
+    top = module.partition(".")[0]
+    if not top or top == "iloci":
+        return ""
+    from importlib.metadata import entry_points
+
+    ours = [ep for ep in entry_points(group="iloci")
+            if ep.module == module or module.startswith(ep.module + ".")
+            or ep.module.partition(".")[0] == top]
+    if ours:
+        ep = ours[0]
+        dist = getattr(ep.dist, "name", None)
+        who = f"plugin {ep.name!r}" + (f" ({dist}, module {module})" if dist else
+                                       f" (module {module})")
+        block = f"ILOCI_BLOCK_PLUGINS={ep.name}"
+    else:
+        who, block = f"module {module}", "ILOCI_BLOCK_PLUGINS"
+    return (f"\nin `iloci {args.command}`, a command of {who}, not of iloci: report it to its "
+            f"authors, or leave the plugin out with {block} (docs/hooks.md)")
 
 
 if __name__ == "__main__":  # pragma: no cover

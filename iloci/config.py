@@ -159,6 +159,11 @@ def _read_text(path: Path, what: str) -> str:
             raise ConfigError(f"{what} is UTF-16 text (it starts with a UTF-16 byte-order "
                               "mark); TOML files are UTF-8: save it as UTF-8.",
                               source=str(path))
+        head = raw[:200]
+        if len(head) >= 4 and head.count(0) * 3 >= len(head):
+            # ASCII in UTF-16 without a mark: every other byte is zero
+            raise ConfigError(f"{what} looks like UTF-16 text (every other byte is zero); "
+                              "TOML files are UTF-8: save it as UTF-8.", source=str(path))
         # a UTF-8 byte-order mark (what Notepad and PowerShell write) is no content
         text = raw.decode("utf-8-sig")
     except FileNotFoundError:
@@ -196,12 +201,23 @@ def read_toml(path: str | os.PathLike[str], what: str = "config") -> dict[str, A
     return _parse_toml(_read_text(path, what), path)
 
 
+#: What a file of another format is called, by its suffix, in the error that it is not TOML.
+_NOT_TOML = {".json": "JSON", ".yaml": "YAML", ".yml": "YAML", ".ini": "INI", ".cfg": "INI",
+             ".xml": "XML", ".py": "Python"}
+
+
 def _parse_toml(text: str, path: Path) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         m = _LINE_RE.search(str(exc))
         line = int(m.group(1)) if m else None
+        kind = _NOT_TOML.get(path.suffix.lower())
+        if kind is not None:
+            raise ConfigError(f"this is a {kind} file ({path.name}), and iloci reads TOML "
+                              f"([section] then key = value lines); TOML's parser says: {exc}. "
+                              "Write the settings as TOML (`iloci config show` prints every "
+                              "one in TOML).", source=str(path), line=line) from None
         raise ConfigError(f"malformed TOML: {exc}", source=str(path), line=line) from None
     except RecursionError:
         raise ConfigError("its arrays or tables are nested too deeply to read (an iloci "
@@ -332,6 +348,7 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
                               source=origin, key=key)
 
     kwargs: dict[str, Any] = {"source": origin}
+    elsewhere = _keys_of_sections(data, registry, supplied)
     # A typo is reported before a missing back end: it is what the user can fix here.
     missing: MissingBackendError | None = None
     for sec, kind in COMPONENT_KINDS.items():
@@ -362,13 +379,35 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
         except MissingBackendError as exc:
             missing = missing or exc
             continue
-        kwargs[sec] = ComponentConfig(name, validate_params(spec, values, source=origin))
+        kwargs[sec] = ComponentConfig(name, validate_params(spec, values, source=origin,
+                                                            elsewhere=elsewhere))
     for sec, cls in _PLAIN_SECTIONS.items():
         kwargs[sec] = validate_dataclass(cls, dict(data.get(sec, {})), section=sec,
-                                         source=origin)
+                                         source=origin, elsewhere=elsewhere)
     if missing is not None:
         raise missing
     return Config(**kwargs, _registry=registry, _supplied=frozenset(supplied))
+
+
+def _keys_of_sections(data: Mapping[str, Any], registry: Any,
+                      supplied: set[str]) -> dict[str, set[str]]:
+    """Every section's keys: the plain sections' and those of the components ``data``
+    names (or the defaults), as far as the registry knows them (for the hint that a key
+    belongs in another section)."""
+    keys = {sec: {f.name for f in dataclasses.fields(cls)}
+            for sec, cls in _PLAIN_SECTIONS.items()}
+    for sec in COMPONENT_KINDS:
+        keys[sec] = {"name"}
+        name = (data.get(sec) or {}).get("name", DEFAULT_NAMES[sec])
+        if registry is None or sec in supplied or not isinstance(name, str) or name == "none":
+            continue
+        try:
+            params = registry.get(sec, name).params
+        except (UnknownComponentError, MissingBackendError):  # said in its turn below
+            continue
+        if params is not None:
+            keys[sec] |= {f.name for f in dataclasses.fields(params)}
+    return keys
 
 
 #: Sections every setting of which a saved memory's entries depend on.

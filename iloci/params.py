@@ -107,11 +107,27 @@ class RNNPBParams:
     #: of a state.
     kernel: str = "auto"
 
+    #: Largest values of the sizes and counts: beyond them a run would ask for
+    #: more memory than a machine has (hidden = 10^8: 26 GiB of weights) or
+    #: run for years (epochs = 2^63), and fail deep inside numpy or hang.
+    #: Each is far above what any setting here was measured with (the paper:
+    #: 60 hidden, 25 context, 4 PB, 1500 epochs; iloci: 10 recognition steps).
+    LIMITS: ClassVar[dict[str, int]] = {
+        "input_size": 4096, "hidden": 4096, "context": 4096, "pb": 1024,
+        "epochs": 10_000_000, "warmup_epochs": 10_000_000, "recognition_steps": 100_000,
+        "recognition_starts": 1000}
+
     def validate(self) -> None:
         for name in ("input_size", "hidden", "context", "pb", "epochs",
                      "recognition_steps", "recognition_starts"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name, most in self.LIMITS.items():
+            if getattr(self, name) > most:
+                raise ValueError(f"{name} must be at most {most:,}, got "
+                                 f"{getattr(self, name):,}: a network or a training that "
+                                 "large would not fit in memory or end (the paper's "
+                                 "network: 60 hidden, 25 context, 4 PB units, 1500 epochs)")
         if self.warmup_epochs < 0:
             raise ValueError(f"warmup_epochs must be >= 0, got {self.warmup_epochs}")
         if not 0.0 < self.learning_rate_decay <= 1.0:

@@ -47,7 +47,9 @@ class LearnerConfig:
     #: ``epochs`` (the paper is silent on the number). Fewer run faster but
     #: let regenerated patterns drift further from what was demonstrated
     #: (measured in docs/method.md, "Where the paper is silent").
-    rehearsal_epochs: int = constrained(0, Interval(0))
+    rehearsal_epochs: int = constrained(0, Interval(0, 10_000_000, integer=True,
+                                                    note="at most 10^7: a rehearsal would "
+                                                    "not end"))
     #: Recognition answers "unknown" when its familiarity (``familiarity``
     #: below, ``iloci.concepts.inference.familiarity``: near 1 for a
     #: demonstration like something the memory knows, 0.5 when it lies as
@@ -204,7 +206,9 @@ class SensorimotorConfig:
     """From pen trajectory to network input (section ``[sensorimotor]``)."""
 
     #: Points each demonstration is resampled to before IK (sequence length).
-    steps: int = constrained(50, Interval(3))
+    steps: int = constrained(50, Interval(3, 10_000, integer=True,
+                                          note="points a drawing is resampled to; the "
+                                          "paper's 50"))
     #: Resampling parameter: ``"arc_length"`` (evenly along the drawn path,
     #: smoothed along it: independent of the teacher's pace, the sampling
     #: rate and pauses of the pen) or ``"time"`` (evenly in the

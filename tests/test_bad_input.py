@@ -101,7 +101,13 @@ def test_nan_config_is_refused_by_config_check(tmp_path, cli):
     ("evaluation", {"seeds": 1}, "unknown key 'evaluation.seeds'.*Did you mean 'seed'"),
     ("learner", {"k_cutoff": -0.5}, "k_cutoff must be >= 0"),
     ("learner", {"num_threshold": True}, "learner.num_threshold must be an integer"),
-    ("sensorimotor", {"steps": 2}, "steps must be >= 3"),
+    ("sensorimotor", {"steps": 2}, r"steps must be in 3..10000"),
+    ("sensorimotor", {"steps": 10**9}, r"steps must be in 3..10000"),
+    ("learner", {"rehearsal_epochs": 10**8}, r"rehearsal_epochs must be in 0..10000000"),
+    ("evaluation", {"k_cutoff": 0.5}, r"unknown key 'evaluation.k_cutoff'.*'k_cutoff' is "
+                                      r"a key of \[learner\]: move it there"),
+    ("learner", {"evaluation": {"seed": 3}}, r"evaluation.seed under \[learner\] is read as "
+                                             r"learner.evaluation.seed"),
     ("sensorimotor", {"robot": "nao"}, r"unknown key 'sensorimotor.robot'"),
     ("robot", {"plane": "manual"}, r"plane must be 'auto' or \[x, y, z, width, height\]"),
     ("sensorimotor", {"smoothing_window": 4}, "odd number"),
@@ -112,6 +118,36 @@ def test_nan_config_is_refused_by_config_check(tmp_path, cli):
 def test_out_of_range_or_mistyped_values_name_their_key(section, values, match):
     with pytest.raises(ConfigError, match=match):
         load_config({section: values})
+
+
+@pytest.mark.usefixtures("default_back_ends")  # the perceptual model's own settings
+@pytest.mark.parametrize("values, match", [
+    ({"hidden": 10**8}, r"hidden must be at most 4,096, got 100,000,000"),
+    ({"epochs": 2**63 - 1}, r"epochs must be at most 10,000,000"),
+    ({"recognition_starts": 10**6}, r"recognition_starts must be at most 1,000"),
+    ({"k_cutoff": 0.4}, r"'k_cutoff' is a key of \[learner\]: move it there"),
+])
+def test_sizes_no_machine_holds_are_refused_before_anything_runs(values, match):
+    """hidden = 10^8 failed with numpy's MemoryError (26 GiB), epochs = 2^63 - 1 with
+    'array is too big', steps = 10^9 hung: each passed `iloci config check`."""
+    with pytest.raises(ConfigError, match=match):
+        load_config({"perceptual_model": values})
+
+
+def test_a_json_or_yaml_config_and_utf16_without_a_mark_say_what_they_are(tmp_path):
+    from iloci.interfaces import COMPONENT_KINDS  # no back end looked up: runs in bare too
+    for name, text in (("c.json", '{"learner": {"k_cutoff": 0.7}}'),
+                       ("c.yaml", "learner:\n  k_cutoff: 0.7\n")):
+        (tmp_path / name).write_text(text)
+        kind = "JSON" if name.endswith("json") else "YAML"
+        with pytest.raises(ConfigError, match=rf"this is a {kind} file \({name}\), and iloci "
+                                              r"reads TOML"):
+            load_config(tmp_path / name, supplied=COMPONENT_KINDS)
+    f = tmp_path / "u16.toml"
+    f.write_bytes("[learner]\nk_cutoff = 0.7\n".encode("utf-16-le"))  # no byte-order mark
+    with pytest.raises(ConfigError, match=r"looks like UTF-16 text \(every other byte is "
+                                          r"zero\)"):
+        load_config(f, supplied=COMPONENT_KINDS)
 
 
 def test_input_size_must_match_the_encoding():
@@ -484,3 +520,82 @@ def test_evaluate_checks_every_back_end_before_fold_0(monkeypatch):
     monkeypatch.setattr("iloci.evaluation.evaluate.load_lasa", no_data)
     with pytest.raises(MissingBackendError, match="teacher 'needy' needs no_such_module_xyz"):
         ev.evaluate(config, plugin_manager=pm, jobs=1)
+
+
+PARAMS_TEACHERS = """
+    from dataclasses import dataclass
+    from iloci import hookimpl
+
+    class Kind:
+        def __init__(self, **kw):
+            pass
+
+        def feedback(self, demo, response):
+            return 1
+
+    @dataclass(frozen=True)
+    class NeedsPath:
+        path: str                    # no default: hooks.md asks for one
+
+    @dataclass(frozen=True)
+    class Buggy:
+        rate: int = 1
+
+        def validate(self):
+            return self.rate + "x"   # a fault of the plugin's code, not of the config
+
+    @hookimpl
+    def iloci_register_teachers(registry):
+        registry.add("needs-path", Kind, params=NeedsPath, summary="needs a path")
+        registry.add("buggy", Kind, params=Buggy, summary="a faulty validate")
+"""
+
+
+def test_a_plugins_setting_without_default_or_faulty_validate_is_said_as_such(site):
+    """A plugin's params without a default blamed the user's config with Python's
+    "__init__() missing 1 required positional argument"; a TypeError in its validate()
+    was printed as a fault of the user's config file."""
+    from iloci.errors import PluginError
+    from iloci.interfaces import COMPONENT_KINDS
+
+    _fake_distribution(site, "iloci-params", "iloci_params", "params", PARAMS_TEACHERS)
+    registry = get_registry(get_plugin_manager())
+    others = tuple(k for k in COMPONENT_KINDS if k != "teacher")
+    with pytest.raises(ConfigError, match=r"\[teacher\] needs path: this teacher has no "
+                                          r"default for it; set path = \.\.\. under "):
+        load_config({"teacher": {"name": "needs-path"}}, registry=registry, supplied=others)
+    assert load_config({"teacher": {"name": "needs-path", "path": "a.csv"}},
+                       registry=registry, supplied=others).teacher.params.path == "a.csv"
+    with pytest.raises(PluginError, match=r"iloci_params.Buggy.validate\(\) failed with "
+                                          r"TypeError: .*not of the config"):
+        load_config({"teacher": {"name": "buggy"}}, registry=registry, supplied=others)
+
+
+def test_a_plugin_commands_failure_names_the_plugin(site, cli):
+    _fake_distribution(site, "iloci-cmd", "iloci_cmd", "cmd", """
+        from iloci import hookimpl
+
+        def run(args):
+            return {}["missing thing"]
+
+        @hookimpl
+        def iloci_add_commands(subparsers):
+            subparsers.add_parser("mycmd").set_defaults(func=run)
+    """)
+    out = cli("mycmd", env={"PYTHONPATH": str(site)})
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    assert "failed: KeyError: 'missing thing'\nin `iloci mycmd`, a command of plugin 'cmd' " \
+           "(iloci-cmd, module iloci_cmd), not of iloci: report it to its authors, or leave " \
+           "the plugin out with ILOCI_BLOCK_PLUGINS=cmd" in out.stderr
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_fold_named_twice_and_a_memory_path_that_is_a_folder_are_refused(tmp_path, cli):
+    from iloci.errors import InvalidInputError
+    from iloci.evaluation.evaluate import evaluate
+
+    with pytest.raises(InvalidInputError, match=r"fold\(s\) 0 named more than once"):
+        evaluate(None, folds=[0, 0])
+    (tmp_path / "m.npz").mkdir()
+    out = cli("show", str(tmp_path / "m.npz"))
+    assert out.returncode == 2 and "is a directory, not a memory file" in out.stderr

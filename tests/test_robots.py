@@ -215,6 +215,45 @@ def test_memory_records_its_robot_and_refuses_another(arm_agent, tmp_path):
         iloci.Agent.load(path, {"perceptual_model": {"epochs": 30}})
 
 
+def test_a_memory_refuses_its_arm_once_the_urdf_moved_its_joints(tmp_path):
+    """An audit lengthened a link of a taught arm's URDF by 1 cm: the memory was read,
+    and taught further, with the other arm's kinematics, without a word."""
+    import shutil
+
+    from iloci.sensorimotor.robots.urdf import kinematics_fingerprint
+
+    urdf = write_test_arm(tmp_path / "a")
+    agent = iloci.build({**arm_config(urdf), "perceptual_model": {"epochs": 30}})
+    path = agent.save(tmp_path / "arm.npz")
+    before = path.read_bytes()
+    text = urdf.read_text()
+    urdf.write_text(text.replace("<robot", "<!-- a comment -->\n<robot", 1)
+                    .replace('<joint name="grip"', '<joint name="grip" '))  # no motion
+    assert iloci.Agent.load(path).robot.name == "testarm"
+    fp = kinematics_fingerprint(urdf, "base", "pen")
+    urdf.write_text(text.replace('<origin xyz="0 0 0.25"/>', '<origin xyz="0 0 0.26"/>'))
+    assert kinematics_fingerprint(urdf, "base", "pen") != fp
+    with pytest.raises(MemoryFileError, match=r"the arm's joints from 'base' to 'pen' in "
+                                              r".*arm.urdf have changed since"):
+        iloci.Agent.load(path)
+    assert path.read_bytes() == before
+    shutil.rmtree(tmp_path / "a")
+
+
+def test_a_joint_without_an_axis_or_with_nan_is_refused_naming_it(tmp_path):
+    urdf = write_test_arm(tmp_path)
+    text = urdf.read_text()
+    urdf.write_text(text.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', 1))
+    with pytest.raises(InvalidInputError, match=r"joint 'j2' has <axis xyz=\"0 0 0\">, a "
+                                                r"zero vector"):
+        read_urdf(urdf)
+    urdf.write_text(text.replace('<origin xyz="0 0 0.25"/>', '<origin xyz="0 0 nan"/>'))
+    with pytest.raises(InvalidInputError, match=r"origin xyz '0 0 nan' holds nan or inf"):
+        read_urdf(urdf)
+    with pytest.raises(InvalidInputError, match=r"is a directory; give the robot's .urdf"):
+        read_urdf(urdf.parent)
+
+
 # -------------------------------------------------------------- IK conformance
 def test_conformance_catches_a_solver_that_jumps_between_branches():
     """The IK contract requires a continuous joint path (``ik_continuous_path``)."""

@@ -172,10 +172,23 @@ class Persistence(AgentBase):
 
 
 def robot_record(robot: Any) -> dict[str, Any]:
-    """What a memory file records of its robot (JSON)."""
+    """What a memory file records of its robot (JSON): names, frames, the URDF's path
+    and the fingerprint of its arm's kinematics (:func:`_kinematics`)."""
     return {"name": robot.name, "joints": list(robot.joint_names),
             "tip_frame": robot.end_effector_frame, "base_frame": robot.base_frame,
-            "urdf": str(robot.urdf_path)}
+            "urdf": str(robot.urdf_path), "kinematics": _kinematics(robot)}
+
+
+def _kinematics(robot: Any) -> str | None:
+    """:func:`~iloci.sensorimotor.robots.urdf.kinematics_fingerprint` of the robot's chain,
+    or None for a robot without a readable URDF (an object passed to ``build``)."""
+    from iloci.sensorimotor.robots.urdf import kinematics_fingerprint
+
+    try:
+        return kinematics_fingerprint(robot.urdf_path, robot.base_frame,
+                                      robot.end_effector_frame)
+    except (InvalidInputError, OSError, AttributeError, TypeError):
+        return None
 
 
 def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
@@ -205,5 +218,17 @@ def check_same_robot(path: Any, saved: dict[str, Any], robot: Any, memory: Any) 
             f"{len(robot.joint_names)} ({', '.join(robot.joint_names)}). A memory's patterns "
             "are that robot's joint motions: load it with its own robot (leave out config= "
             "or use the [robot] it was saved with), or teach the new robot afresh.")
+    was = saved.get("kinematics")
+    if was:
+        now = _kinematics(robot)
+        if now is not None and now != was:
+            raise MemoryFileError(
+                f"{path} was learned by robot {saved.get('name')!r} as its URDF "
+                f"({saved.get('urdf')}) was then; the arm's joints from "
+                f"{robot.base_frame!r} to {robot.end_effector_frame!r} in "
+                f"{robot.urdf_path} have changed since (a link's length, an axis, a limit): "
+                "the memory's patterns are the old arm's joint motions. Restore the URDF it "
+                "was taught with, or teach the changed arm afresh (another --memory). The "
+                "file is unchanged.")
 
 

@@ -146,6 +146,9 @@ def read_memory_file(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray
         memory, or written by a newer iloci.
     """
     path = Path(path)
+    if path.is_dir():
+        raise MemoryFileError(f"{path} is a directory, not a memory file; give the .npz "
+                              "file `iloci teach --memory FILE` wrote.")
     if not path.is_file():
         raise MemoryFileError(f"memory file not found: {path}. Teach the robot first "
                               "(`iloci teach --memory FILE`), or check the path.")

@@ -170,6 +170,10 @@ def evaluate(config: Any = None, *, jobs: int | None = None,
         raise InvalidInputError(f"jobs must be >= 1, got {asked}.")
     n_folds = config.evaluation.folds
     wanted = list(range(n_folds)) if folds is None else list(folds)
+    twice = sorted({k for k in wanted if wanted.count(k) > 1})
+    if twice:  # run twice, a fold would count twice in the mean and its spread
+        raise InvalidInputError(f"fold(s) {', '.join(map(str, twice))} named more than once "
+                                f"(folds {wanted}); name each fold once.")
     for k in wanted:
         if not 0 <= k < n_folds:
             raise InvalidInputError(f"fold {k} does not exist; folds are 0..{n_folds - 1}.")

@@ -21,7 +21,7 @@ from typing import Any
 from iloci.errors import (ConfigError, IlociError, InvalidInputError, MissingBackendError,
                           PluginError, PluginNotLoadedError, UnknownComponentError, did_you_mean)
 from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, unmet_members
-from iloci.registry.params import params_to_dict, validate_dataclass
+from iloci.registry.params import misplaced, params_to_dict, validate_dataclass
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "params_to_dict", "validate_dataclass",
            "validate_params"]
@@ -404,14 +404,22 @@ class KindRegistry:
 
 
 def validate_params(spec: ComponentSpec, values: Mapping[str, Any], *,
-                    source: str | None = None) -> Any:
-    """Validate a component's config keys against its schema (no heavy import)."""
+                    source: str | None = None,
+                    elsewhere: Mapping[str, Any] | None = None) -> Any:
+    """Validate a component's config keys against its schema (no heavy import).
+
+    ``elsewhere``: the other sections' keys, to point a misplaced key to its
+    section (:func:`~iloci.registry.params.misplaced`).
+    """
     section = spec.kind
     if spec.params is None:
         if values:
             key = next(iter(values))
             raise ConfigError(
                 f"unknown key {section + '.' + key!r}: {_label(spec.kind)} "
-                f"{spec.name!r} takes no parameters.", source=source, key=f"{section}.{key}")
+                f"{spec.name!r} takes no parameters."
+                f"{misplaced(section, key, values[key], elsewhere)}",
+                source=source, key=f"{section}.{key}")
         return None
-    return validate_dataclass(spec.params, values, section=section, source=source)
+    return validate_dataclass(spec.params, values, section=section, source=source,
+                              elsewhere=elsewhere)

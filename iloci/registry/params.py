@@ -16,7 +16,7 @@ import typing
 from typing import Any, Union
 
 from iloci.constraints import violations
-from iloci.errors import ConfigError, did_you_mean
+from iloci.errors import ConfigError, PluginError, did_you_mean
 
 __all__ = ["params_to_dict", "validate_dataclass"]
 
@@ -113,23 +113,50 @@ def _value_kind(value: Any) -> str:
     return type(value).__name__
 
 
+def misplaced(section: str, key: str, value: Any,
+              elsewhere: Mapping[str, Any] | None) -> str:
+    """A hint for an unknown ``section.key`` that belongs in another section, or ``""``.
+
+    ``elsewhere`` maps the other sections to their keys: a key of one of them
+    (``k_cutoff`` under ``[evaluation]``) is named with its section; a
+    section's name used as a dotted key (``learner.k_cutoff = 0.4`` under
+    ``[perceptual_model]``, which TOML reads as ``perceptual_model.learner``)
+    is explained.
+    """
+    if not elsewhere:
+        return ""
+    if key in elsewhere and isinstance(value, Mapping):
+        inner = next(iter(value), "KEY")
+        return (f" {key}.{inner} under [{section}] is read as {section}.{key}.{inner} (a "
+                f"dotted key stays in its table); write {inner} under [{key}] instead.")
+    homes = [sec for sec, keys in elsewhere.items() if sec != section and key in keys]
+    if homes:
+        return (f" {key!r} is a key of {' and '.join(f'[{h}]' for h in homes)}: move it "
+                "there.")
+    return ""
+
+
 def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
-                       source: str | None = None) -> Any:
+                       source: str | None = None,
+                       elsewhere: Mapping[str, Any] | None = None) -> Any:
     """Build dataclass ``cls`` from ``values``, checking keys and types.
 
     Unknown keys and wrongly typed values raise :class:`ConfigError` naming
-    the key (``section.key``) and the source. After construction the
-    instance's ``validate()`` method, when it has one, may raise
-    ``ValueError`` for out-of-range values; that becomes a ConfigError too.
+    the key (``section.key``) and the source; an unknown key that another
+    section of ``elsewhere`` (section -> its keys) has is pointed there
+    (:func:`misplaced`). After construction the instance's ``validate()``
+    method, when it has one, may raise ``ValueError`` for out-of-range
+    values; that becomes a ConfigError too.
     """
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     hints = typing.get_type_hints(cls)
     kwargs = {}
     for key, value in values.items():
         if key not in fields:
+            hint = misplaced(section, key, value, elsewhere) or did_you_mean(key, fields)
             raise ConfigError(
                 f"unknown key {section + '.' + key!r}; valid keys in [{section}] are "
-                f"{', '.join(sorted(fields)) or '(none)'}.{did_you_mean(key, fields)}",
+                f"{', '.join(sorted(fields)) or '(none)'}.{hint}",
                 source=source, key=f"{section}.{key}")
         ok, coerced = _type_ok(value, hints.get(key, Any))
         if not ok:
@@ -145,6 +172,13 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
             raise ConfigError(f"{section}.{key} is out of range: {value!r} does not fit in "
                               "a 64-bit integer.", source=source, key=f"{section}.{key}")
         kwargs[key] = coerced
+    needed = [name for name, f in fields.items() if name not in kwargs
+              and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if needed:  # a setting without a default (hooks.md asks for defaults): the user's to give
+        raise ConfigError(f"[{section}] needs {', '.join(needed)}: this {section} has no "
+                          f"default for {'it' if len(needed) == 1 else 'them'}; set "
+                          f"{', '.join(f'{n} = ...' for n in needed)} under [{section}].",
+                          source=source, key=f"{section}.{needed[0]}")
     try:
         obj = cls(**kwargs)
     except (ValueError, TypeError, OverflowError) as exc:
@@ -155,8 +189,17 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
         check = getattr(obj, "validate", None)  # rules that tie fields together
         if callable(check):
             check()
-    except (ValueError, TypeError, OverflowError) as exc:
+    except (ValueError, OverflowError) as exc:
         raise ConfigError(f"[{section}]: {exc}", source=source, key=section) from None
+    except Exception as exc:
+        # validate() reports a bad value by ValueError (hooks.md); anything else is a
+        # fault of its code, not of the config: said as the plugin's
+        raise PluginError(
+            f"[{section}]: {cls.__module__}.{cls.__qualname__}.validate() failed with "
+            f"{type(exc).__name__}: {exc}. That is a fault of the code that defines "
+            f"[{section}]'s settings (module {cls.__module__}), not of the config: report "
+            "it to its authors, or leave the plugin out with ILOCI_BLOCK_PLUGINS "
+            "(docs/hooks.md).") from exc
     return obj
 
 

@@ -23,7 +23,9 @@ A ``<mesh filename=...>`` is resolved as ROS tools do:
 from __future__ import annotations
 
 from dataclasses import dataclass
+import hashlib
 import importlib.util
+import json
 import os
 from pathlib import Path
 import xml.etree.ElementTree as ET
@@ -60,6 +62,8 @@ class UrdfJoint:
     limits_given : bool
         Whether the file gives both ``lower`` and ``upper`` (URDF lets a
         revolute or prismatic joint leave them out: they then read 0).
+    axis : (float, float, float)
+        ``<axis xyz>`` in the joint's frame (URDF's default ``1 0 0``).
     """
 
     name: str
@@ -71,6 +75,7 @@ class UrdfJoint:
     origin: np.ndarray
     mimic: tuple[str, float, float] | None = None
     limits_given: bool = True
+    axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
 
     def limits_fault(self) -> str:
         """What keeps iloci from moving this joint: ``"continuous"`` (no limits),
@@ -233,6 +238,27 @@ class UrdfTree:
         return T
 
 
+def kinematics_fingerprint(path: str | os.PathLike[str], base: str, tip: str) -> str:
+    """SHA-256 of the joints from ``base`` to ``tip`` as they move the tip: each one's
+    name, type, origin, axis, limits and mimic (to 1e-9), not the file's bytes.
+
+    A memory records it (``robot.kinematics``): its patterns are this arm's joint
+    motions, so an edit of the chain (a link's length, a limit) makes them another
+    arm's, while comments, colours, meshes and joints off the chain change nothing.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`read_urdf` and :meth:`UrdfTree.chain`.
+    """
+    h = hashlib.sha256()
+    for j in read_urdf(path).chain(base, tip):
+        h.update(json.dumps([j.name, j.type, np.round(j.origin, 9).tolist(),
+                             np.round(j.axis, 9).tolist(), repr(j.lower), repr(j.upper),
+                             j.mimic]).encode())
+    return h.hexdigest()
+
+
 def _floats(text: str | None, n: int, what: str, path: Path) -> np.ndarray:
     if text is None:
         return np.zeros(n)
@@ -242,6 +268,9 @@ def _floats(text: str | None, n: int, what: str, path: Path) -> np.ndarray:
         v = np.zeros(0)
     if v.shape != (n,):
         raise InvalidInputError(f"{path}: {what} {text!r} is not {n} numbers.")
+    if not np.all(np.isfinite(v)):
+        raise InvalidInputError(f"{path}: {what} {text!r} holds nan or inf; give "
+                                f"{n} finite numbers.")
     return v
 
 
@@ -276,6 +305,9 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
         ``<robot>``, a joint naming an unknown link, not exactly one root).
     """
     p = Path(path)
+    if p.is_dir():
+        raise InvalidInputError(f"urdf {p} is a directory; give the robot's .urdf file in "
+                                "it.")
     if not p.is_file():
         raise InvalidInputError(
             f"URDF not found: {p}. Give an existing file path, or "
@@ -320,6 +352,15 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
             hi = _number(lim.get("upper", "0"), f"joint {name!r} <limit upper>", p)
         elif kind in ("revolute", "prismatic"):
             given = False
+        axis = np.eye(3)[0]
+        if kind in ("revolute", "continuous", "prismatic"):
+            axis = _floats(_child_attr(el, "axis", "xyz") or None, 3, f"joint {name!r} "
+                           "<axis xyz>", p) if el.find("axis") is not None else np.eye(3)[0]
+            if not np.linalg.norm(axis) > 1e-9:
+                raise InvalidInputError(
+                    f"{p}: joint {name!r} has <axis xyz=\"{_child_attr(el, 'axis', 'xyz')}\">, "
+                    "a zero vector: a joint moves about (or along) an axis; give its "
+                    "direction, e.g. xyz=\"0 0 1\".")
         mimic = None
         m = el.find("mimic")
         if m is not None:
@@ -327,7 +368,8 @@ def read_urdf(path: str | os.PathLike[str]) -> UrdfTree:
                      _number(m.get("multiplier", "1"), f"joint {name!r} <mimic multiplier>", p),
                      _number(m.get("offset", "0"), f"joint {name!r} <mimic offset>", p))
         joints[name] = UrdfJoint(name, kind, parent, child, lo, hi,
-                                 _origin(el.find("origin"), p), mimic, given)
+                                 _origin(el.find("origin"), p), mimic, given,
+                                 (float(axis[0]), float(axis[1]), float(axis[2])))
     parents: dict[str, list[str]] = {}
     for j in joints.values():
         parents.setdefault(j.child, []).append(j.name)
@@ -403,9 +445,12 @@ def _check_expanded(root: ET.Element, path: Path) -> None:
 
 def _number(text: str, what: str, path: Path) -> float:
     try:
-        return float(text)
+        v = float(text)
     except ValueError:
         raise InvalidInputError(f"{path}: {what} is {text!r}, not a number.") from None
+    if np.isnan(v):
+        raise InvalidInputError(f"{path}: {what} is {text!r}, not a number.")
+    return v
 
 
 def _has_mass(link: ET.Element, path: Path) -> bool:
