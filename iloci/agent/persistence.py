@@ -22,6 +22,7 @@ from iloci.agent.assembly import PURPOSES, NotLoaded, assemble
 from iloci.agent.base import AgentBase
 from iloci.concepts.memory import load_memory, save_memory
 from iloci.config import memory_conflicts
+from iloci.sensorimotor.robots.urdf import kinematics_fingerprint
 from iloci.errors import (ConfigError, InvalidInputError, MemoryConfigError, MemoryFileError,
                           UnknownComponentError)
 from iloci.progress import saving
@@ -182,8 +183,6 @@ def robot_record(robot: Any) -> dict[str, Any]:
 def _kinematics(robot: Any) -> str | None:
     """:func:`~iloci.sensorimotor.robots.urdf.kinematics_fingerprint` of the robot's chain,
     or None for a robot without a readable URDF (an object passed to ``build``)."""
-    from iloci.sensorimotor.robots.urdf import kinematics_fingerprint
-
     try:
         return kinematics_fingerprint(robot.urdf_path, robot.base_frame,
                                       robot.end_effector_frame)
