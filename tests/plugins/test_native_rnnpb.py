@@ -340,3 +340,21 @@ def test_the_scripted_sessions_learn_the_same_bits_with_every_blas_kernel():
         assert out.returncode == 0, out.stderr[-2000:]
         digests[core] = out.stdout.strip().splitlines()[-1]
     assert len(set(digests.values())) == 1, digests
+
+
+def test_config_check_refuses_a_kernel_the_back_end_does_not_have():
+    """`iloci config check` said ok to kernel = "torch" on native-rnnpb (and "native" on
+    jax-rnnpb); the run then refused it. Now the config is refused."""
+    from iloci.config import load_config
+    from iloci.errors import ConfigError
+
+    OTHERS = ("clusterer", "teacher", "ik", "simulator")  # not looked up: any installed
+    with pytest.raises(ConfigError, match=r'kernel = "torch" names torch-rnnpb\'s torch '
+                                          r'operations.*name = "torch-rnnpb"'):
+        load_config({"perceptual_model": {"name": "native-rnnpb", "kernel": "torch"}},
+                    supplied=OTHERS)
+    pytest.importorskip("iloci_jax", reason="jax-rnnpb not installed")
+    with pytest.raises(ConfigError, match=r"jax-rnnpb has one kernel \(XLA's\), got kernel "
+                                          r"= 'native'.*\"native\" is native-rnnpb's"):
+        load_config({"perceptual_model": {"name": "jax-rnnpb", "kernel": "native"}},
+                    supplied=OTHERS)

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from iloci.errors import InvalidInputError
+from iloci_jax import _ONE_KERNEL
 from iloci.rnnpb import (LM_DOWN, LM_MAX, LM_MIN, LM_TINY, LM_U_MAX, LM_UP,
                           WEIGHT_NAMES, RNNPBBase, diverged_error)
 
@@ -277,10 +278,7 @@ class JaxRNNPB(RNNPBBase):
 
     def _setup(self) -> None:
         if self.params.kernel != "auto":
-            raise InvalidInputError(
-                f"jax-rnnpb has one kernel (XLA's), got kernel = {self.params.kernel!r}; "
-                "remove the setting or set kernel = \"auto\" (\"native\" and \"torch\" "
-                "are torch-rnnpb's).")
+            raise InvalidInputError(_ONE_KERNEL.format(kernel=self.params.kernel) + ".")
         self._x64 = self.params.dtype == "float64"
         self._dtype = np.float64 if self._x64 else np.float32
 

@@ -144,8 +144,8 @@ class NativeRNNPB(RNNPBBase):
         p = self.params
         if p.kernel == "torch":
             raise IlociError('kernel = "torch" names torch-rnnpb\'s torch operations; '
-                             'native-rnnpb runs kernel = "auto" or "native" (or use '
-                             'perceptual_model = "torch-rnnpb").')
+                             'native-rnnpb runs kernel = "auto" or "native" (or set '
+                             '[perceptual_model] name = "torch-rnnpb").')
         self._sizes = (p.input_size, p.hidden, p.context, p.pb)
         d, h, c, _ = self._sizes
         self._fits = max(-(-h // 16), -(-(d + c) // 16)) * 16 <= NATIVE_WIDTH_MAX
