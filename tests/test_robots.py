@@ -240,6 +240,22 @@ def test_a_memory_refuses_its_arm_once_the_urdf_moved_its_joints(tmp_path):
     shutil.rmtree(tmp_path / "a")
 
 
+def test_a_urdf_in_millimetres_is_pointed_out(tmp_path):
+    import re
+    import warnings
+
+    urdf = write_test_arm(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the arm in metres: no warning
+        describe_robot(urdf, tip_frame="pen")
+    urdf.write_text(re.sub(r'<origin xyz="0 0 ([\d.]+)"/>',
+                           lambda m: f'<origin xyz="0 0 {1000 * float(m.group(1)):g}"/>',
+                           urdf.read_text()))
+    with pytest.warns(UserWarning, match=r"the arm from 'base' to 'pen' is 700\.1 m long.*"
+                                         r"was it written in millimetres"):
+        describe_robot(urdf, tip_frame="pen")
+
+
 def test_a_joint_without_an_axis_or_with_nan_is_refused_naming_it(tmp_path):
     urdf = write_test_arm(tmp_path)
     text = urdf.read_text()

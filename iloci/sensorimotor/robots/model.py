@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 import os
 from pathlib import Path
 from typing import Any
+import warnings
 
 import numpy as np
 
@@ -276,6 +277,11 @@ class Robot:
                        plane_report=dict(report or {"method": "given"}))
 
 
+#: Longest arm (m, base to pen tip along the joints) read without a warning: industrial
+#: arms reach about 3 m; a URDF in millimetres is 1000 times its size.
+LONGEST_ARM_M = 20.0
+
+
 def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = None,
                    tip_frame: str, joints: Sequence[str] = (),
                    rest: Sequence[float] | None = None,
@@ -373,6 +379,13 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
         raise InvalidInputError(f"base frame {base!r} moves with joint(s) {moving}; choose "
                                 "a base frame above every joint used.")
     _check_mimic(tree, base, tip_frame, names, path)
+    reach = float(sum(np.linalg.norm(j.origin[:3, 3]) for j in tree.chain(base, tip_frame)))
+    if reach > LONGEST_ARM_M:
+        warnings.warn(f"{path}: the arm from {base!r} to {tip_frame!r} is {reach:.4g} m "
+                      "long (the sum of its joints' offsets); URDF lengths are in metres: "
+                      f"was it written in millimetres or centimetres? A robot arm is under "
+                      f"{LONGEST_ARM_M:g} m; iloci goes on with the file as it is.",
+                      stacklevel=2)
     faults = limits_message([tree.joints[n] for n in names])
     if faults:
         raise InvalidInputError(f"{path}: {faults}.")
