@@ -599,3 +599,21 @@ def test_a_fold_named_twice_and_a_memory_path_that_is_a_folder_are_refused(tmp_p
     (tmp_path / "m.npz").mkdir()
     out = cli("show", str(tmp_path / "m.npz"))
     assert out.returncode == 2 and "is a directory, not a memory file" in out.stderr
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_config_check_says_what_evaluate_would_refuse_of_the_data(tmp_path, cli):
+    """`iloci config check` said ok to a [data] path that does not exist, 8 folds on LASA
+    and untaught leaving fewer than 2 shapes; `iloci evaluate` then refused each."""
+    for name, text, said in (
+            ("path", '[data]\npath = "no/such/dir"\n', "[data] path 'no/such/dir' does not "
+                                                       "exist"),
+            ("folds", "[evaluation]\nfolds = 8\n", "LASA has 7 demonstrations of each "
+                                                   "shape, so at most 7 folds"),
+            ("untaught", '[data]\nshapes = ["GShape", "Sine", "Leaf_1"]\n[evaluation]\n'
+                         "untaught = 2\n", "untaught = 2 leaves fewer than 2 of the 3 LASA "
+                                           "shapes to learn; use at most 1")):
+        f = tmp_path / f"{name}.toml"
+        f.write_text(text)
+        out = cli("config", "check", str(f))
+        assert out.returncode == 2 and said in out.stderr, out.stderr
