@@ -627,3 +627,15 @@ def test_files_beside_writer_folders_and_an_empty_manifest_are_said(digits, tmp_
     (tmp_path / "m.json").write_text("[]")
     with pytest.raises(InvalidInputError, match=r"m.json lists no samples: give one row"):
         load_dataset(tmp_path / "m.json")
+
+
+def test_a_file_name_that_is_not_utf8_is_recorded_as_text(digits, tmp_path):
+    """metrics.json held a lone surrogate for a Latin-1 file name (caf\\xe9.csv), which
+    is not text: JSON readers showed a replacement character."""
+    root = _export(digits, tmp_path / "d")
+    first = sorted((root / "2").rglob("*.csv"))[0]
+    first.rename(first.parent / os.fsdecode(b"caf\xe9.csv"))
+    files = load_dataset(root).sample_files()
+    named = [v["file"] for v in files.values() if "caf" in v["file"]]
+    assert named == [f"2/{first.parent.name}/caf\\xe9.csv"]
+    json.dumps(files, ensure_ascii=False).encode("utf-8")  # text: no lone surrogate

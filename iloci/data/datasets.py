@@ -130,8 +130,10 @@ class DataSet:
     def sample_files(self) -> dict[str, dict[str, str | None]]:
         """Each sample's key (``folds.json``'s ``"circle/0"``) -> its ``file`` (relative to
         :attr:`root`, ``/`` separated, as a manifest names it), ``concept``, ``writer`` and
-        ``session`` (None when not named): ``metrics.json``'s ``samples``."""
-        return {d.key: {"file": s.path, "concept": s.concept, "writer": s.writer,
+        ``session`` (None when not named): ``metrics.json``'s ``samples``. A file name
+        whose bytes are not UTF-8 is written with them as ``\\xNN`` (as concept names
+        are, :func:`_text`): JSON and CSV hold text, not the file system's bytes."""
+        return {d.key: {"file": _text(s.path), "concept": s.concept, "writer": s.writer,
                         "session": s.session} for s, d in zip(self.samples, self.demos)}
 
     def writers_of(self, indices: Sequence[int]) -> list[str]:
