@@ -136,6 +136,23 @@ def test_tampered_header_fails_the_checksum(tmp_path):
         load_memory(path)
 
 
+def test_a_cut_header_is_said_to_be_damaged_not_foreign(tmp_path):
+    """A header cut mid-way was called "not an iloci memory file" with json's message."""
+    path = tmp_path / "m.npz"
+    save_memory(path, *small_memory())
+
+    def edit(arrays):
+        arrays["__header__"] = arrays["__header__"][:len(arrays["__header__"]) // 2]
+
+    _rewrite(path, edit)
+    before = path.read_bytes()
+    with pytest.raises(MemoryFileError, match=r"m.npz: its header \(the memory's settings "
+                                              r"and checksum\) is damaged and cannot be "
+                                              r"read \(Unterminated"):
+        load_memory(path)
+    assert path.read_bytes() == before
+
+
 def test_flipped_byte_is_detected(tmp_path):
     path = tmp_path / "m.npz"
     save_memory(path, *small_memory())

@@ -164,14 +164,18 @@ def read_memory_file(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray
         raise MemoryFileError(f"cannot read memory file {path}: it is truncated, corrupted "
                               f"or not an iloci memory ({type(exc).__name__}: {exc}).") from None
     raw = arrays.pop("__header__", None)
+    if raw is None:
+        raise MemoryFileError(f"{path} is not an iloci memory file (no header).")
     try:
-        if raw is None:
-            raise ValueError("no header")
         header = json.loads(raw.tobytes().decode("utf-8"))
         if not isinstance(header, dict):
             raise ValueError("header is not an object")
     except (ValueError, UnicodeDecodeError) as exc:
-        raise MemoryFileError(f"{path} is not an iloci memory file ({exc}).") from None
+        # an iloci file (it has the header member) whose header was cut or edited
+        raise MemoryFileError(f"{path}: its header (the memory's settings and checksum) is "
+                              f"damaged and cannot be read ({exc}); the file was cut or "
+                              "edited. Restore it from a copy, or teach afresh. The file is "
+                              "unchanged.") from None
     if header.get("format") != FORMAT:
         raise MemoryFileError(f"{path} is not an iloci memory file (format "
                               f"{header.get('format')!r}).")
