@@ -152,6 +152,10 @@ class Persistence(AgentBase):
                     f"upgrade iloci (and its plugins) to {written} or later to load it; its "
                     f"saved config holds what this version does not know ({exc}). The file "
                     "is unchanged.") from None
+            if own_config and exc.args and isinstance(exc.args[0], str):
+                # the saved config is a mapping ("<dict>" in the message): name the file
+                exc.args = (exc.args[0].replace("<dict>", f"{path} (its saved config)", 1),
+                            *exc.args[1:])
             raise
         saved_robot = header.get("robot") or {
             "name": "nao-v32-right-arm",

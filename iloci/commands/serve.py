@@ -89,7 +89,7 @@ def _build(memory: str | Path, config: Any, worker: bool, protocol: str):
 
     path = Path(memory)
     header = load_memory(path)[2] if path.exists() else None
-    cfg = command_config(config, header, protocol, PAGE)
+    cfg = command_config(config, header, protocol, PAGE, memory=path)
     # the person at the page is the teacher: no teacher object is asked
     agent = Agent.load(path, cfg) if header is not None else build(cfg)
     if worker:

@@ -21,7 +21,7 @@ import warnings
 
 from iloci.agent import Agent, SkippedDemonstrationWarning, build
 from iloci.concepts.memory import load_memory
-from iloci.config import load_config
+from iloci.config import ConfigData, load_config
 from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
 from iloci.data.writes import check_memory_path
 from iloci.errors import IlociError, MemoryFileError
@@ -70,7 +70,8 @@ def add_protocol_argument(p: argparse.ArgumentParser) -> None:
 
 
 def command_config(config: Any, header: dict | None, protocol: str = "interactive",
-                   interactive: Mapping[str, Any] = INTERACTIVE):
+                   interactive: Mapping[str, Any] = INTERACTIVE,
+                   memory: str | Path | None = None):
     """The config a teaching command uses: ``--config``, else the memory's, else the defaults.
 
     With the interactive protocol, ``interactive`` (:data:`INTERACTIVE` for
@@ -86,7 +87,9 @@ def command_config(config: Any, header: dict | None, protocol: str = "interactiv
         else:
             given = _learner_keys(config)
     elif header is not None and isinstance(header.get("config"), dict):
-        return load_config(header["config"])
+        saved = ConfigData(header["config"])  # its errors name the memory, not "<dict>"
+        saved.source = f"{memory} (its saved config)" if memory else "the memory's config"
+        return load_config(saved)
     else:
         cfg = load_config(None)
         given = set()
@@ -188,7 +191,8 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     from iloci.display import Bars
 
     header = load_memory(memory_path)[2] if memory_path.exists() else None
-    cfg = command_config(args.config, header, getattr(args, "protocol", "interactive"))
+    cfg = command_config(args.config, header, getattr(args, "protocol", "interactive"),
+                         memory=memory_path)
     if args.teacher:
         cfg = cfg.replace(teacher={"name": args.teacher})
     items = resolve_demos(args.demos) if args.demos else default_stream(cfg)
