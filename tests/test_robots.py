@@ -516,3 +516,11 @@ def test_config_check_looks_the_robot_preset_up_in_the_registry():
     # a URDF of one's own needs no preset
     check_installed(config({"name": "panda", "urdf": str(get_robot().urdf_path),
                             "tip_frame": "r_pen_tip"}), registry)
+
+
+def test_robots_show_gives_a_prismatic_joints_range_in_millimetres(arm_urdf):
+    """`iloci robots --show` printed a prismatic joint's range (metres) as degrees."""
+    from iloci.commands.robots import _prismatic
+
+    assert _prismatic({"urdf": str(arm_urdf), "joints": ["j1", "grip", "j2"]}) == {"grip"}
+    assert _prismatic({"urdf": "gone.urdf", "joints": ["j1"]}) == set()

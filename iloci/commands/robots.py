@@ -15,9 +15,10 @@ import json
 import numpy as np
 
 from iloci.config import load_config
-from iloci.errors import MissingBackendError
+from iloci.errors import InvalidInputError, MissingBackendError
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.sensorimotor.robots import check_robot, robot_and_ik
+from iloci.sensorimotor.robots.urdf import read_urdf
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -65,8 +66,12 @@ def run(args: argparse.Namespace) -> int:
     deg = np.degrees
     print(f"robot {desc['name']}: {len(desc['joints'])} joints, URDF {desc['urdf']}")
     print(f"  base frame {desc['base_frame']!r}, pen tip {desc['tip_frame']!r}")
+    sliding = _prismatic(desc)
     for j, lo, hi, q in zip(desc["joints"], desc["lower"], desc["upper"], desc["q_home"]):
-        print(f"  {j:24s} [{deg(lo):8.1f}, {deg(hi):8.1f}] deg, start {deg(q):7.1f}")
+        if j in sliding:  # a prismatic joint moves in metres: shown in mm
+            print(f"  {j:24s} [{1000 * lo:8.1f}, {1000 * hi:8.1f}] mm, start {1000 * q:7.1f}")
+        else:
+            print(f"  {j:24s} [{deg(lo):8.1f}, {deg(hi):8.1f}] deg, start {deg(q):7.1f}")
     p = desc["plane"]
     c = np.round(np.array(p["center"]) * 1000, 1).tolist()
     print(f"  plane: centre {c} mm, {p['width'] * 1000:.0f} x {p['height'] * 1000:.0f} mm, "
@@ -96,3 +101,12 @@ def describe(name: str | None, config: str | None) -> dict:
     robot, _ = robot_and_ik(robot_cfg, lambda robot: registry.build(
         "ik", cfg.ik.name, cfg.ik.params, seed=cfg.seed, robot=robot), plugin_manager=pm)
     return robot.describe()
+
+
+def _prismatic(desc: dict) -> set[str]:
+    """The prismatic joints among ``desc``'s (their limits are in m, not rad)."""
+    try:
+        joints = read_urdf(desc["urdf"]).joints
+    except (InvalidInputError, OSError, KeyError):
+        return set()
+    return {j for j in desc["joints"] if j in joints and joints[j].type == "prismatic"}
