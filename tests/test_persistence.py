@@ -153,6 +153,18 @@ def test_a_cut_header_is_said_to_be_damaged_not_foreign(tmp_path):
     assert path.read_bytes() == before
 
 
+def test_a_small_file_that_unpacks_to_gigabytes_is_refused_unpacked(tmp_path):
+    """An audit's 1.5 MB upload to the teaching page unpacked to 1.6 GB of zeros before
+    its checksum refused it (3.3 GB of the server's memory; every tab stalled 22 s)."""
+    path = tmp_path / "bomb.npz"
+    np.savez_compressed(path, w=np.zeros(80 * 2**20 // 8))   # 80 MiB of zeros, ~80 kB
+    assert path.stat().st_size < 2**20
+    with pytest.raises(MemoryFileError, match=r"bomb.npz would unpack [\d,]+ bytes into "
+                                              r"83,886,\d+ \([\d,]+ times as many\).*a zip "
+                                              r"bomb\); nothing was unpacked"):
+        load_memory(path)
+
+
 def test_flipped_byte_is_detected(tmp_path):
     path = tmp_path / "m.npz"
     save_memory(path, *small_memory())

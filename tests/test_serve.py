@@ -555,6 +555,35 @@ def test_forget_an_entry_and_a_concept(served, lasa):
     assert r["memory"]["concepts"] == [] and iloci.Agent.load(memory).memory.entries == []
 
 
+def test_a_control_from_a_page_another_tab_has_changed_is_refused(served, lasa):
+    """An audit's two tabs: tab B taught, then tab A's Undo took back B's step (A's page
+    still said "undo: drawing/9"); A's forget of "entry 2" removed another concept's entry
+    after B forgot entry 0. A page names the memory version it shows; a control from an
+    older view is refused with the memory as it is, and nothing is done."""
+    client, classroom, memory = served
+    for key in ("GShape/0", "Angle/0"):
+        r = client.post("/api/observe", json={"points": stroke(lasa[key])}).json()
+        if "answer" in r:
+            judge(client, r["answer"], -1)
+    seen = client.get("/api/state").json()["memory"]             # tab A's view
+    assert seen["version"] == classroom.history.version == 2
+    r = client.post("/api/forget", json={"entry": 0, "version": seen["version"]})  # tab B
+    assert r.status_code == 200, r.text
+    now = r.json()["memory"]
+    before = [e.sources for e in classroom.agent.memory.entries]
+    for path, body in (("/api/undo", {}), ("/api/forget", {"entry": 1}),
+                       ("/api/rename", {"concept": "c2", "name": "angle"}), ("/api/reset", {})):
+        r = client.post(path, json={**body, "version": seen["version"]})  # tab A, stale
+        assert r.status_code == 409, (path, r.text)
+        assert r.json()["error"].startswith("nothing was done: the memory changed since "
+                                            "this page showed it")
+        assert r.json()["memory"] == now                          # the page is brought up to date
+        assert [e.sources for e in classroom.agent.memory.entries] == before
+    r = client.post("/api/undo", json={"version": now["version"]})  # from the fresh view: done
+    assert r.status_code == 200 and r.json()["undone"] == "forget entry 0"
+    assert client.post("/api/undo", json={}).status_code == 200   # a script names no version
+
+
 def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
     client, classroom, _ = served
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})

@@ -51,6 +51,12 @@ FORMAT_VERSION = 1
 #: before anything is unpacked): 2 GiB, about 10^4 times a LASA-taught memory of every
 #: concept (~200 kB); a file claiming more is refused, as a zip bomb would be.
 MAX_UNPACKED = 2 * 2**30
+#: Above this many unpacked bytes (64 MiB), a file whose arrays unpack to more than
+#: :data:`MAX_RATIO` times their packed size is refused before anything is unpacked: an
+#: audit's 1.5 MB upload of zeros unpacked to 1.6 GB (3.3 GB of the server's memory, every
+#: tab stalled 22 s). Memories iloci writes compress about 1.1 to 3 times (float arrays).
+BOMB_ABOVE = 64 * 2**20
+MAX_RATIO = 20
 
 
 def _checksum(header: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> str:
@@ -83,6 +89,14 @@ def _check_members(path: Path) -> None:
         with zipfile.ZipFile(path) as zf:
             infos = zf.infolist()
             total = sum(i.file_size for i in infos)
+            packed = sum(i.compress_size for i in infos)
+            if total > BOMB_ABOVE and total > MAX_RATIO * max(packed, 1):
+                raise MemoryFileError(
+                    f"{path} would unpack {packed:,} bytes into {total:,} "
+                    f"({total / max(packed, 1):,.0f} times as many); an iloci memory's arrays "
+                    f"(weights, PB vectors, patterns) compress less than {MAX_RATIO} times. It "
+                    "was not written by iloci or was made to exhaust memory (a zip bomb); "
+                    "nothing was unpacked.")
             if total > MAX_UNPACKED:
                 raise MemoryFileError(
                     f"{path} would unpack to {total / 2**30:.1f} GiB of arrays; iloci reads "

@@ -55,6 +55,9 @@ class History:
         self.save_error: str | None = None
         self.steps: list[Any] = []
         self.saved = agent.snapshot("start")    # what the file holds (or will)
+        #: Changes saved so far (commits and undos): a page names the version it shows,
+        #: so a control sent from a view another tab has since changed is refused
+        self.version = 0
 
     @property
     def last(self) -> str | None:
@@ -82,6 +85,7 @@ class History:
         self.steps.append(self.saved)
         del self.steps[:-UNDO_STEPS]
         self.saved = self.agent.snapshot(what)
+        self.version += 1
 
     def undo(self) -> str:
         """Restore memory and network as before the last step and save; the step's name.
@@ -104,4 +108,5 @@ class History:
             raise HTTPError(507, self.save_error, saved=False) from None
         self.save_error = None
         self.saved = snap
+        self.version += 1
         return current.what

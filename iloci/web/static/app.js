@@ -336,16 +336,19 @@ async function control(path, body, done) {
   if (busy) return;
   showError("");
   try {
-    const data = await api(path, body);
+    // the memory this page shows: the server refuses the control if another tab changed it
+    const data = await api(path, {...body, version: memoryVersion});
     renderMemory(data.memory);
     say(done(data));
   } catch (err) { say(""); showError(err.message); }
 }
 
 let saved = false;       // whether the memory file exists (Export has something to give)
+let memoryVersion = null;  // the server's version of the memory this page shows
 function renderMemory(memory) {
   if (!memory) return;
   saved = !!memory.saved;
+  memoryVersion = memory.version;
   $("memsummary").textContent = `${memory.concepts.length} concept(s), ${memory.entries} entries, ` +
     `${memory.demonstrations_seen} drawing(s) learned; saved in ${memory.file}`;
   $("undo").disabled = !memory.undo;
@@ -374,7 +377,8 @@ function renderMemory(memory) {
       e.preventDefault();
       showError("");
       try {
-        const data = await api("/api/rename", {concept: concept.name, name: input.value});
+        const data = await api("/api/rename", {concept: concept.name, name: input.value,
+                                               version: memoryVersion});
         renderMemory(data.memory);
         say(`Renamed "${concept.name}" to "${input.value.trim()}".`);
       } catch (err) { say(""); showError(err.message); }
