@@ -135,7 +135,7 @@ def why_not_saved(path: str | os.PathLike[str], exc: OSError) -> str:
 
 
 #: Memory locks this process holds: real path of the memory -> (lock, holder record).
-_HELD: dict[str, tuple[Any, dict[str, Any]]] = {}
+_HELD: dict[str, tuple[Any, dict[str, Any], list[int | None]]] = {}
 _HELD_GUARD = threading.Lock()
 
 
@@ -214,7 +214,8 @@ def acquire_memory_lock(memory: str | os.PathLike[str],
         record = {"command": command, "pid": os.getpid(), "since": time.time()}
         with contextlib.suppress(OSError):
             _holder_path(lock_path).write_text(json.dumps(record), encoding="utf-8")
-        _HELD[key] = (lock, record)
+        # the file's own lock, moved to each new file a save writes (saving())
+        _HELD[key] = (lock, record, [file_lock])
 
     def release() -> None:
         with _HELD_GUARD:
@@ -223,11 +224,34 @@ def acquire_memory_lock(memory: str | os.PathLike[str],
                 return
             with contextlib.suppress(OSError):
                 _holder_path(lock_path).unlink()
-            if file_lock is not None:
-                with contextlib.suppress(OSError):
-                    os.close(file_lock)
+            for fd in held[2]:
+                if fd is not None:
+                    with contextlib.suppress(OSError):
+                        os.close(fd)
             held[0].release()
     return release
+
+
+def _relock_the_file(key: str, memory: str | os.PathLike[str]) -> None:
+    """After a save by the lock's holder: its file lock moves to the file just written.
+
+    A save replaces the memory file by a new one (a new inode); a hard link made
+    to it after the save names that new file, which the old lock does not cover.
+    """
+    with _HELD_GUARD:
+        held = _HELD.get(key)
+        if held is None:
+            return
+        fds = held[2]
+        try:
+            new = _lock_the_file(memory)
+        except MemoryLockedError:
+            return  # another name of the new file is already locked: its writer's error
+        for fd in fds:
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        fds[:] = [new]
 
 
 def _lock_the_file(memory: str | os.PathLike[str]) -> int | None:
@@ -320,9 +344,13 @@ def saving(memory: str | os.PathLike[str]) -> Iterator[None]:
     key = str(lock_path_of(memory))
     with _HELD_GUARD:
         mine = key in _HELD
-    if mine or not os.path.exists(key):
-        # held here, or never locked by anyone (a writer's lock file stays after
-        # it ends): no lock file is made for a plain save
+    if mine:
+        yield
+        _relock_the_file(key, memory)  # the file just written is the one to guard now
+        return
+    if not os.path.exists(key):
+        # never locked by anyone (a writer's lock file stays after it ends): no lock
+        # file is made for a plain save
         yield
         return
     from filelock import FileLock, Timeout

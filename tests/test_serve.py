@@ -612,6 +612,25 @@ def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
 
 
 # -- one writer per memory file ---------------------------------------------------------
+def test_a_hard_link_made_after_a_save_is_refused_too(served, lasa, tmp_path):
+    """The file lock was on the file as the server started; its first save wrote a new
+    file, and a hard link made to that one let a second server teach the same memory."""
+    import os
+
+    client, classroom, memory = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})  # a first save
+    first = memory.stat().st_ino
+    r = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()
+    if "answer" in r:
+        judge(client, r["answer"], -1)                                   # a second save
+    assert memory.stat().st_ino != first                                 # a new file
+    other = tmp_path / "other-name.npz"
+    os.link(memory, other)
+    with pytest.raises(MemoryLockedError, match=r"under another name \(a hard link to the "
+                                                r"same file\)"):
+        build_classroom(other, small_config(), worker=False)
+
+
 def test_one_writer_a_symlink_and_a_failed_save(tmp_path, lasa):
     import resource
 
