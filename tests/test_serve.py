@@ -736,3 +736,49 @@ def test_teach_uses_the_interactive_protocol_unless_told_otherwise(tmp_path):
     cfg = command_config(str(toml), None)
     assert cfg.learner.confirm_rewards is False and cfg.learner.novelty_below == 0.8
     assert command_config(None, None, "paper").learner.novelty_below == 0.0
+
+
+def test_ctrl_c_says_what_it_waits_for_and_a_second_one_stops_without_tracebacks(tmp_path):
+    """With a client holding a request open, Ctrl-C waited 16 s without a word, and a
+    second Ctrl-C printed uvicorn's CancelledError tracebacks (a web-page audit)."""
+    import re
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+
+    import tomli_w
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    cfg = tmp_path / "small.toml"
+    cfg.write_text(tomli_w.dumps(small_config()))
+    proc = subprocess.Popen([sys.executable, "-m", "iloci", "serve", "--memory",
+                             str(tmp_path / "m.npz"), "--port", str(port), "--config", str(cfg)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        page = ""
+        for _ in range(240):
+            try:
+                page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=1).read()
+                break
+            except OSError:
+                time.sleep(0.25)
+        token = re.search(rb'name="iloci-token" content="([^"]+)"', page).group(1).decode()
+        held = socket.create_connection(("127.0.0.1", port))
+        held.sendall(f"POST /api/recognize HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                     f"Content-Type: application/json\r\n{TOKEN_HEADER}: {token}\r\n"
+                     "Content-Length: 1000\r\n\r\n{".encode())
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)                      # stop at once
+        _, err = proc.communicate(timeout=30)
+        held.close()
+    finally:
+        proc.kill()
+    assert "stopping: finishing the 1 request(s) under way" in err, err
+    assert "Traceback" not in err and "CancelledError" not in err, err

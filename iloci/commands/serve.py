@@ -8,6 +8,8 @@ from it. Needs the ``serve`` extra: ``pip install 'iloci[serve]'``.
 from __future__ import annotations
 
 import argparse
+import asyncio
+import logging
 import signal
 import sys
 from pathlib import Path
@@ -124,8 +126,15 @@ def run(args: argparse.Namespace) -> int:
         # a request's head must arrive within 10 s and at most 128 connections stay
         # open (iloci.web.connections): a client that connects and sends slowly
         # does not hold the server
-        uvicorn.run(app, host=args.host, port=args.port, log_level="warning",
-                    timeout_keep_alive=5, **uvicorn_options())
+        server = _server_class(uvicorn)(uvicorn.Config(
+            app, host=args.host, port=args.port, log_level="warning", timeout_keep_alive=5,
+            **uvicorn_options()))
+        quiet = _CancelledAtExit()
+        logging.getLogger("uvicorn.error").addFilter(quiet)
+        try:
+            server.run()
+        finally:
+            logging.getLogger("uvicorn.error").removeFilter(quiet)
     finally:
         _stop_worker(classroom)
         classroom.close()
@@ -135,6 +144,40 @@ def run(args: argparse.Namespace) -> int:
 
 def _exit_on_sigterm(signum: int, frame: Any) -> None:
     raise SystemExit(128 + signum)
+
+
+def _server_class(uvicorn: Any) -> type:
+    """uvicorn's Server, saying on the first Ctrl-C what it waits for.
+
+    uvicorn stops taking connections and lets the requests under way end
+    (a drawing being learned is learned and saved; a client sending slowly
+    has up to 15 s, iloci.web.schemas); it used to do so without a word,
+    for up to 16 s. A second Ctrl-C stops at once.
+    """
+    class Server(uvicorn.Server):
+        def handle_exit(self, sig: int, frame: Any) -> None:
+            if not self.should_exit:
+                open_now = len(getattr(self.server_state, "connections", ()))
+                print(f"stopping: finishing the {open_now} request(s) under way (a drawing "
+                      "being learned is saved first; a slow client gets at most 15 s). "
+                      "Ctrl-C again to stop at once.", file=sys.stderr, flush=True)
+            super().handle_exit(sig, frame)
+    return Server
+
+
+class _CancelledAtExit(logging.Filter):
+    """Drops uvicorn's tracebacks of the tasks it cancels when told to stop at once (a
+    second Ctrl-C): requests cut short on purpose, not faults. The memory file holds
+    every step saved before (each is saved whole)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, asyncio.CancelledError):
+            return False
+        # the lifespan task logs its traceback as the message itself
+        text = str(record.msg)
+        return not (text.startswith("Traceback") and text.rstrip().endswith(
+            "CancelledError"))
 
 
 def _stop_worker(classroom: Any) -> None:
