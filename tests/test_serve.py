@@ -401,6 +401,15 @@ def test_each_client_has_its_own_turn(served, lasa):
                                            "client": "a"}).json()["answer"]
     client.post("/api/observe", json={"points": stroke(lasa["Angle/2"]), "client": "a"})
     assert judge(client, a2, 1).status_code == 409
+    # a tab that names itself cannot judge another tab's guess (an audit's tab B said
+    # "no" to tab A's drawing; A was then told its guess was judged already)
+    a3 = client.get("/api/state?client=a").json()["pending"]
+    r = client.post("/api/feedback", json={"turn": a3["turn"], "answer": a3["id"],
+                                           "value": -1, "client": "b"})
+    assert r.status_code == 409 and "another tab's drawing" in r.json()["error"]
+    r = client.post("/api/feedback", json={"turn": a3["turn"], "answer": a3["id"],
+                                           "value": -1, "client": "a"})
+    assert r.status_code == 200, r.text
 
 
 def test_another_tabs_undo_start_over_or_import_keeps_this_tabs_guess(served, lasa, tmp_path):
@@ -782,3 +791,14 @@ def test_ctrl_c_says_what_it_waits_for_and_a_second_one_stops_without_tracebacks
         proc.kill()
     assert "stopping: finishing the 1 request(s) under way" in err, err
     assert "Traceback" not in err and "CancelledError" not in err, err
+
+
+def test_two_tabs_drawings_waiting_at_once_get_two_names(served, lasa):
+    """Both were named drawing/9 (numbered by the drawings learned so far), so the entries'
+    sources could not tell them apart."""
+    client, classroom, _ = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"]), "client": "a"})
+    client.post("/api/observe", json={"points": stroke(lasa["Angle/0"]), "client": "a"})
+    client.post("/api/observe", json={"points": stroke(lasa["Angle/1"]), "client": "b"})
+    keys = [t.demo.key for t in classroom.turns.values()]
+    assert len(keys) == 2 and len(set(keys)) == 2, keys

@@ -82,6 +82,7 @@ class Classroom:
         self._thumbs: tuple[Any, int, int, list] | None = None
         self._thumb_lock = threading.Lock()
         self.close_lock: Any = None                # released by close()
+        self._next_index = 0                       # the next drawing's number (_demo)
         agent.on_progress = self._on_progress
 
     @property
@@ -115,11 +116,15 @@ class Classroom:
         await asyncio.to_thread(self.history.commit, what)
 
     def _demo(self, positions: np.ndarray, times: np.ndarray) -> Any:
-        index = self.agent.memory.demonstrations_seen
+        # numbered as they arrive: two tabs' drawings waiting at once get two names
+        # (both were "drawing/9" when numbered by the drawings learned so far)
+        index = max(self.agent.memory.demonstrations_seen, self._next_index)
         try:
-            return Demonstration(positions, times=times, shape="drawing", index=index)
+            demo = Demonstration(positions, times=times, shape="drawing", index=index)
         except InvalidDemonstrationError as exc:
             raise HTTPError(422, plain_words(str(exc))) from None
+        self._next_index = index + 1
+        return demo
 
     def _drop_client(self, client: str) -> None:
         for k in [k for k, t in self.turns.items() if t.client == client]:
@@ -255,6 +260,10 @@ class Classroom:
                 why = self.gone.get(turn_id, "it is not one of this server's")
                 raise HTTPError(409, f"no such guess is waiting for an answer ({why}); "
                                      "draw again.")
+            if isinstance(body, dict) and "client" in body and client_id(body) != rec.client:
+                # the page names its tab: another tab's guess is that tab's to judge
+                raise HTTPError(409, "this guess is another tab's drawing: answer it in "
+                                     "that tab (nothing was learned).")
             if rec.memory is not self.agent.memory or rec.revision != self.agent.memory.revision:
                 # another tab taught, or an undo, a rename, a forget, a start over or an
                 # import: look at the drawing again

@@ -268,7 +268,8 @@ async function judge(value) {
   say(value === "new" ? "Something new: learning..." :
       value > 0 ? "Yes: learning..." : "No: thinking again...");
   try {
-    const data = await withProgress(api("/api/feedback", {turn: pending.turn, answer: pending.id, value}));
+    const data = await withProgress(api("/api/feedback", {turn: pending.turn, answer: pending.id, value,
+                                                    client: CLIENT}));
     if (data.answer) { say(""); showAnswer(data.answer); }
     else learned(data);
   } catch (err) {
