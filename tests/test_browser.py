@@ -318,6 +318,40 @@ def test_two_tabs_each_keep_their_guess(server, browser):
     context.close()
 
 
+def test_undo_in_a_tab_another_tab_has_changed_since_takes_back_nothing(server, browser,
+                                                                         tmp_path):
+    """An audit in Chromium: tab B's Undo button said "undo: drawing/9" (B's step) but
+    took back tab A's later step. Now B is told, brought up to date, and nothing is
+    undone; B's next Undo (its view now current) takes back the last step."""
+    url, memory = server
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    expect = sync_api.expect
+    context = browser.new_context(viewport={"width": 1000, "height": 900})
+    a, b = context.new_page(), context.new_page()
+    b.goto(url)
+    teach_first(b, lasa)                                       # B teaches c1
+    a.goto(url)
+    draw(a, lasa["Angle/0"], "fast")                           # then A teaches c2
+    expect(a.locator("#new")).to_be_visible(timeout=WAIT)
+    a.locator("#new").click()
+    expect(a.locator("#message")).to_contain_text('new concept, "c2"', timeout=WAIT)
+    b.bring_to_front()
+    expect(b.locator(".concept")).to_have_count(1)             # B's view: before A's step
+    b.locator("#undo").click()
+    expect(b.locator("#error")).to_contain_text("nothing was done: the memory changed since "
+                                                "this page showed it", timeout=WAIT)
+    expect(b.locator(".concept")).to_have_count(2)             # brought up to date
+    from iloci.agent import Agent
+    assert Agent.load(memory).memory.concepts() == ["c1", "c2"]
+    b.screenshot(path=str(Path(os.environ.get("ILOCI_SCREENSHOT_DIR") or tmp_path)
+                          / "stale-undo.png"), full_page=True)
+    b.locator("#undo").click()                                 # now it means A's step
+    expect(b.locator("#message")).to_contain_text("Undone", timeout=WAIT)
+    expect(b.locator(".concept")).to_have_count(1)
+    assert Agent.load(memory).memory.concepts() == ["c1"]
+    context.close()
+
+
 def test_a_second_finger_does_not_take_over_the_stroke(server, browser):
     url, _ = server
     context = browser.new_context(has_touch=True, viewport={"width": 1000, "height": 900})
