@@ -220,7 +220,8 @@ def test_every_bad_drawing_is_a_4xx_json_error_and_the_memory_is_untouched(serve
         (json.dumps({"points": backwards}), 422, "times must increase"),
         (json.dumps({"points": [[float("nan"), 1.0, 1.0]] + good[1:]}), 422, "not finite"),
         (json.dumps({"points": [[1e300, 1.0, 1.0]] + good[1:]}), 422, "exceeds"),
-        (b"x" * (MAX_BODY + 1), 413, "over"),
+        (b"x" * (MAX_BODY + 1), 413, f"over {MAX_BODY:,} bytes: a drawing is sent with at "
+                                     f"most {MAX_POINTS} points [x, y, t]; send fewer"),
     ]
     for path in ("/api/observe", "/api/recognize"):
         for body, status, words in cases:
@@ -802,3 +803,12 @@ def test_two_tabs_drawings_waiting_at_once_get_two_names(served, lasa):
     client.post("/api/observe", json={"points": stroke(lasa["Angle/1"]), "client": "b"})
     keys = [t.demo.key for t in classroom.turns.values()]
     assert len(keys) == 2 and len(set(keys)) == 2, keys
+
+
+def test_a_body_too_large_says_what_to_do():
+    """A 413 said only "request body over 524288 bytes" (a web-page audit)."""
+    from iloci.web.schemas import MAX_MEMORY_BYTES, _too_big
+
+    assert str(_too_big(MAX_MEMORY_BYTES)) == (
+        "the request body is over 67,108,864 bytes: a memory file is imported up to 64 MiB; "
+        "one this large was not written by iloci.")

@@ -153,13 +153,24 @@ def plain_words(message: str) -> str:
     return message
 
 
+def _too_big(limit: int) -> HTTPError:
+    """413, saying what to do: a drawing's body or a memory file's, by the limit."""
+    if limit >= MAX_MEMORY_BYTES:
+        what = (f"a memory file is imported up to {limit // 2**20} MiB; one this large was "
+                "not written by iloci")
+    else:
+        what = (f"a drawing is sent with at most {MAX_POINTS} points [x, y, t]; send fewer "
+                "(every other sample of a long recording, say)")
+    return HTTPError(413, f"the request body is over {limit:,} bytes: {what}.")
+
+
 async def read_body(request: Any, limit: int) -> bytes:
     """The request's body: at most ``limit`` bytes (413), within :data:`BODY_SECONDS` (408)."""
     length = request.headers.get("content-length")
     if length is not None and not (length.isdigit() and len(length) < 16):
         raise HTTPError(400, "the Content-Length header is not a number.")
     if length is not None and int(length) > limit:
-        raise HTTPError(413, f"request body over {limit} bytes.")
+        raise _too_big(limit)
     from starlette.requests import ClientDisconnect  # the serve extra
 
     async def read() -> bytes:
@@ -167,7 +178,7 @@ async def read_body(request: Any, limit: int) -> bytes:
         async for chunk in request.stream():
             size += len(chunk)
             if size > limit:
-                raise HTTPError(413, f"request body over {limit} bytes.")
+                raise _too_big(limit)
             chunks.append(chunk)
         return b"".join(chunks)
     try:
