@@ -617,3 +617,15 @@ def test_config_check_says_what_evaluate_would_refuse_of_the_data(tmp_path, cli)
         f.write_text(text)
         out = cli("config", "check", str(f))
         assert out.returncode == 2 and said in out.stderr, out.stderr
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_teacher_flag_typo_is_said_as_the_flags(tmp_path, cli):
+    """It was said as an error of the config file, which does not name a teacher."""
+    cfg = tmp_path / "ok.toml"
+    cfg.write_text("[learner]\nk_cutoff = 0.5\n")
+    out = cli("teach", "--config", str(cfg), "--teacher", "oracel", "--memory",
+              str(tmp_path / "m.npz"), "GShape/0")
+    assert out.returncode == 2
+    assert out.stderr.startswith("error: --teacher oracel: unknown teacher 'oracel'"), out.stderr
+    assert "Did you mean 'oracle'?" in out.stderr and not (tmp_path / "m.npz").exists()

@@ -24,7 +24,7 @@ from iloci.concepts.memory import load_memory
 from iloci.config import ConfigData, load_config
 from iloci.data.streams import default_stream, resolve_demos, shared_stem_notes
 from iloci.data.writes import check_memory_path
-from iloci.errors import IlociError, MemoryFileError
+from iloci.errors import IlociError, MemoryFileError, UnknownComponentError
 from iloci.interfaces import Demonstration
 from iloci.progress import (PROGRESS_KEY, item_digest, progress_record,
                             resume_point, teaching_lock, why_not_saved)
@@ -194,7 +194,13 @@ def _teach(args: argparse.Namespace, memory_path: Path) -> int:
     cfg = command_config(args.config, header, getattr(args, "protocol", "interactive"),
                          memory=memory_path)
     if args.teacher:
-        cfg = cfg.replace(teacher={"name": args.teacher})
+        try:
+            cfg = cfg.replace(teacher={"name": args.teacher})
+        except UnknownComponentError as exc:
+            # the flag's value, not the config file (its name led the message)
+            exc.args = (f"--teacher {args.teacher}: "
+                        f"{str(exc).partition('[teacher] name: ')[2] or exc}",)
+            raise
     items = resolve_demos(args.demos) if args.demos else default_stream(cfg)
     for note in shared_stem_notes(items):
         print(f"note: {note}", file=sys.stderr)
