@@ -237,6 +237,13 @@ def test_a_memory_refuses_its_arm_once_the_urdf_moved_its_joints(tmp_path):
                                               r".*arm.urdf have changed since"):
         iloci.Agent.load(path)
     assert path.read_bytes() == before
+    # the arm recorded is the one the robot was built with, not the file at save time
+    urdf.write_text(text)
+    agent = iloci.build({**arm_config(urdf), "perceptual_model": {"epochs": 30}})
+    urdf.write_text(text.replace('<origin xyz="0 0 0.25"/>', '<origin xyz="0 0 0.26"/>'))
+    later = agent.save(tmp_path / "later.npz")   # while serving, someone edits the URDF
+    with pytest.raises(MemoryFileError, match=r"have changed since"):
+        iloci.Agent.load(later)
     shutil.rmtree(tmp_path / "a")
 
 

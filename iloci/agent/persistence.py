@@ -185,8 +185,13 @@ def robot_record(robot: Any) -> dict[str, Any]:
 
 
 def _kinematics(robot: Any) -> str | None:
-    """:func:`~iloci.sensorimotor.robots.urdf.kinematics_fingerprint` of the robot's chain,
-    or None for a robot without a readable URDF (an object passed to ``build``)."""
+    """The fingerprint of the robot's chain (:attr:`Robot.kinematics
+    <iloci.sensorimotor.robots.Robot>`, as read when it was described; else
+    :func:`~iloci.sensorimotor.robots.urdf.kinematics_fingerprint` of its URDF file), or
+    None for a robot without a readable URDF (an object passed to ``build``)."""
+    known = getattr(robot, "kinematics", None)
+    if isinstance(known, str):
+        return known
     try:
         return kinematics_fingerprint(robot.urdf_path, robot.base_frame,
                                       robot.end_effector_frame)

@@ -15,8 +15,8 @@ import numpy as np
 
 from iloci.linalg import matmul
 from iloci.errors import InvalidInputError, did_you_mean
-from iloci.sensorimotor.robots.urdf import (MOVABLE, limits_message, read_urdf, resolve_uri,
-                                            urdf_unicode)
+from iloci.sensorimotor.robots.urdf import (MOVABLE, chain_fingerprint, limits_message,
+                                            read_urdf, resolve_uri, urdf_unicode)
 from iloci.validation import check_array
 
 __all__ = ["DrawingPlane", "Robot", "describe_robot"]
@@ -218,6 +218,10 @@ class Robot:
     plane_report : dict
         How the plane was found (``"given"`` or the automatic search's
         margins, see :func:`iloci.sensorimotor.robots.plane.find_drawing_plane`).
+    kinematics : str or None
+        :func:`~iloci.sensorimotor.robots.urdf.chain_fingerprint` of the joints
+        from ``base_frame`` to the pen tip as the URDF held them when the robot
+        was described (a memory records it); None: read from the file when asked.
     """
 
     name: str
@@ -234,6 +238,7 @@ class Robot:
     package_dirs: tuple[Path, ...] = ()
     base_pose: np.ndarray = field(default_factory=lambda: _frozen(np.eye(4)))
     plane_report: dict[str, Any] = field(default_factory=lambda: {"method": "given"})
+    kinematics: str | None = None
 
     @property
     def dof(self) -> int:
@@ -417,7 +422,8 @@ def describe_robot(urdf: str | os.PathLike[str], *, base_frame: str | None = Non
         plane=plane, base_frame=base, fixed_joints=fixed,
         rest=None if rest_given is None else _frozen(rest_given), package_dirs=dirs,
         base_pose=_frozen(tree.pose_of(base)),
-        plane_report={"method": "placeholder" if placeholder else "given"})
+        plane_report={"method": "placeholder" if placeholder else "given"},
+        kinematics=chain_fingerprint(tree.chain(base, tip_frame)))
 
 
 def _ancestors(tree: Any, link: str) -> set[str]:

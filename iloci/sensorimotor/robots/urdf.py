@@ -251,8 +251,13 @@ def kinematics_fingerprint(path: str | os.PathLike[str], base: str, tip: str) ->
     InvalidInputError
         As :func:`read_urdf` and :meth:`UrdfTree.chain`.
     """
+    return chain_fingerprint(read_urdf(path).chain(base, tip))
+
+
+def chain_fingerprint(chain: list[UrdfJoint]) -> str:
+    """:func:`kinematics_fingerprint` of joints already read (:meth:`UrdfTree.chain`)."""
     h = hashlib.sha256()
-    for j in read_urdf(path).chain(base, tip):
+    for j in chain:
         h.update(json.dumps([j.name, j.type, np.round(j.origin, 9).tolist(),
                              np.round(j.axis, 9).tolist(), repr(j.lower), repr(j.upper),
                              j.mimic]).encode())
