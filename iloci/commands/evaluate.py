@@ -9,7 +9,7 @@ import re
 import sys
 
 from iloci.config import load_config
-from iloci.data.datasets import check_protocol, load_dataset_once
+from iloci.data.datasets import check_protocol, load_dataset_once, manifests_in
 from iloci.data.files import writable_dir
 from iloci.errors import InvalidInputError
 
@@ -135,8 +135,7 @@ def _outside_the_data(flag: str, where: str | None, data: str) -> None:
     if not where or not data:
         return
     root = Path(data).expanduser().resolve()
-    if not root.is_dir() or any(f.name.lower() in ("manifest.csv", "manifest.json")
-                                for f in root.iterdir()):
+    if not root.is_dir() or manifests_in(root):
         return  # a manifest lists its files: a folder beside them is not read
     out = Path(where).expanduser().resolve()
     if out == root or root in out.parents:

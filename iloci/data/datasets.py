@@ -334,7 +334,7 @@ def _check_gesture_names(root: Path, samples: Sequence[Sample]) -> None:
         "gesture names, a manifest is read as it says too.)")
 
 
-def _manifests_in(folder: Path) -> list[Path]:
+def manifests_in(folder: Path) -> list[Path]:
     """``manifest.csv`` / ``manifest.json`` in ``folder``, their names in any case."""
     return sorted(f for f in folder.iterdir() if f.name.lower() in _MANIFESTS and f.is_file())
 
@@ -587,7 +587,7 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                                     "manifest.")
         manifest = p
     else:
-        found = _manifests_in(p)
+        found = manifests_in(p)
         if len(found) > 1:
             raise InvalidInputError(
                 f"data set {p} holds both {' and '.join(f.name for f in found)}: give the one "
@@ -696,7 +696,7 @@ def _fingerprint(p: Path) -> tuple:
             return (f, -1, -1)
         return (f, st.st_size, st.st_mtime_ns)
 
-    found = _manifests_in(p) if p.is_dir() else [p]
+    found = manifests_in(p) if p.is_dir() else [p]
     if found:  # the manifest and the files it lists (which may lie anywhere)
         files = [str(m) for m in found]
         try:
