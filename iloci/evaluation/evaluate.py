@@ -270,7 +270,7 @@ def check_drawings(dataset: DataSet, config: Config) -> None:
             rests = (f" once the pen's rests are trimmed (from {len(d.positions)})"
                      if n < len(d.positions) else "")
             short.append(f"{Path(dataset.root) / s.path}: {n} point(s){rests}"
-                         + outlier_note(d.positions))
+                         + outlier_note(glitch))
         elif glitch is not None:
             glitches.append(f"{s.path} (sample {glitch[0]}, {glitch[1]:.3g} times its "
                             "size away)")

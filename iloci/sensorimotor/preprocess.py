@@ -223,9 +223,8 @@ def lone_outlier(positions: np.ndarray, factor: float = 20.0) -> tuple[int, floa
     return None
 
 
-def outlier_note(positions: np.ndarray) -> str:
-    """``""``, or what to say of :func:`lone_outlier`'s sample in an error about the drawing."""
-    found = lone_outlier(positions)
+def outlier_note(found: tuple[int, float] | None) -> str:
+    """``""``, or what to say in an error about a drawing of :func:`lone_outlier`'s result."""
     if found is None:
         return ""
     row, ratio = found
@@ -312,7 +311,7 @@ def preprocess(demo: Demonstration, *, steps: int = 50, resample_by: str = "arc_
     if len(positions) < min_points:
         rests = (f" once the pen's rests are trimmed (from {len(demo.positions)})"
                  if len(positions) < len(demo.positions) else "")
-        glitch = outlier_note(demo.positions)
+        glitch = outlier_note(lone_outlier(demo.positions))
         raise InvalidDemonstrationError(
             f"demonstration {demo.key!r} has {len(positions)} samples{rests}{glitch}; at "
             f"least {min_points} are needed to read a drawing (a tap or a click is not one)"

@@ -22,6 +22,7 @@ from iloci.hookspecs import hookimpl
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.registry import KindRegistry
 from iloci.sensorimotor.robots.model import DrawingPlane, Robot, _frozen
+from iloci.sensorimotor.robots.urdf import kinematics_fingerprint
 
 __all__ = ["NAO_PLANE", "NAO_Q_HOME", "ROBOTS", "RobotPreset", "available_robots", "get_robot"]
 
@@ -74,6 +75,8 @@ def nao_v32_right_arm() -> Robot:
         q_home=_frozen(NAO_Q_HOME),
         plane=NAO_PLANE,
         fixed_joints={"RWristYaw": 0.0},
+        # once per robot, not at every save of a memory (persistence.robot_record)
+        kinematics=kinematics_fingerprint(path, "torso", "r_pen_tip"),
     )
 
 
