@@ -594,6 +594,33 @@ def test_a_control_from_a_page_another_tab_has_changed_is_refused(served, lasa):
     assert client.post("/api/undo", json={}).status_code == 200   # a script names no version
 
 
+def test_a_misspelt_field_is_refused_naming_it_not_read_as_missing(served, lasa):
+    """An audit's script sent {"vesion": 3} with an undo: the field was ignored, so the
+    stale-page check it asked for never ran, and the undo took back another tab's step.
+    Every JSON action refuses a field it does not take, names it (with the field meant,
+    when close) and changes nothing."""
+    client, classroom, memory = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})
+    answer = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"])}).json()["answer"]
+    before, version = memory.read_bytes(), classroom.history.version
+    cases = [("/api/undo", {"vesion": version}, "vesion", "version"),
+             ("/api/reset", {"version": version, "force": True}, "force", None),
+             ("/api/forget", {"concpt": "c1"}, "concpt", "concept"),
+             ("/api/rename", {"concept": "c1", "nmae": "g"}, "nmae", "name"),
+             ("/api/feedback", {"turn": answer["turn"], "answer": answer["id"], "vaule": 1},
+              "vaule", "value"),
+             ("/api/observe", {"points": stroke(lasa["GShape/1"]), "pts": []}, "pts", "points"),
+             ("/api/recognize", {"points": stroke(lasa["GShape/1"]), "k": 3}, '"k"', None)]
+    for path, body, named, meant in cases:
+        r = client.post(path, json=body)
+        assert r.status_code == 400, (path, r.text)
+        error = r.json()["error"]
+        assert named in error and "Nothing was changed" in error, error
+        assert (f"did you mean '{meant}'" in error) if meant else "did you mean" not in error
+    assert memory.read_bytes() == before and classroom.history.version == version
+    assert judge(client, answer, -1).status_code == 200         # the guess still waits
+
+
 def test_export_then_import_into_a_fresh_server(served, lasa, tmp_path):
     client, classroom, _ = served
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})

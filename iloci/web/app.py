@@ -10,7 +10,11 @@ after every change.
 
 API (JSON in and out; an error is ``{"error": message}`` with a 4xx status
 and leaves the memory untouched; a failed save is a 507 whose memory is
-what the file still holds):
+what the file still holds; a body holding a field its endpoint does not
+take, :data:`BODY_FIELDS`, is refused with 400 naming it; every body may
+carry the tab's ``"client"`` id and, for the memory's controls, the
+``"version"`` of the memory the page shows, refused with 409 when another
+tab changed it since):
 
 ``GET /api/state?client=ID``
     The memory (concepts, entries with thumbnails), the client's pending
@@ -77,10 +81,23 @@ from typing import Any
 from iloci.errors import IlociError
 from iloci.web.classroom import Classroom
 from iloci.web.schemas import (MAX_BODY, MAX_MEMORY_BYTES, MAX_POINTS, HTTPError, client_id,
-                               plain_words, read_body, read_json, status_of)
+                               known_fields, plain_words, read_body, read_json,
+                               status_of)
 from iloci.web.security import LOCAL_HOSTS, TOKEN_HEADER, HostGuard, foreign, write_refusal
 
-__all__ = ["Classroom", "create_app", "plain_words", "MAX_BODY", "MAX_POINTS",
+#: The fields each JSON action's body may hold (``POST /api/<name>``); any other is refused
+#: (400), so a misspelt field is not read as a missing one.
+BODY_FIELDS: dict[str, tuple[str, ...]] = {
+    "observe": ("points", "client"),
+    "feedback": ("turn", "answer", "value", "client"),
+    "recognize": ("points", "client"),
+    "rename": ("concept", "name", "version", "client"),
+    "undo": ("version", "client"),
+    "forget": ("concept", "entry", "version", "client"),
+    "reset": ("version", "client"),
+}
+
+__all__ = ["BODY_FIELDS", "Classroom", "create_app", "plain_words", "MAX_BODY", "MAX_POINTS",
            "MAX_MEMORY_BYTES", "STATIC", "TOKEN_HEADER", "LOCAL_HOSTS"]
 
 STATIC = Path(__file__).parent / "static"
@@ -150,9 +167,12 @@ def create_app(classroom: Classroom, *, token: str | None = None,
     async def progress(request: Request) -> Any:
         return JSONResponse({"progress": classroom.progress})
 
-    def action(method: Any) -> Any:
+    def action(method: Any, fields: tuple[str, ...]) -> Any:
+        """The endpoint of a JSON action: its body, checked to hold only ``fields``."""
         async def run(request: Request) -> Any:
-            return JSONResponse(await method(await read_json(request)))
+            body = await read_json(request)
+            known_fields(body, fields, request.url.path)
+            return JSONResponse(await method(body))
         return run
 
     async def import_(request: Request) -> Any:
@@ -182,13 +202,8 @@ def create_app(classroom: Classroom, *, token: str | None = None,
         Route("/api/progress", guarded(progress, write=False)),
         Route("/api/export", guarded(export, write=False)),
         Route("/api/arm.png", guarded(arm, write=False)),
-        Route("/api/observe", guarded(action(classroom.observe)), methods=["POST"]),
-        Route("/api/feedback", guarded(action(classroom.feedback)), methods=["POST"]),
-        Route("/api/recognize", guarded(action(classroom.recognize)), methods=["POST"]),
-        Route("/api/rename", guarded(action(classroom.rename)), methods=["POST"]),
-        Route("/api/undo", guarded(action(classroom.undo)), methods=["POST"]),
-        Route("/api/forget", guarded(action(classroom.forget)), methods=["POST"]),
-        Route("/api/reset", guarded(action(classroom.reset)), methods=["POST"]),
+        *[Route(f"/api/{name}", guarded(action(getattr(classroom, name), fields)),
+                methods=["POST"]) for name, fields in BODY_FIELDS.items()],
         Route("/api/import", guarded(import_, body="file"), methods=["POST"]),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]

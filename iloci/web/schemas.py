@@ -8,6 +8,8 @@ sees it, a body is read with a size limit and a deadline.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Sequence
+import difflib
 import json
 import math
 from typing import Any
@@ -112,6 +114,26 @@ def parse_feedback(body: Any) -> tuple[int | str, int, str]:
         raise HTTPError(400, f'"turn" must be the id of a guess, got '
                              f"{json.dumps(turn_id)[:40]}.")
     return value, turn_id, answer_id
+
+
+def known_fields(body: Any, fields: Sequence[str], path: str) -> None:
+    """Refuse (HTTPError 400) a JSON object with a field outside ``fields``, naming it.
+
+    A misspelt field (``"vaule"``) would otherwise be read as a missing one,
+    or, where it is optional (``"version"``), silently not be checked. Bodies
+    that are not objects are left to the endpoint's own message.
+    """
+    if not isinstance(body, dict):
+        return
+    unknown = [k for k in body if k not in fields]
+    if not unknown:
+        return
+    hints = []
+    for k in unknown:
+        close = difflib.get_close_matches(str(k), fields, n=1)
+        hints.append(f"{json.dumps(k)[:40]}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    raise HTTPError(400, f"{path} does not take the field(s) {', '.join(hints)}; it takes "
+                         f"{', '.join(fields)}. Nothing was changed.")
 
 
 def client_id(body: Any) -> str:
