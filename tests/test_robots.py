@@ -195,6 +195,22 @@ def test_no_reachable_plane_says_what_to_relax(arm_urdf):
         iloci.build(arm_config(arm_urdf, plane_min_up=2.0))
 
 
+def test_no_plane_for_an_arm_whose_base_frame_is_below_its_joints_says_so(arm_urdf):
+    """An audit's base_frame one link too low (below the shoulder joints, which iloci then
+    holds still) got the plane search's advice only; the error now says which joints the
+    arm has and which movable joints lie above its base."""
+    from iloci.sensorimotor.robots.plane import NoReachablePlaneError
+    with pytest.raises(NoReachablePlaneError) as err:
+        iloci.build(arm_config(arm_urdf, base_frame="l3", rest=[]))
+    message = str(err.value)
+    assert "moves 2 joint(s): j4, j5" in message
+    assert "below the movable joint(s) j1, j2, j3" in message
+    assert "the URDF's root is 'base'" in message
+    with pytest.raises(NoReachablePlaneError) as err:  # a right base: no such sentence
+        iloci.build(arm_config(arm_urdf, plane_min_up=2.0))
+    assert "moves 5 joint(s)" in str(err.value) and "below the movable" not in str(err.value)
+
+
 def test_given_plane_gets_a_start_posture_at_its_centre(arm_urdf):
     agent = iloci.build(arm_config(arm_urdf, plane=[0.25, 0.0, 0.35, 0.12, 0.12]))
     robot = agent.robot
@@ -379,8 +395,8 @@ def test_arm_executor_starts_from_the_current_posture(arm_agent):
 class _ArmPlugin:
     """Registers robot ``name`` (the Nao's description under that name)."""
 
-    def __init__(self, name: str) -> None:
-        self.robot_name = name
+    def __init__(self, name: str, joints: int = 4) -> None:
+        self.robot_name, self.joints = name, joints
 
     from iloci import hookimpl
 
@@ -388,7 +404,7 @@ class _ArmPlugin:
     def iloci_register_robots(self, registry):
         from iloci.sensorimotor.robots.presets import nao_v32_right_arm
         registry.add(self.robot_name, nao_v32_right_arm, summary="the Nao, renamed",
-                     joints=4, plane="given")
+                     joints=self.joints, plane="given")
 
 
 class _OldArmPlugin:
@@ -445,6 +461,42 @@ def test_a_robot_registered_twice_names_both_plugins():
     with pytest.raises(PluginError, match=r"robot 'nao-v32-right-arm' is registered twice: "
                        rf"by plugin '{BUILT_IN}' \(distribution iloci\) and by plugin"):
         get_robot("nao-v32-right-arm", pm)
+
+
+def test_a_robot_preset_that_is_not_what_its_registration_says_is_refused():
+    """An audit's plugin registered the Nao's 4-joint arm with joints=6: `iloci robots`
+    listed 6 joints and every command built and used the arm without a word. Building the
+    preset now checks its registration, naming the plugin."""
+    from iloci.errors import PluginError
+    from iloci.plugins import get_plugin_manager
+
+    plugin = _ArmPlugin("nao-copy", joints=6)
+    pm = get_plugin_manager(autoload=False, plugins=[plugin])
+    with pytest.raises(PluginError, match=rf"robot 'nao-copy' of plugin '{pm.get_name(plugin)}'"
+                       r".*registered with joints=6, but the robot its factory builds moves 4 "
+                       r"\(RShoulderPitch, RShoulderRoll, RElbowYaw, RElbowRoll\)"):
+        get_robot("nao-copy", pm)
+    right = get_plugin_manager(autoload=False, plugins=[_ArmPlugin("nao-copy")])
+    assert get_robot("nao-copy", right).dof == 4
+
+
+def test_iloci_robots_lists_a_broken_preset_as_broken_and_the_others_as_before(monkeypatch,
+                                                                                capsys):
+    import json
+
+    import iloci.commands.robots as robots_command
+    from iloci.cli import main
+    from iloci.plugins import get_plugin_manager, get_registry
+
+    plugin = _ArmPlugin("nao-copy", joints=6)
+    pm = get_plugin_manager(autoload=False, plugins=[plugin])
+    monkeypatch.setattr(robots_command, "get_registry", lambda: get_registry(pm))
+    assert main(["robots", "--json"]) == 0
+    listed = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
+    assert listed["nao-v32-right-arm"]["status"] == "available"
+    assert listed["nao-copy"]["status"].startswith("broken: robot 'nao-copy' of plugin")
+    assert main(["robots"]) == 0
+    assert "(broken: robot 'nao-copy'" in capsys.readouterr().out
 
 
 def test_a_robot_registration_must_state_its_joints_and_plane():

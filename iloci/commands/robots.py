@@ -15,7 +15,7 @@ import json
 import numpy as np
 
 from iloci.config import load_config
-from iloci.errors import InvalidInputError, MissingBackendError
+from iloci.errors import InvalidInputError, MissingBackendError, PluginError
 from iloci.plugins import get_plugin_manager, get_registry
 from iloci.sensorimotor.robots import check_robot, robot_and_ik
 from iloci.sensorimotor.robots.urdf import read_urdf
@@ -43,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
                 registry.build("robot", spec.name)
             except MissingBackendError as exc:
                 status = f"missing: {exc}"
+            except PluginError as exc:  # one plugin's broken preset: listed, not fatal
+                status = f"broken: {exc}"
             rows.append({"name": spec.name, "joints": spec.fact("joints"),
                          "source": spec.distribution or "none", "plane": spec.fact("plane"),
                          "plugin": spec.plugin, "status": status, "summary": spec.summary})

@@ -358,7 +358,29 @@ def check_built(spec: ComponentSpec, obj: Any) -> Any:
             f"is not {kind.label_article}: it lacks {', '.join(unmet)} (see "
             f"iloci.interfaces.{kind.protocol.__name__}). Fix the plugin, or block it with "
             f"ILOCI_BLOCK_PLUGINS={spec.plugin}.")
+    if spec.kind == "robot":
+        _check_robot_facts(spec, obj)
     return obj
+
+
+def _check_robot_facts(spec: ComponentSpec, robot: Any) -> None:
+    """A robot preset's registration states its joints and plane (``iloci robots`` lists
+    them before anything is built); refuse a robot that is not what it was said to be."""
+    said, joints = spec.fact("joints"), tuple(robot.joint_names)
+    faults = []
+    if isinstance(said, int) and said != len(joints):
+        faults.append(f"it was registered with joints={said}, but the robot its factory "
+                      f"builds moves {len(joints)} ({', '.join(joints)})")
+    method = (getattr(robot, "plane_report", None) or {}).get("method")
+    if spec.fact("plane") == "given" and method == "placeholder":
+        faults.append('it was registered with plane="given", but the robot comes with a '
+                      'placeholder plane (register it with plane="auto" to have it placed)')
+    if faults:
+        raise PluginError(
+            f"robot {spec.name!r} of plugin {spec.plugin or '?'!r} (distribution "
+            f"{spec.distribution or 'none'}): {'; '.join(faults)}. Fix the registration in "
+            f"the plugin's iloci_register_robots, or block it with "
+            f"ILOCI_BLOCK_PLUGINS={spec.plugin}.")
 
 
 def _factory_name(factory: Any) -> str:

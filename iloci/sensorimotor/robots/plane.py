@@ -33,6 +33,7 @@ import numpy as np
 
 from iloci.errors import IlociError, InvalidInputError, UnreachableTargetError
 from iloci.sensorimotor.robots.model import DrawingPlane, _vec3
+from iloci.sensorimotor.robots.urdf import read_urdf
 
 __all__ = ["NoReachablePlaneError", "PlaneCheck", "check_plane", "find_drawing_plane"]
 
@@ -114,6 +115,24 @@ def _fmt(v: Any) -> str:
     return "(" + ", ".join(f"{float(x):.3g}" for x in v) + ")"
 
 
+def _arm_note(robot: Any) -> str:
+    """What the plane search worked with, for its errors: the arm's joints, and the movable
+    joints above its base frame, which iloci never moves (a base frame chosen too low)."""
+    joints = list(robot.joint_names)
+    note = (f" (The arm from {robot.base_frame!r} to {robot.end_effector_frame!r} moves "
+            f"{len(joints)} joint(s): {', '.join(joints)}.")
+    try:
+        tree = read_urdf(robot.urdf_path)
+        above = tree.movable_between(tree.root, robot.base_frame)
+    except (IlociError, OSError):  # the robot was built from this file: not expected
+        return note + ")"
+    if above:
+        note += (f" Its base frame {robot.base_frame!r} hangs below the movable joint(s) "
+                 f"{', '.join(above)}, which iloci holds still: if they belong to the arm, "
+                 f"set base_frame to a link above them (the URDF's root is {tree.root!r}).")
+    return note + ")"
+
+
 def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float] = (1, 0, 0),
                        up: tuple[float, float, float] = (0, 0, 1), aspect: float = 1.0,
                        joint_margin: float = math.radians(10.0), min_singular: float = 0.1,
@@ -192,7 +211,8 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
     if front.sum() < 20:
         raise NoReachablePlaneError(
             f"{robot.name!r} reaches almost nothing in front of it along normal "
-            f"{_fmt(normal)} (base frame {robot.base_frame!r}); choose another plane_normal.")
+            f"{_fmt(normal)} (base frame {robot.base_frame!r}); choose another plane_normal."
+            + _arm_note(robot))
     reach = float(np.percentile(np.linalg.norm(x[front], axis=1), 95))
     h_cap = min(max_height, reach)
 
@@ -261,7 +281,7 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
             f"smallest singular value >= {min_singular} of its best, its lowest edge "
             f">= {min_up} m above the base origin. Give the plane "
             "([robot] plane = [x, y, z, width, height]), another plane_normal / plane_up, or "
-            "lower plane_joint_margin / plane_min_singular / plane_min_up.")
+            "lower plane_joint_margin / plane_min_singular / plane_min_up." + _arm_note(robot))
     # the largest first (stable: among equals, the one found first)
     candidates.sort(key=lambda c: -c[0])
     best = (0.0, 0.0, 0.0, 0.0)
@@ -299,11 +319,13 @@ def find_drawing_plane(robot: Any, ik: Any, *, normal: tuple[float, float, float
         h *= 0.95
     else:
         raise NoReachablePlaneError(f"no drawing plane for {robot.name!r} passed the final "
-                                    "15 x 15 check; relax the margins or give the plane.")
+                                    "15 x 15 check; relax the margins or give the plane."
+                                    + _arm_note(robot))
     if h < 0.01:
         raise NoReachablePlaneError(
             f"the largest drawable square for {robot.name!r} is {h * 1000:.1f} mm: too small "
-            "to draw in. Give the plane, another orientation, or lower the margins.")
+            "to draw in. Give the plane, another orientation, or lower the margins."
+            + _arm_note(robot))
     assert final.q_center is not None
     report = {
         "method": "auto",
