@@ -10,6 +10,7 @@ them); ``docs/config.md`` is generated from their ``#:`` comments.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 from iloci.constraints import Interval, Options, constrained
 from iloci.data.concepts import LASA_SHAPES, MULTI_MODEL_SHAPES
@@ -319,8 +320,21 @@ class RobotConfig:
             raise ValueError("plane must be [x, y, z, width, height] (m, base frame, width and "
                              f"height > 0), got {list(self.plane)}")
         for key in ("plane_normal", "plane_up"):
-            if len(getattr(self, key)) != 3:
-                raise ValueError(f"{key} must be 3 numbers, got {list(getattr(self, key))}")
+            v = getattr(self, key)
+            if len(v) != 3:
+                raise ValueError(f"{key} must be 3 numbers, got {list(v)}")
+            if not all(math.isfinite(c) for c in v) or not any(v):
+                raise ValueError(f"{key} must be a direction (finite, not all zero), got "
+                                 f"{list(v)}")
+        # as DrawingPlane checks them, before anything is built (config check says it too)
+        n, up = (math.hypot(*self.plane_normal), math.hypot(*self.plane_up))
+        cos = sum(a * b for a, b in zip(self.plane_normal, self.plane_up)) / (n * up)
+        if abs(cos) > 1e-6:
+            angle = math.degrees(math.acos(max(-1.0, min(1.0, cos))))
+            raise ValueError(f"plane_normal {list(self.plane_normal)} and plane_up "
+                             f"{list(self.plane_up)} must be orthogonal ({angle:.1f} deg "
+                             "apart): the normal points away from the robot, up runs along "
+                             "the plane, e.g. [1, 0, 0] and [0, 0, 1]")
         if self.urdf and not self.tip_frame:
             raise ValueError("urdf needs tip_frame: the URDF link whose origin is the pen tip")
         if not self.urdf and not self.name:

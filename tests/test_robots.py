@@ -112,6 +112,15 @@ def test_config_section_validates(tmp_path):
         load_config({"robot": {"tipframe": "pen"}})
     cfg = load_config({"robot": {"plane": [0.2, 0, 0.3, 0.1, 0.1]}})
     assert cfg.robot.plane == (0.2, 0.0, 0.3, 0.1, 0.1)
+    # the plane's orientation is checked with the config (config check), not first when
+    # the plane is placed (an audit: plane_normal parallel to plane_up passed the check)
+    with pytest.raises(ConfigError, match=r"plane_normal \[0.0, 0.0, 1.0\] and plane_up "
+                       r"\[0.0, 0.0, 1.0\] must be orthogonal \(0.0 deg apart\)"):
+        load_config({"robot": {"plane_normal": [0, 0, 1]}})
+    with pytest.raises(ConfigError, match="plane_up must be a direction"):
+        load_config({"robot": {"plane_up": [0, 0, 0]}})
+    cfg = load_config({"robot": {"plane_normal": [0, 2, 0], "plane_up": [0, 0, 0.5]}})
+    assert cfg.robot.plane_normal == (0.0, 2.0, 0.0)  # any length: DrawingPlane scales it
 
 
 # ------------------------------------------------------- IK, plane, agent (pinocchio)
