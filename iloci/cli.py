@@ -12,6 +12,7 @@ Each subcommand lives in a module of :mod:`iloci.commands` with a
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import sys
@@ -22,7 +23,7 @@ from typing import Any
 from iloci._version import __version__
 from iloci.errors import IlociError, PluginError
 from iloci.plugins import get_plugin_manager, hook_results
-from iloci.progress import progress_sink
+from iloci.progress import FULL_ERRNOS, progress_sink, why_not_written
 
 __all__ = ["main"]
 
@@ -145,9 +146,27 @@ def _main(argv: Sequence[str] | None) -> int:
     except Exception as exc:  # a failure, not a user error
         if show_tb:
             raise
+        said = _machine_refused(exc)
+        if said:
+            print(f"error: {said}", file=sys.stderr)
+            return 1
         print(f"failed: {type(exc).__name__}: {exc}{_whose(args)}\n(run with --traceback "
               "for details)", file=sys.stderr)
         return 1
+
+
+def _machine_refused(exc: BaseException) -> str:
+    """What to say of an OSError the machine raised (a full disk, a file size limit, a
+    read-only disk, no permission), naming the file; "" for any other exception."""
+    if not isinstance(exc, OSError) or not exc.filename:
+        return ""
+    if exc.errno in FULL_ERRNOS or exc.errno == errno.EROFS:
+        return (f"{why_not_written(exc.filename, exc)} Free some space (or write elsewhere) "
+                "and run the command again.")
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return (f"permission denied: {exc.filename}. Fix its permissions (or use another "
+                "file) and run the command again.")
+    return ""
 
 
 def _whose(args: argparse.Namespace) -> str:

@@ -19,6 +19,7 @@ point, is therefore a different stream, which is taught from its start
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
@@ -42,6 +43,7 @@ __all__ = [
     "memory_lock",
     "saving",
     "why_not_saved",
+    "why_not_written",
     "item_digest",
     "long_step",
     "progress_sink",
@@ -119,19 +121,33 @@ def resume_point(record: Any, digests: Sequence[str]) -> int:
     return n if record.get("digest") == prefix_digest(digests, n) else 0
 
 
-def why_not_saved(path: str | os.PathLike[str], exc: OSError) -> str:
-    """``"could not save the memory to PATH: the disk is full (...)."``: a failed save in words."""
-    import errno
+#: errno values of a write the machine refused (not a fault of iloci or of the input):
+#: no space, a file size limit, a quota; no permission, a read-only disk.
+FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", errno.ENOSPC)})
+REFUSED_ERRNOS = FULL_ERRNOS | {errno.EACCES, errno.EPERM, errno.EROFS}
+
+
+def why_not_written(path: str | os.PathLike[str], exc: OSError,
+                    what: str = "write") -> str:
+    """``"could not write PATH: the disk is full (...)."``: a failed write in words.
+
+    ``what``: the verb phrase before the path (``"save the memory to"``).
+    """
     why = exc.strerror or str(exc)
-    if exc.errno in (errno.ENOSPC, errno.EFBIG, getattr(errno, "EDQUOT", -1)):
-        what = "the disk is full (or the file size limit is reached)"
+    if exc.errno in FULL_ERRNOS:
+        cause = "the disk is full (or the file size limit is reached)"
     elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        what = "it may not be written (permissions, or a read-only disk)"
+        cause = "it may not be written (permissions, or a read-only disk)"
     else:
-        what = "the system refused"
+        cause = "the system refused"
     target = os.path.realpath(path)
     where = str(path) if target == os.fspath(path) else f"{path} (a link to {target})"
-    return f"could not save the memory to {where}: {what} ({why})."
+    return f"could not {what} {where}: {cause} ({why})."
+
+
+def why_not_saved(path: str | os.PathLike[str], exc: OSError) -> str:
+    """``"could not save the memory to PATH: the disk is full (...)."``: a failed save in words."""
+    return why_not_written(path, exc, "save the memory to")
 
 
 #: Memory locks this process holds: real path of the memory -> (lock, holder record).

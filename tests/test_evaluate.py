@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import tomllib
 
 import pytest
@@ -435,3 +436,53 @@ def test_a_run_on_your_own_data_never_writes_over_lasas_report(tmp_path, cli):
     report = (tmp_path / "runs" / "lab_shapes" / "report.md").read_text()
     assert "Fold 0 of a 2-fold evaluation (`--folds`: the others were not run) on " in report
     assert "(one fold)" in report and "± 0.00" not in report
+
+
+@pytest.mark.skipif(sys.platform != "linux",
+                    reason="RLIMIT_FSIZE in a child process: Linux")
+def test_a_full_disk_at_the_report_says_so_after_the_results(small_config, tmp_path):
+    """A disk that fills while the report is written (here the file size limit, as
+    `ulimit -f` sets it) gave "failed: OSError: [Errno 27] File too large" after the whole
+    evaluation, and the results were lost. Now the results are printed first, then one
+    error naming the file and saying what is complete; no cut file is left behind."""
+    import resource
+    import subprocess
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "iloci", "evaluate", "--config",
+                           str(small_config), "--out", str(out), "--jobs", "1", "--quiet",
+                           "--no-baseline"], capture_output=True, text=True, timeout=600,
+                          preexec_fn=limit)
+    assert done.returncode == 1, done.stderr
+    assert "interactions per learning demo" in done.stdout      # the results, printed
+    error = done.stderr.strip().splitlines()[-1]
+    assert error.startswith(f"error: could not write {out / 'metrics.json'}: the disk is "
+                            "full (or the file size limit is reached)"), error
+    assert "nothing is there" in error and "run the command again" in error
+    assert "Traceback" not in done.stderr and "failed:" not in done.stderr
+    assert not [p for p in out.rglob("*") if p.is_file()]      # no cut file, no temporary
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_FSIZE in a child process: Linux")
+def test_any_command_that_meets_a_full_disk_names_the_file_in_one_error(tmp_path):
+    """The CLI's last resort: an OSError the machine raised (no space, a file size limit,
+    a read-only disk) is one error naming the file and what to do, not "failed: ..."."""
+    import resource
+    import subprocess
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+
+    image = tmp_path / "g.png"
+    done = subprocess.run([sys.executable, "-m", "iloci", "show", "GShape/0", "--out",
+                           str(image)], capture_output=True, text=True, timeout=600,
+                          preexec_fn=limit)
+    assert done.returncode == 1
+    assert done.stderr.strip() == (
+        f"error: could not write {image}: the disk is full (or the file size limit is "
+        "reached) (File too large). Free some space (or write elsewhere) and run the "
+        "command again.")
+    assert not list(tmp_path.iterdir())

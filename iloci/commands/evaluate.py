@@ -12,6 +12,7 @@ from iloci.config import load_config
 from iloci.data.datasets import check_protocol, load_dataset_once, manifests_in
 from iloci.data.files import writable_dir
 from iloci.errors import InvalidInputError
+from iloci.progress import REFUSED_ERRNOS, why_not_written
 
 
 def _jobs(args: argparse.Namespace, config) -> str:
@@ -188,14 +189,33 @@ def _run_folds(args: argparse.Namespace, config) -> int:
     except KeyboardInterrupt:
         print("\ninterrupted: workers stopped, nothing written.", file=sys.stderr)
         return 130
-    report = write_outputs(args.out, metrics, results)
+    # the results first: a report that cannot be written does not take them along
     print(headline(metrics))
     if metrics.get("robustness"):
         # loaded when the command runs (see run's imports)
         from iloci.evaluation.report import robustness_table
         print("\n" + "\n".join(robustness_table(metrics["robustness"])))
+    try:
+        report = write_outputs(args.out, metrics, results)
+    except OSError as exc:
+        return _not_written(args.out, exc)
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
     return 0
+
+
+def _not_written(out: str, exc: OSError) -> int:
+    """Say that the report could not be written (the results were printed), and what is
+    in ``out``; exit code 1."""
+    if exc.errno not in REFUSED_ERRNOS:
+        raise exc
+    written = sorted(p.name for p in Path(out).glob("*.json") if p.is_file())
+    kept = (f"{', '.join(written)} {'is' if len(written) == 1 else 'are'} complete there "
+            "(each file is written whole or not at all)" if written else "nothing is there")
+    print(f"error: {why_not_written(exc.filename or out, exc)} The results above were "
+          f"computed, but the report in {out} is not complete: {kept}. Free some space (or "
+          "fix the permissions) and run the command again, or give another --out.",
+          file=sys.stderr)
+    return 1
 
 
 def _run_stream(args: argparse.Namespace, config) -> int:
@@ -221,7 +241,10 @@ def _run_stream(args: argparse.Namespace, config) -> int:
     except KeyboardInterrupt:
         print("\ninterrupted: nothing written.", file=sys.stderr)
         return 130
-    report = write_stream_outputs(args.out, metrics, steps)
     print(stream_headline(metrics))
+    try:
+        report = write_stream_outputs(args.out, metrics, steps)
+    except OSError as exc:
+        return _not_written(args.out, exc)
     print(f"\nwrote {args.out}/metrics.json, {report} and figures/")
     return 0

@@ -170,8 +170,10 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
     FileExistsError
         ``overwrite=False`` and the target exists.
     OSError
-        Unchanged from the file system (e.g. :class:`PermissionError` for an
-        unwritable directory); whatever ``writer`` raises propagates too.
+        From the file system (e.g. :class:`PermissionError` for an unwritable
+        directory), with ``filename`` the target when the system named none
+        (a write refused for a full disk); whatever ``writer`` raises
+        propagates too.
     """
     target = Path(path)
     directory = target.parent
@@ -202,11 +204,13 @@ def write_atomic(path: str | os.PathLike[str], writer: Callable[[IO[bytes]], Any
             os.chmod(tmp, old_mode)
         # the rename is the commit point: before it the old file is intact
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(exc, OSError) and exc.errno is not None and exc.filename is None:
+            exc.filename = str(target)  # a full disk says which file it refused
         raise
     _fsync_directory(directory)
     return target

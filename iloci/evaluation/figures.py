@@ -16,6 +16,7 @@ import warnings
 import numpy as np
 
 from iloci.errors import MissingBackendError
+from iloci.data.writes import write_atomic
 from iloci.evaluation.metrics import backward_moving_average
 
 __all__ = [
@@ -42,11 +43,13 @@ def _plt() -> Any:
 
 
 def _save(fig: Any, path: str | Path) -> Path:
+    """Write ``fig`` as PNG, whole or not at all (a full disk leaves no cut image)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    import matplotlib.pyplot as plt
-    plt.close(fig)
+    try:
+        write_atomic(path, lambda fh: fig.savefig(fh, format="png", dpi=110,
+                                                  bbox_inches="tight"), mkdir=True)
+    finally:
+        _plt().close(fig)
     return path
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from iloci.data.writes import write_text_atomic
+from iloci.data.writes import write_atomic, write_text_atomic
 from iloci_ray.sweep import BASELINES_METRIC, RUN_METRICS, SweepSpec
 
 __all__ = ["summarize", "write_report"]
@@ -111,9 +111,10 @@ def plot_against(rows: Sequence[dict[str, Any]], key: str, path: Path) -> Path |
     fig.suptitle(f"mean ± std over {seeds} seed(s) (each the mean over its folds)",
                  fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:  # whole or not at all: a full disk leaves no cut image
+        write_atomic(path, lambda fh: fig.savefig(fh, format="png", dpi=110), mkdir=True)
+    finally:
+        plt.close(fig)
     return path
 
 
