@@ -124,6 +124,31 @@ def test_a_bad_feedback_or_a_stale_turn_changes_nothing(lasa):
         other.feedback(1, pending)
 
 
+def test_a_turn_observed_before_an_undo_start_over_or_load_is_refused(lasa, tmp_path):
+    """An audit: a turn observed, then agent.restore(snapshot) (or start_over, or
+    replace_memory): its feedback still went on, into the memory the agent no longer used
+    (the new concept lost), and retrained the network the current memory relies on."""
+    agent = make_agent()
+    agent.learn(lasa["GShape/0"])
+    agent.save(tmp_path / "m.npz")
+    snap = agent.snapshot()
+    for replace in (lambda: agent.restore(snap),
+                    lambda: agent.replace_memory(tmp_path / "m.npz"), agent.start_over):
+        turn = agent.observe(lasa["Angle/0"])
+        replace()
+        current, net = agent.memory.copy(), state(agent)
+        with pytest.raises(InvalidInputError, match="the memory was replaced since 'Angle/0' "
+                                                    "was observed .* observe it again"):
+            turn.feedback(-1, turn.answer.id)
+        assert entries_equal(agent.memory.entries, current.entries)
+        assert same_state(net, state(agent))
+    agent.replace_memory(tmp_path / "m.npz")
+    turn = agent.observe(lasa["Angle/0"])              # observed again: learned as usual
+    while not turn.done:
+        turn.feedback(-1, turn.answer.id)
+    assert turn.outcome.action == "new_concept"
+
+
 def counters(agent) -> tuple:
     m = agent.memory
     return (m.concept_count, m.demonstrations_seen, [e.num_samples for e in m.entries],

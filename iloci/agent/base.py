@@ -101,7 +101,8 @@ class AgentBase:
                        self.config.learner, simulator=self.simulator,
                        hook=self.plugin_manager.hook,
                        joint_limits=ik_joint_limits(self.ik_solver),
-                       on_progress=self._report_progress, lock=self._lock)
+                       on_progress=self._report_progress, lock=self._lock,
+                       current_memory=lambda: self.memory)
 
     def _report_progress(self, progress: Any) -> None:
         # looked up at each report, so a callback set after observe() applies to that turn

@@ -125,6 +125,11 @@ class Learner(Recognizer):
         Held by each step of a :class:`Turn` (an agent passes its own, so
         one learning step runs at a time); a fresh ``threading.RLock`` by
         default.
+    current_memory : callable, optional
+        Returns the memory its owner uses now (an agent passes one: its
+        ``restore``, ``start_over`` and ``replace_memory`` put another
+        :class:`Memory` in place); a :class:`Turn` observed on ``memory``
+        refuses feedback once that is no longer it. Default: ``memory``.
     """
 
     def __init__(self, memory: Memory, model: PerceptualModel, clusterer: Clusterer,
@@ -132,8 +137,10 @@ class Learner(Recognizer):
                  simulator: Simulator | None = None, hook: Any = None,
                  joint_limits: tuple[np.ndarray, np.ndarray] | None = None,
                  on_progress: Callable[[RehearsalProgress], None] | None = None,
-                 lock: Any = None) -> None:
+                 lock: Any = None,
+                 current_memory: Callable[[], Memory] | None = None) -> None:
         self.memory = memory
+        self.current_memory = current_memory or (lambda: memory)
         self.model = model
         self.clusterer = clusterer
         self.teacher = teacher

@@ -293,6 +293,10 @@ class Turn:
         """
         with self.learner.lock:
             self.check_pending(answer_id)
+            if self.learner.current_memory() is not self.learner.memory:
+                raise InvalidInputError(f"the memory was replaced since {self.key!r} was "
+                                        "observed (an undo, a start over or another memory "
+                                        "loaded); observe it again.")
             if self.learner.memory.revision != self.revision:
                 raise InvalidInputError(f"the memory changed since {self.key!r} was observed "
                                         "(another demonstration was learned, or a concept "
