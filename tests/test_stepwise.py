@@ -149,6 +149,42 @@ def test_a_turn_observed_before_an_undo_start_over_or_load_is_refused(lasa, tmp_
     assert turn.outcome.action == "new_concept"
 
 
+def test_a_step_that_fails_half_way_is_put_back_whole(lasa):
+    """An audit: a clusterer that raised after the rehearsal had installed the new
+    exemplar left 3 entries for 2 demonstrations, the turn not done, the same feedback then
+    refused ("memory changed"), and the demonstration counted twice when learned again. A
+    failed step now puts back the memory, the network and the turn."""
+
+    class Failing:
+        calls = 0
+
+        def cluster(self, points, d_cutoff):
+            Failing.calls += 1
+            raise RuntimeError("the clusterer's own bug")
+
+    settings = config()
+    settings["learner"].update(num_threshold=1, similarity_threshold=1e-9)
+    try:
+        agent = iloci.build(settings, clusterer=Failing())
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    agent.learn(lasa["GShape/0"])
+    agent.learn(lasa["Angle/0"])
+    turn = agent.observe(lasa["GShape/1"])
+    while turn.answer.concept != agent.memory.entries[0].concept:
+        turn.feedback(-1, turn.answer.id)
+    before, net, seen = agent.memory.copy(), state(agent), agent.memory.demonstrations_seen
+    revision, answer = agent.memory.revision, turn.answer
+    for _ in range(2):  # the same feedback, given again, fails the same way: nothing stale
+        with pytest.raises(RuntimeError, match="the clusterer's own bug"):
+            turn.feedback(1, answer.id)
+        assert entries_equal(agent.memory.entries, before.entries)
+        assert agent.memory.demonstrations_seen == seen and agent.memory.revision == revision
+        assert same_state(net, state(agent))                 # the rehearsal undone too
+        assert not turn.done and turn.answer == answer and turn.feedbacks.count(1) == 0
+    assert Failing.calls == 2
+
+
 def counters(agent) -> tuple:
     m = agent.memory
     return (m.concept_count, m.demonstrations_seen, [e.num_samples for e in m.entries],

@@ -8,7 +8,7 @@ circle: the learner makes turns, a turn does not import the learner).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from typing import Any, Protocol
 
@@ -31,6 +31,7 @@ class LearnerFace(Protocol):
     model: PerceptualModel
     policies: Policies
     lock: Any
+    current_memory: Callable[[], Memory]
 
     def recognize_pbs(self, sequences: Sequence[np.ndarray]) -> np.ndarray: ...
 

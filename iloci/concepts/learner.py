@@ -154,6 +154,9 @@ class Learner(Recognizer):
         self.lock = lock if lock is not None else threading.RLock()
         # observer events of the turn under way, sent once it is committed
         self._pending: list[tuple[str, Any]] = []
+        # the network before a step's first rehearsal, put back if the step fails
+        self._net_before: dict[str, np.ndarray] | None = None
+        self._in_step = False
 
     # -- helpers ---------------------------------------------------------------
     @property
@@ -212,13 +215,26 @@ class Learner(Recognizer):
 
     @contextlib.contextmanager
     def uncommitted(self) -> Iterator[None]:
-        """A step of a turn: the events it queues are dropped if it raises (it changed nothing)."""
+        """A step of a turn: all or nothing.
+
+        If it raises (a rehearsal that fails, a clusterer that raises after
+        a rehearsal installed the new exemplar, an interrupt), the memory is
+        put back as it was (:meth:`Memory.checkpoint`), the network too when
+        a rehearsal had changed it, and the events it queued are dropped.
+        """
         mark = len(self._pending)
+        point = self.memory.checkpoint()
+        self._net_before, self._in_step = None, True
         try:
             yield
         except BaseException:
             del self._pending[mark:]
+            self.memory.rollback(point)
+            if self._net_before is not None:
+                self.model.load_state(self._net_before)
             raise
+        finally:
+            self._net_before, self._in_step = None, False
 
     def deliver(self, outcome: LearnOutcome) -> None:
         """Send the events of one committed learning step to every observer.
@@ -262,6 +278,9 @@ class Learner(Recognizer):
         succeeded, so a reader in another thread sees the old memory or the
         new one, never a mix, and a failed rehearsal leaves it as it was.
         """
+        if self._in_step and self._net_before is None:  # put back if the step fails
+            self._net_before = {k: np.array(v, copy=True)
+                                for k, v in self.model.state().items()}
         result = rehearsal.rehearse(self.model, entries, new_pattern,
                                     None if new_entry is None else new_entry.pb,
                                     epochs=self.rehearsal_epochs,

@@ -308,6 +308,18 @@ class Memory:
                         for key in self.entries[i].sources]
                 for label in self.concepts()}
 
+    def checkpoint(self) -> tuple[Any, ...]:
+        """What :meth:`rollback` puts back: copies of the entries, the counters and
+        :attr:`learned`, and the revision (the encoder is not changed by learning)."""
+        return ([e.copy() for e in self.entries], self.concept_count,
+                self.demonstrations_seen, set(self.learned), self.revision)
+
+    def rollback(self, point: tuple[Any, ...]) -> None:
+        """Put the memory back as :meth:`checkpoint` found it (a learning step that failed
+        half-way: a clusterer that raised after a rehearsal installed its new exemplar)."""
+        entries, self.concept_count, self.demonstrations_seen, learned, self.revision = point
+        self.entries, self.learned = entries, learned
+
     def copy(self) -> Memory:
         enc = None
         if self.encoder is not None and self.encoder.scale_ is not None:

@@ -318,15 +318,23 @@ class Turn:
     def _step(self, action: Callable[[], Answer | LearnOutcome]) -> Answer | LearnOutcome:
         """Run one action; observers hear of the turn's events once it is committed.
 
-        The events of an action that fails are dropped (it changed nothing);
+        An action that fails changes nothing: the memory, the network
+        (:meth:`Learner.uncommitted <iloci.concepts.learner.Learner.uncommitted>`)
+        and the turn are put back, and its events are dropped;
         those of earlier steps wait for the end of the turn, when they are
         delivered with its own (:meth:`Learner.deliver
         <iloci.concepts.learner.Learner.deliver>`; an observer's fault then
         raises :class:`~iloci.errors.ObserverError`, the demonstration
         learned).
         """
-        with self.learner.uncommitted():
-            result = action()
+        # the turn's own state too: a step that fails can be given again
+        saved = {k: (list(v) if isinstance(v, list) else v) for k, v in vars(self).items()}
+        try:
+            with self.learner.uncommitted():
+                result = action()
+        except BaseException:
+            vars(self).update(saved)
+            raise
         if self.outcome is not None:
             self.learner.deliver(self.outcome)
         return result
