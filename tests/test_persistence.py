@@ -284,6 +284,55 @@ def test_learning_continues_after_loading(taught, tmp_path):
     assert again.recognize(demos["Sine/1"]).concept in ("c1", "c2", "c3")
 
 
+def test_save_refuses_an_extra_that_would_break_the_file_and_a_path_that_is_none(taught,
+                                                                                   tmp_path):
+    """An audit: save(extra={"memory": {}}) (or "format", "version", ...) wrote a file
+    that could not be loaded; an extra value json cannot hold, a path that is a folder,
+    None or "" failed inside json, os or the lock. Each is one error, nothing written."""
+    from iloci.errors import InvalidInputError
+
+    agent, path, _, _ = taught
+    target = tmp_path / "m.npz"
+    for extra in ({"memory": {}}, {"format": "junk"}, {"version": 99}, {"config": {}},
+                  {"checksum": "0"}):
+        with pytest.raises(InvalidInputError, match=f"extra may not hold '{next(iter(extra))}'"
+                                                    ": the memory file's own header holds it"):
+            agent.save(target, extra=extra)
+    with pytest.raises(InvalidInputError, match=r"extra\['x'\] cannot be written .* \.item\(\)"):
+        agent.save(target, extra={"x": np.float32(1.5)})
+    with pytest.raises(InvalidInputError, match="extra must be a mapping"):
+        agent.save(target, extra=[1, 2])
+    for bad in (None, ""):
+        with pytest.raises(InvalidInputError, match="a memory file needs a path"):
+            agent.save(bad)
+        with pytest.raises(InvalidInputError, match="a memory file needs a path"):
+            iloci.Agent.load(bad)
+    with pytest.raises(MemoryFileError, match="is a directory; give a file name in it"):
+        agent.save(tmp_path)
+    assert not list(tmp_path.iterdir())
+    agent.save(target, extra={"note": "kept", "progress": {"items": 2}})
+    assert iloci.Agent.load(target).memory.n_entries == agent.memory.n_entries
+
+
+def test_restore_refuses_a_snapshot_of_an_agent_whose_memory_does_not_fit(taught):
+    """An audit: a snapshot of a 3-joint arm's agent restored into the Nao's agent was
+    taken; every later call failed and the file it saved could not be loaded."""
+    from iloci.errors import InvalidInputError
+
+    agent, _, demos, cfg = taught
+    other = iloci.build(iloci.load_config(cfg).replace(perceptual_model={"pb": 3}))
+    other.learn(demos["Sine/0"])
+    before = agent.memory.copy()
+    with pytest.raises(InvalidInputError, match="does not fit this one: perceptual_model.pb "
+                                                "= 3 in the memory, 4 in the config"):
+        agent.restore(other.snapshot())
+    with pytest.raises(InvalidInputError, match="restore takes a Snapshot"):
+        agent.restore(None)
+    assert entries_equal(agent.memory.entries, before.entries)
+    agent.restore(agent.snapshot())                    # its own: as before
+    assert entries_equal(agent.memory.entries, before.entries)
+
+
 def test_cli_teach_then_recognize(taught, tmp_path, cli):
     _, _, _, cfg = taught
     memory = tmp_path / "robot.npz"

@@ -11,16 +11,17 @@ after a change, never half of it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import json
 import os
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from iloci.agent.persistence import Persistence
+from iloci.agent.persistence import Persistence, robot_record
 from iloci.concepts.memory import Memory, load_memory
 from iloci.concepts.perform import ik_joint_limits, perform
+from iloci.config import memory_conflicts
 from iloci.errors import InvalidInputError
 from iloci.sensorimotor.frames import TeacherFrame
 
@@ -45,6 +46,10 @@ class Snapshot:
         The memory's encoder (shared: an encoder is never changed once fitted).
     network : dict of str to ndarray
         The perceptual model's ``state()`` (copies); empty before the first rehearsal.
+    agent : dict
+        Whose it is: the robot (as a memory file records it) and the config
+        sections the memory's entries depend on; :meth:`Controls.restore`
+        refuses a snapshot of another agent.
     """
 
     what: str
@@ -52,6 +57,7 @@ class Snapshot:
     meta: dict[str, Any]
     encoder: Any
     network: dict[str, np.ndarray]
+    agent: dict[str, Any] = field(default_factory=dict)
 
 
 class Controls(Persistence):
@@ -73,14 +79,46 @@ class Controls(Persistence):
                 meta=json.loads(json.dumps(meta)),
                 encoder=self.memory.encoder,
                 network={k: np.array(v, copy=True)
-                         for k, v in self.perceptual_model.state().items()})
+                         for k, v in self.perceptual_model.state().items()},
+                agent=self._whose())
+
+    def _whose(self) -> dict[str, Any]:
+        """What a snapshot records of this agent: its robot (as a memory file records it)
+        and its config (of which :func:`~iloci.config.memory_conflicts` compares the
+        settings the memory's entries depend on, as :meth:`load` does)."""
+        return json.loads(json.dumps({"robot": robot_record(self.robot),
+                                      "config": self.config.to_dict()}, default=str))
 
     def restore(self, snapshot: Snapshot) -> None:
         """Put back the memory and the network of ``snapshot`` (bit for bit).
 
         The memory's ``revision`` still grows (a turn observed before the
         restore sees that the memory changed).
+
+        Raises
+        ------
+        InvalidInputError
+            ``snapshot`` is not a :class:`Snapshot`, or one of another agent
+            (another robot, network sizes or sensorimotor settings: its
+            entries would not fit this agent); the agent is unchanged.
         """
+        if not isinstance(snapshot, Snapshot):
+            raise InvalidInputError(f"restore takes a Snapshot (agent.snapshot()), got "
+                                    f"{type(snapshot).__name__}.")
+        if snapshot.agent:
+            theirs, mine = snapshot.agent, robot_record(self.robot)
+            differ = memory_conflicts(theirs["config"], self.config)
+            if theirs["robot"] != json.loads(json.dumps(mine, default=str)):
+                differ.insert(0, f"robot = {theirs['robot']['name']!r} with "
+                                 f"{len(theirs['robot']['joints'])} joints "
+                                 f"(kinematics {theirs['robot'].get('kinematics')}), here "
+                                 f"{mine['name']!r} with {len(mine['joints'])} "
+                                 f"(kinematics {mine.get('kinematics')})")
+            if differ:
+                raise InvalidInputError(
+                    "this snapshot was taken of an agent whose memory does not fit this one: "
+                    + "; ".join(differ) + ". Restore snapshots of this agent, or save the "
+                    "other agent and load its file (Agent.load). Nothing was changed.")
         with self._lock:
             memory = Memory.from_arrays(snapshot.arrays, snapshot.meta)
             memory.encoder = snapshot.encoder if snapshot.encoder is not None \

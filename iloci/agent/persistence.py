@@ -21,6 +21,7 @@ from iloci._version import __version__, is_newer
 from iloci.agent.assembly import PURPOSES, NotLoaded, assemble
 from iloci.agent.base import AgentBase
 from iloci.concepts.memory import load_memory, save_memory
+from iloci.concepts.storage import RESERVED, check_header_extra, memory_path
 from iloci.config import memory_conflicts
 from iloci.sensorimotor.robots.urdf import kinematics_fingerprint
 from iloci.errors import (ConfigError, InvalidInputError, MemoryConfigError, MemoryFileError,
@@ -28,6 +29,10 @@ from iloci.errors import (ConfigError, InvalidInputError, MemoryConfigError, Mem
 from iloci.progress import saving
 
 __all__ = ["Persistence", "robot_record", "upgrade_config", "check_same_robot"]
+
+
+#: Header keys :meth:`Persistence.save` writes beside the memory's (not for ``extra``).
+SAVED_KEYS = frozenset({"config", "robot", "needs"})
 
 
 class Persistence(AgentBase):
@@ -45,6 +50,13 @@ class Persistence(AgentBase):
 
         Raises
         ------
+        InvalidInputError
+            ``path`` is empty, or ``extra`` is not a mapping of JSON values
+            or names a key the file's header holds itself (``format``,
+            ``version``, ``iloci``, ``checksum``, ``memory``, ``config``,
+            ``robot``, ``needs``); nothing is written.
+        MemoryFileError
+            ``path`` is a directory; nothing is written.
         MemoryLockedError
             Another process (``iloci serve``, ``iloci teach``) holds the
             memory's lock (:func:`iloci.progress.memory_lock`); nothing is
@@ -53,9 +65,11 @@ class Persistence(AgentBase):
             The file cannot be written (disk full, permissions); the file
             on disk is the previous one, untouched.
         """
+        memory_path(path)
+        extra = check_header_extra(extra, RESERVED | {"memory", *SAVED_KEYS})
         with self._lock, saving(path):
             return save_memory(path, self.memory, self.perceptual_model.state(),
-                               extra={**dict(extra or {}), "config": self.config.to_dict(),
+                               extra={**extra, "config": self.config.to_dict(),
                                       "robot": robot_record(self.robot),
                                       "needs": self.needs()})
 
@@ -124,7 +138,7 @@ class Persistence(AgentBase):
         if purpose not in PURPOSES:
             raise InvalidInputError(f"purpose must be one of {', '.join(map(repr, PURPOSES))}, "
                                     f"got {purpose!r}.")
-        memory, net_state, header = load_memory(path)
+        memory, net_state, header = load_memory(memory_path(path))
         saved = header.get("config")
         own_config = config is None
         if config is None:

@@ -39,9 +39,10 @@ import numpy as np
 
 from iloci._version import __version__
 from iloci.data.files import write_atomic
-from iloci.errors import MemoryFileError
+from iloci.errors import InvalidInputError, MemoryFileError
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "read_memory_file", "write_memory_file"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "RESERVED", "check_header_extra", "memory_path",
+           "read_memory_file", "write_memory_file"]
 
 #: Name written in every memory file's header.
 FORMAT = "iloci-memory"
@@ -133,13 +134,69 @@ def _pickled(path: Path, what: str) -> str:
             "by iloci (or was altered). Nothing was loaded.")
 
 
+#: Header keys every memory file's header holds, written by :func:`write_memory_file`.
+RESERVED = frozenset({"format", "version", "iloci", "checksum"})
+
+
+def check_header_extra(extra: Any, reserved: frozenset[str] | set[str]) -> dict[str, Any]:
+    """``extra`` as a dict of more header values, or InvalidInputError saying what is wrong.
+
+    It must be a mapping with string keys, none of ``reserved`` (keys the file's
+    own header holds: writing them would make the file unreadable), and
+    values JSON can hold (str, int, float, bool, None, lists and dicts of them).
+    """
+    if extra is None:
+        return {}
+    if not isinstance(extra, Mapping):
+        raise InvalidInputError(f"extra must be a mapping of more header values (a dict), got "
+                                f"{type(extra).__name__}.")
+    bad_keys = [k for k in extra if not isinstance(k, str)]
+    if bad_keys:
+        raise InvalidInputError(f"extra's keys must be strings, got {bad_keys[0]!r}.")
+    taken = sorted(set(extra) & set(reserved))
+    if taken:
+        raise InvalidInputError(
+            f"extra may not hold {', '.join(map(repr, taken))}: the memory file's own header "
+            f"holds {'it' if len(taken) == 1 else 'them'} (reserved: "
+            f"{', '.join(sorted(reserved))}). Choose other key names; nothing was written.")
+    for key, value in extra.items():
+        try:
+            json.dumps(value)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(
+                f"extra[{key!r}] cannot be written to the memory file's JSON header "
+                f"({exc}): use str, int, float, bool, None, and lists and dicts of them "
+                "(a numpy value: .item() or .tolist()). Nothing was written.") from None
+    return dict(extra)
+
+
+def memory_path(path: Any) -> str | os.PathLike[str]:
+    """``path`` if it can name a memory file, else InvalidInputError (None, "", a number)."""
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise InvalidInputError(f"a memory file needs a path (e.g. 'memory.npz'), got "
+                                f"{path!r}.")
+    return path
+
+
 def write_memory_file(path: str | os.PathLike[str], arrays: dict[str, np.ndarray],
                       header: Mapping[str, Any]) -> Path:
     """Write ``arrays`` and ``header`` (with format, version and checksum) atomically.
 
     A symlinked memory is written through to its target (the link stays).
     Returns the path written.
+
+    Raises
+    ------
+    InvalidInputError
+        ``path`` is empty or not a path, or ``header`` holds a key of
+        :data:`RESERVED` or a value JSON cannot hold; nothing is written.
+    MemoryFileError
+        ``path`` is a directory.
     """
+    if os.path.isdir(memory_path(path)):
+        raise MemoryFileError(f"{path} is a directory; give a file name in it, e.g. "
+                              f"{os.path.join(os.fspath(path), 'memory.npz')}.")
+    header = check_header_extra(header, RESERVED)
     path = Path(os.path.realpath(os.fspath(path)))
     full: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                             "iloci": __version__, **dict(header)}
