@@ -75,6 +75,24 @@ def check_array(value: Any, name: str, shape: Sequence[int | str | None], *,
         message gives the index of the first one).
     """
     want = shape_text(shape)
+    if hasattr(value, "detach") and hasattr(value, "cpu"):  # a torch tensor (maybe on a GPU)
+        value = value.detach().cpu().numpy()
+    if isinstance(value, np.ma.MaskedArray):
+        if np.ma.count_masked(value):
+            raise error(f"{name} is a masked array with masked values: iloci would read the "
+                        "values under the mask. Drop the masked rows (or fill them) first.")
+        value = value.data
+    try:
+        kind = np.asarray(value).dtype.kind
+    except (TypeError, ValueError):  # ragged nested lists: said below
+        kind = "O"
+    if kind in "bcmMV":  # numpy would read these as numbers, silently: not what was meant
+        what = {"b": "true/false values", "c": "complex numbers",
+                "m": "time spans (timedelta64)", "M": "dates (datetime64)",
+                "V": "records"}[kind]
+        extra = (" Convert time stamps to seconds first, e.g. (t - t[0]) / "
+                 "np.timedelta64(1, 's').") if kind in "mM" else ""
+        raise error(f"{name} must be a numeric array of shape {want}, got {what}.{extra}")
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):

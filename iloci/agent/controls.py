@@ -151,8 +151,12 @@ class Controls(Persistence):
         Raises
         ------
         InvalidInputError
-            ``index`` is not an entry of the memory.
+            ``index`` is not an int, or not an entry of the memory; nothing changes.
         """
+        if not isinstance(index, (int, np.integer)) or isinstance(index, (bool, np.bool_)):
+            raise InvalidInputError(f"forget_entry takes an entry's index (an int, 0-based in "
+                                    f"memory.entries), got {index!r}.")
+        index = int(index)
         with self._lock:
             mem = self.memory
             if not 0 <= index < len(mem.entries):
@@ -203,10 +207,28 @@ class Controls(Persistence):
         ndarray (T, 2) or None
             Pen positions in ``demo``'s units; None when the performance has
             no drawing in the teacher's frame.
+
+        Raises
+        ------
+        InvalidInputError
+            No such concept, or ``entry`` is not the index (in
+            ``memory.entries``) of one of its entries.
         """
         motion = self.motion(demo)
         frame = TeacherFrame.of(demo, motion.plane_points)
-        index = entry if isinstance(entry, int) else self.memory.performer_of(concept)
+        mine = self.memory.indices_of(concept) if isinstance(concept, str) else []
+        if not mine:
+            raise InvalidInputError(f"the memory holds no concept {concept!r}; its concepts "
+                                    f"are {', '.join(self.memory.concepts()) or 'none'}.")
+        if entry is None:
+            index = self.memory.performer_of(concept)
+        elif (isinstance(entry, (int, np.integer)) and not isinstance(entry, (bool, np.bool_))
+                and int(entry) in mine):
+            index = int(entry)
+        else:
+            raise InvalidInputError(f"entry {entry!r} is not an entry of {concept!r}: give one "
+                                    f"of its indices in memory.entries ({mine}), or leave "
+                                    "entry out for its best.")
         with self._lock:
             response = perform(self.memory, self.perceptual_model, index,
                                joint_limits=ik_joint_limits(self.ik_solver), frame=frame)

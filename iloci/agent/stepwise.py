@@ -112,9 +112,15 @@ class Stepwise(AgentBase):
         InvalidDemonstrationError, UnreachableTargetError
             The demonstration cannot be preprocessed or reached; the memory
             is untouched.
+        InvalidInputError
+            ``motion`` is another demonstration's; the memory is untouched.
         """
         if motion is None:
             motion = self.motion(demo)
+        elif getattr(motion, "demo_key", demo.key) != demo.key:
+            raise InvalidInputError(f"the motion given is that of {motion.demo_key!r}, not of "
+                                    f"{demo.key!r}: pass self.motion(demo) of this "
+                                    "demonstration, or leave motion out. Nothing was learned.")
         with self._lock:
             if self.memory.encoder is None:
                 self.fit_encoder([motion])
@@ -248,11 +254,27 @@ class Stepwise(AgentBase):
 
         Raises
         ------
+        InvalidInputError
+            ``demos`` is not an iterable of demonstrations (one demonstration,
+            one path, one array) or ``on_change`` not callable; nothing learned.
         ObserverError
             An observer hook raised. The demonstration it observed is
             learned and ``on_change`` was called with its outcome (so a
             saving callback saved it); the stream stops there.
         """
+        if isinstance(demos, (Demonstration, str, os.PathLike)) or not isinstance(
+                demos, Iterable) or (isinstance(demos, np.ndarray) and demos.ndim != 3):
+            one = isinstance(demos, (Demonstration, str, os.PathLike)) or (
+                isinstance(demos, np.ndarray) and demos.ndim == 2)
+            raise InvalidInputError(
+                f"teach takes a sequence (or any iterable) of demonstrations, got "
+                f"{type(demos).__name__}"
+                + (": for one demonstration, pass [it] (or call learn(demo))" if one else "")
+                + ". Nothing was learned.")
+        if on_change is not None and not callable(on_change):
+            raise InvalidInputError(f"on_change must be a function called with each outcome "
+                                    f"(e.g. lambda outcome: agent.save(path)), got "
+                                    f"{on_change!r}. Nothing was learned.")
         t0 = time.perf_counter()
         skipped: list[tuple[str, str]] = []
 

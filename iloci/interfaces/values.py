@@ -139,11 +139,8 @@ class Demonstration:
         if self.times is None:
             t = np.arange(len(pos), dtype=np.float64)
         else:
-            try:
-                t = np.asarray(self.times, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise InvalidDemonstrationError(
-                    f"times of {label} must be numeric.") from None
+            t = np.asarray(check_array(self.times, f"times of {label}", (None,), finite=False,
+                                       error=InvalidDemonstrationError), dtype=np.float64)
             if t.shape != (len(pos),):
                 raise InvalidDemonstrationError(
                     f"times of {label} must have shape ({len(pos)},) to match "

@@ -22,7 +22,13 @@ __all__ = ["params_to_dict", "validate_dataclass"]
 
 
 def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
-    """Check ``value`` against a simple annotation; return (ok, coerced)."""
+    """Check ``value`` against a simple annotation; return (ok, coerced).
+
+    A numpy scalar or array (a value computed in numpy, from embedding code)
+    is read as the Python value it holds (``.item()``, ``.tolist()``).
+    """
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):
+        value = value.tolist()
     if tp is Any:
         return True, value
     origin = typing.get_origin(tp)

@@ -1,0 +1,141 @@
+"""Mistaken calls of the embedding API (docs/embedding.md) that an audit found read silently
+wrong or failing inside numpy or Python: each is now one iloci error saying what to pass,
+with nothing learned or changed, or the value is read as what it means."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import iloci
+from iloci.concepts.memory import entries_equal
+from iloci.data import load_lasa
+from iloci.errors import InvalidDemonstrationError, InvalidInputError, MissingBackendError
+from iloci.interfaces import Demonstration
+
+pytest.importorskip("pinocchio")
+
+SETTINGS = {"perceptual_model": {"name": "native-rnnpb", "epochs": 30,
+                                 "recognition_steps": 30},
+            "learner": {"rehearsal_epochs": 30}}
+
+
+@pytest.fixture(scope="module")
+def lasa():
+    return {d.key: d for d in load_lasa(["GShape", "Angle", "Sine"])}
+
+
+@pytest.fixture
+def taught(lasa):
+    try:
+        agent = iloci.build(SETTINGS)
+    except MissingBackendError as exc:
+        pytest.skip(str(exc))
+    agent.learn(lasa["GShape/0"])
+    turn = agent.observe(lasa["Angle/0"])
+    while not turn.done:
+        turn.feedback(-1, turn.answer.id)
+    return agent
+
+
+def test_drawing_in_frame_refuses_an_entry_of_another_concept_or_not_an_index(taught, lasa):
+    """entry=0 (an entry of c1) gave c1's drawing for c2; -1 the last entry; "0" and
+    np.int64(99) were ignored; 99 an IndexError."""
+    agent, demo = taught, lasa["GShape/1"]
+    c1, c2 = agent.memory.entries[0].concept, agent.memory.entries[1].concept
+    for entry in (0, -1, 99, "1", 1.0, True):
+        with pytest.raises(InvalidInputError, match=f"entry {entry!r} is not an entry of "
+                                                    f"{c2!r}: give one of its indices"):
+            agent.drawing_in_frame(demo, c2, entry=entry)
+    with pytest.raises(InvalidInputError, match="the memory holds no concept 'c9'"):
+        agent.drawing_in_frame(demo, "c9")
+    drawn = agent.drawing_in_frame(demo, c2, entry=np.int64(1))
+    assert np.array_equal(drawn, agent.drawing_in_frame(demo, c2))
+    assert not np.array_equal(drawn, agent.drawing_in_frame(demo, c1, entry=0))
+
+
+def test_forget_entry_takes_an_int_and_nothing_else(taught):
+    """0.5 forgot nothing but bumped the revision (a pending turn was refused); True and
+    1.0 were read as 1; "0" and None failed inside Python."""
+    agent = taught
+    before, revision = agent.memory.copy(), agent.memory.revision
+    for index in (0.5, True, 1.0, "0", None):
+        with pytest.raises(InvalidInputError, match="forget_entry takes an entry's index"):
+            agent.forget_entry(index)
+    assert entries_equal(agent.memory.entries, before.entries)
+    assert agent.memory.revision == revision
+    agent.forget_entry(np.int64(1))
+    assert len(agent.memory.entries) == 1
+
+
+def test_a_motion_of_another_demonstration_is_refused(taught, lasa):
+    """learn(circle, motion=agent.motion(wave)) learned the wave's motion under the
+    circle's key."""
+    agent = taught
+    before = agent.memory.copy()
+    with pytest.raises(InvalidInputError, match="the motion given is that of 'Sine/0', not "
+                                                "of 'GShape/1'"):
+        agent.learn(lasa["GShape/1"], motion=agent.motion(lasa["Sine/0"]))
+    assert entries_equal(agent.memory.entries, before.entries)
+
+
+def test_teach_says_it_takes_a_sequence_of_demonstrations(taught, lasa):
+    """teach(demo) and teach(5) failed inside Python; teach(one (N, 2) array) walked its
+    rows, 60 skip warnings; on_change="save" learned one and dropped the rest."""
+    agent = taught
+    before = agent.memory.copy()
+    for demos, said in ((lasa["GShape/1"], "for one demonstration, pass \\[it\\]"),
+                        (lasa["GShape/1"].positions, "for one demonstration"),
+                        ("GShape/1", "for one demonstration"), (5, "got int")):
+        with pytest.raises(InvalidInputError, match=f"teach takes a sequence .*{said}"):
+            agent.teach(demos)
+    with pytest.raises(InvalidInputError, match="on_change must be a function"):
+        agent.teach([lasa["GShape/1"]], on_change="save")
+    assert entries_equal(agent.memory.entries, before.entries)
+    with pytest.raises(iloci.errors.FeedbackError, match="does not know the concept of "
+                                                         "'stream/0'"):
+        agent.teach(np.stack([lasa["Sine/0"].positions]))  # (K, N, 2): K drawings, read
+
+
+def test_numpy_values_in_a_config_are_read_as_the_numbers_they_hold():
+    """epochs=np.int64(50) was refused as "must be an integer"."""
+    config = iloci.load_config({"perceptual_model": {"epochs": np.int64(50)},
+                                "learner": {"k_cutoff": np.float32(0.5),
+                                            "confirm_rewards": np.bool_(True)},
+                                "data": {"shapes": np.array(["GShape", "Sine"])}})
+    assert config.perceptual_model.params.epochs == 50
+    assert type(config.perceptual_model.params.epochs) is int
+    assert config.learner.k_cutoff == 0.5 and config.learner.confirm_rewards is True
+    assert config.data.shapes == ("GShape", "Sine")
+    with pytest.raises(iloci.errors.ConfigError, match="epochs must be an integer"):
+        iloci.load_config({"perceptual_model": {"epochs": np.float64(1.5)}})
+
+
+def test_demonstrations_of_values_numpy_would_misread_are_refused():
+    """Complex positions lost their imaginary part with a ComplexWarning, booleans were
+    read as 0/1, a masked array's masked rows as data, datetime64 times as seconds."""
+    t = np.linspace(0.0, 1.0, 50)
+    xy = np.column_stack([np.cos(3 * t), np.sin(3 * t)])
+    for positions, said in ((xy + 1j, "complex numbers"), (xy > 0, "true/false values")):
+        with pytest.raises(InvalidDemonstrationError, match=f"must be a numeric array of "
+                                                            f"shape \\(N, 2\\), got {said}"):
+            Demonstration(positions, t)
+    masked = np.ma.masked_array(xy, mask=np.zeros_like(xy, dtype=bool))
+    masked[3] = np.ma.masked
+    with pytest.raises(InvalidDemonstrationError, match="masked array with masked values"):
+        Demonstration(masked, t)
+    assert np.array_equal(Demonstration(np.ma.masked_array(xy), t).positions, xy)
+    stamps = np.datetime64("2026-01-01T10:00") + (t * 1000).astype("timedelta64[ms]")
+    with pytest.raises(InvalidDemonstrationError, match=r"got dates \(datetime64\)\. Convert "
+                                                        "time stamps to seconds first"):
+        Demonstration(xy, stamps)
+    seconds = (stamps - stamps[0]) / np.timedelta64(1, "s")
+    assert np.allclose(Demonstration(xy, seconds).times, t, atol=1e-3)  # ms stamps
+
+
+def test_a_torch_tensor_that_needs_grad_is_read_as_its_values():
+    torch = pytest.importorskip("torch")
+    t = np.linspace(0.0, 1.0, 50)
+    xy = np.column_stack([np.cos(3 * t), np.sin(3 * t)])
+    demo = Demonstration(torch.tensor(xy, requires_grad=True), torch.tensor(t))
+    assert np.array_equal(demo.positions, xy) and np.array_equal(demo.times, t)
