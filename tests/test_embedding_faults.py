@@ -139,3 +139,44 @@ def test_a_torch_tensor_that_needs_grad_is_read_as_its_values():
     xy = np.column_stack([np.cos(3 * t), np.sin(3 * t)])
     demo = Demonstration(torch.tensor(xy, requires_grad=True), torch.tensor(t))
     assert np.array_equal(demo.positions, xy) and np.array_equal(demo.times, t)
+
+
+class _Faulty:
+    """A caller's IK solver that wraps the default one and spoils its answer."""
+
+    def __init__(self, inner, spoil):
+        self.inner, self.spoil = inner, spoil
+        self.joint_names, self.lower, self.upper = inner.joint_names, inner.lower, inner.upper
+
+    def solve(self, points, q0=None):
+        return self.spoil(np.array(self.inner.solve(points, q0=q0)))
+
+    def forward(self, q):
+        return self.inner.forward(q)
+
+
+@pytest.mark.parametrize("spoil, said", [
+    (lambda q: q[:, :3], r"returned a joint path of shape \(\d+, 3\) for 'Angle/0'; it must "
+                         r"be \(\d+, 4\): one row per target, one column per joint"),
+    (lambda q: np.where(np.arange(len(q))[:, None] == 5, np.nan, q),
+     "returned NaN or inf for 'Angle/0' \\(first at target 5\\)"),
+    (lambda q: q + np.array([0.0, 0.0, 10.0, 0.0]),
+     "returned a joint path beyond its own limits for 'Angle/0': joint 'RElbowYaw'"),
+    (lambda q: "no", "returned str, not a joint path of numbers")])
+def test_a_custom_ik_solvers_faulty_answer_is_said_as_its_own(taught, lasa, spoil, said):
+    """An audit's IK returning 3 columns for 4 joints failed later as a network input of
+    the wrong width; NaN as a "(T, D) array" error naming neither; angles 10 rad past its
+    own limits were learned. Each is now an UnreachableTargetError naming the solver, and
+    teach skips that demonstration."""
+    from iloci.errors import UnreachableTargetError
+
+    agent = taught
+    agent.ik_solver = _Faulty(agent.ik_solver, spoil)
+    agent.motion_cache = None
+    before = agent.memory.copy()
+    with pytest.raises(UnreachableTargetError, match=f"the IK solver .*_Faulty {said}"):
+        agent.learn(lasa["Angle/0"].__class__(lasa["Angle/0"].positions, shape="Angle",
+                                              index=0, true_concept="Angle"))
+    with pytest.warns(iloci.agent.SkippedDemonstrationWarning, match="_Faulty"):
+        report = agent.teach([lasa["Angle/1"]])
+    assert report.skipped and entries_equal(agent.memory.entries, before.entries)

@@ -188,15 +188,17 @@ def write_memory_file(path: str | os.PathLike[str], arrays: dict[str, np.ndarray
     Raises
     ------
     InvalidInputError
-        ``path`` is empty or not a path, or ``header`` holds a key of
-        :data:`RESERVED` or a value JSON cannot hold; nothing is written.
+        ``path`` is empty or not a path, or ``header`` holds a value JSON
+        cannot hold; nothing is written. (A key of :data:`RESERVED` in
+        ``header`` replaces the writer's own: a caller's choice, which
+        :meth:`Agent.save <iloci.agent.Agent.save>` refuses for ``extra``.)
     MemoryFileError
         ``path`` is a directory.
     """
     if os.path.isdir(memory_path(path)):
         raise MemoryFileError(f"{path} is a directory; give a file name in it, e.g. "
                               f"{os.path.join(os.fspath(path), 'memory.npz')}.")
-    header = check_header_extra(header, RESERVED)
+    header = check_header_extra(header, frozenset())  # format, version: the caller's own
     path = Path(os.path.realpath(os.fspath(path)))
     full: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION,
                             "iloci": __version__, **dict(header)}

@@ -12,12 +12,13 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 import hashlib
+from typing import Any
 
 import numpy as np
 
 from iloci.linalg import matmul
 from iloci.config import Config, SensorimotorConfig
-from iloci.errors import InvalidInputError
+from iloci.errors import InvalidInputError, UnreachableTargetError
 from iloci.interfaces import Demonstration, IKSolver
 from iloci.sensorimotor.preprocess import fit_to_plane, preprocess
 from iloci.sensorimotor.robots import Robot, get_robot
@@ -150,8 +151,51 @@ def _solved(key: str, plane_points: np.ndarray, dt: float, ik: IKSolver,
             robot: Robot) -> Motion:
     """The motion along ``plane_points``: IK solved from the robot's ``q_home``."""
     targets = robot.plane.to_3d(plane_points)
-    joint_path = np.asarray(ik.solve(targets, q0=np.array(robot.q_home)), dtype=np.float64)
-    return Motion(key, plane_points, targets, joint_path, dt)
+    return Motion(key, plane_points, targets, _checked_path(
+        ik, ik.solve(targets, q0=np.array(robot.q_home)), len(targets), robot, key), dt)
+
+
+#: How far (rad or m) a solver's joint path may pass its own limits: rounding, not a fault.
+LIMIT_SLACK = 1e-6
+
+
+def _checked_path(ik: IKSolver, path: Any, steps: int, robot: Robot, key: str) -> np.ndarray:
+    """What ``ik.solve`` returned, as a (steps, J) float array within the solver's limits.
+
+    A solver is a plugin (or the caller's own class): its faults are said as its own,
+    naming it, as an :class:`UnreachableTargetError` (a demonstration ``teach``
+    skips), not found later as a network input of the wrong width.
+    """
+    who = f"the IK solver {type(ik).__module__}.{type(ik).__qualname__}"
+    joints = len(robot.joint_names)
+    try:
+        arr = np.asarray(path, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise UnreachableTargetError(f"{who} returned {type(path).__name__}, not a joint path "
+                                     f"of numbers, for {key!r}.") from None
+    if arr.shape != (steps, joints):
+        raise UnreachableTargetError(
+            f"{who} returned a joint path of shape {arr.shape} for {key!r}; it must be "
+            f"({steps}, {joints}): one row per target, one column per joint of "
+            f"{robot.name!r} ({', '.join(robot.joint_names)}).")
+    if not np.all(np.isfinite(arr)):
+        row = int(np.argwhere(~np.isfinite(arr))[0][0])
+        raise UnreachableTargetError(f"{who} returned NaN or inf for {key!r} (first at "
+                                     f"target {row}): a solver should raise "
+                                     "UnreachableTargetError for a target it cannot reach.")
+    lower, upper = getattr(ik, "lower", None), getattr(ik, "upper", None)
+    if lower is not None and upper is not None:
+        lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+        if lo.shape == hi.shape == (joints,):
+            beyond = (arr < lo - LIMIT_SLACK) | (arr > hi + LIMIT_SLACK)
+            if beyond.any():
+                row, j = (int(v) for v in np.argwhere(beyond)[0])
+                raise UnreachableTargetError(
+                    f"{who} returned a joint path beyond its own limits for {key!r}: joint "
+                    f"{robot.joint_names[j]!r} at {arr[row, j]:.4g} (limits {lo[j]:.4g} .. "
+                    f"{hi[j]:.4g}) at target {row}. The arm could not follow it; the solver "
+                    "must keep within its limits or raise UnreachableTargetError.")
+    return arr
 
 
 def tilted(motion: Motion, degrees: float, ik: IKSolver, robot: Robot | None = None) -> Motion:
