@@ -180,3 +180,21 @@ def test_a_custom_ik_solvers_faulty_answer_is_said_as_its_own(taught, lasa, spoi
     with pytest.warns(iloci.agent.SkippedDemonstrationWarning, match="_Faulty"):
         report = agent.teach([lasa["Angle/1"]])
     assert report.skipped and entries_equal(agent.memory.entries, before.entries)
+
+
+def test_wrong_kinds_of_arguments_are_said_as_such(taught, lasa):
+    """feedback naming its answer by an array, recognize(None), entry_drawings([1, 2])
+    failed inside numpy or Python."""
+    from iloci.errors import FeedbackError
+
+    agent = taught
+    turn = agent.observe(lasa["GShape/1"])
+    with pytest.raises(FeedbackError, match="by its id, a str .* got ndarray"):
+        turn.feedback(1, np.array([turn.answer.id, "x"]))
+    assert not turn.done
+    for bad in (None, 5, "GShape/1", lasa["GShape/1"].positions, [None]):
+        with pytest.raises(InvalidInputError, match="recognize takes"):
+            agent.recognize(bad)
+    with pytest.raises(InvalidInputError, match="entry_drawings takes memory entries"):
+        agent.entry_drawings([1, 2])
+    assert len(agent.entry_drawings(agent.memory.entries[:1])) == 1

@@ -9,17 +9,18 @@ simulator, if any (the arm executor of a real robot is a simulator too, see
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, overload
 
 import numpy as np
 
 from iloci.agent.base import AgentBase
+from iloci.concepts.entry import Entry
 from iloci.concepts.inference import Recognition
 from iloci.concepts.perform import ik_joint_limits, perform
 from iloci.concepts.policies import Policies
 from iloci.concepts.rehearsal import regenerate
-from iloci.errors import NotFittedError, UnreachableTargetError
+from iloci.errors import InvalidInputError, NotFittedError, UnreachableTargetError
 from iloci.interfaces import Demonstration, Response
 from iloci.sensorimotor.pipeline import tilted
 
@@ -53,14 +54,26 @@ class Inference(AgentBase):
 
         Raises
         ------
+        InvalidInputError
+            ``demos`` is not a Demonstration or a sequence of them.
         NotFittedError
             Nothing has been learned yet.
         InvalidDemonstrationError, UnreachableTargetError
             A demonstration cannot be preprocessed (the error names it).
         """
         single = isinstance(demos, Demonstration)
+        if not single and (isinstance(demos, (str, bytes, np.ndarray))
+                           or not isinstance(demos, Iterable)):
+            raise InvalidInputError(f"recognize takes a Demonstration or a sequence of them, "
+                                    f"got {type(demos).__name__} (wrap positions as "
+                                    "iloci.Demonstration(positions, times)).")
         items: list[Demonstration] = ([demos] if isinstance(demos, Demonstration)
                                       else list(demos))
+        wrong = [type(d).__name__ for d in items if not isinstance(d, Demonstration)]
+        if wrong:
+            raise InvalidInputError(f"recognize takes Demonstrations, got {wrong[0]} among "
+                                    "them (wrap positions as iloci.Demonstration(positions, "
+                                    "times)).")
         if not self.memory.entries:
             raise NotFittedError("the robot has learned nothing yet: teach it at least one "
                                  "demonstration (Agent.learn / `iloci teach`) before "
@@ -117,6 +130,10 @@ class Inference(AgentBase):
         """
         mem = self.memory
         entries = list(mem.entries if entries is None else entries)
+        wrong = [type(e).__name__ for e in entries if not isinstance(e, Entry)]
+        if wrong:
+            raise InvalidInputError(f"entry_drawings takes memory entries (agent.memory."
+                                    f"entries, or some of them), got {wrong[0]}.")
         if not entries or mem.encoder is None:
             return []
         seqs = regenerate(self.perceptual_model, entries)

@@ -154,7 +154,7 @@ def check_answer_id(answer_id: str | Answer | None, pending: Answer | None, toke
     Raises
     ------
     FeedbackError
-        No id given.
+        No id given, or not a str.
     StaleAnswerError
         Not the pending answer's id: a duplicate (an answer of this turn
         already judged), another turn's, or the turn is over.
@@ -164,6 +164,10 @@ def check_answer_id(answer_id: str | Answer | None, pending: Answer | None, toke
     if answer_id is None:
         raise FeedbackError("a feedback must name the answer it judges: "
                             "turn.feedback(+1 or -1, turn.answer.id).")
+    if not isinstance(answer_id, str):
+        raise FeedbackError(f"a feedback names the answer it judges by its id, a str "
+                            f"(turn.answer.id), or by the Answer itself; got "
+                            f"{type(answer_id).__name__}.")
     waiting = None if pending is None else pending.id
     if answer_id != waiting:
         if waiting is None:
