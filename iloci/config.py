@@ -338,6 +338,9 @@ def load_config(source: str | os.PathLike[str] | Mapping[str, Any] | Config | No
 
     known = set(COMPONENT_KINDS) | set(_PLAIN_SECTIONS)
     for key, value in data.items():
+        if not isinstance(key, str):
+            raise ConfigError(f"section names are strings, got {key!r}; valid sections are "
+                              f"{', '.join(sorted(known))}.", source=origin)
         if key not in known:
             raise ConfigError(
                 f"unknown section or key {key!r}; valid sections are "

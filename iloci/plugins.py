@@ -248,8 +248,26 @@ def get_plugin_manager(*, autoload: bool | str | None = None,
                   "names against `iloci.hookspecs`.")
             continue
         info[name] = PluginInfo(name, dist_name, dist_version)
+    if isinstance(plugins, (str, bytes)) or not isinstance(plugins, Iterable):
+        raise PluginError(f"plugins must be a list of plugin objects (modules or instances "
+                          f"with @iloci.hookimpl methods), got {type(plugins).__name__}: "
+                          "write plugins=[it].")
     for i, plugin in enumerate(plugins):
         name = getattr(plugin, "__name__", None) or f"extra-{i}"
+        if isinstance(plugin, type):
+            raise PluginError(f"plugins[{i}] is the class {plugin.__qualname__}, not an "
+                              f"instance of it: its hook methods would be called without "
+                              f"self. Pass {plugin.__qualname__}() instead.")
+        if pm.is_registered(plugin):
+            raise PluginError(f"plugins[{i}] ({_short_repr(plugin)}) is given twice (or is "
+                              "a plugin already registered); give each plugin once.")
+        unmarked = [a for a in dir(plugin) if a.startswith("iloci_")
+                    and callable(getattr(plugin, a, None))
+                    and pm.parse_hookimpl_opts(plugin, a) is None]
+        if unmarked:  # pluggy would pass them over: never called, without a word
+            raise PluginError(f"plugins[{i}] ({_short_repr(plugin)}) has "
+                              f"{', '.join(unmarked)} without @iloci.hookimpl: iloci would "
+                              "never call it. Mark each hook method with @iloci.hookimpl.")
         try:
             pm.register(plugin, name=name)
             pm.check_pending()
@@ -262,6 +280,11 @@ def get_plugin_manager(*, autoload: bool | str | None = None,
         info[name] = PluginInfo(name, None, None)
     pm.iloci_plugin_info = info  # type: ignore[attr-defined]
     return pm
+
+
+def _short_repr(obj: object) -> str:
+    text = repr(obj)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _own_version() -> str | None:

@@ -198,3 +198,36 @@ def test_wrong_kinds_of_arguments_are_said_as_such(taught, lasa):
     with pytest.raises(InvalidInputError, match="entry_drawings takes memory entries"):
         agent.entry_drawings([1, 2])
     assert len(agent.entry_drawings(agent.memory.entries[:1])) == 1
+
+
+def test_plugins_and_configs_given_wrongly_in_code_are_said_as_such():
+    """A class instead of an instance (every learn then raised "missing self"), one
+    instance twice (pluggy's ValueError), a plugin not in a list, a hook method without
+    @iloci.hookimpl (silently never called), a non-str config key (difflib's TypeError),
+    a plugin_manager that is not one."""
+    from iloci.errors import ConfigError, PluginError
+    from iloci.plugins import get_plugin_manager
+
+    class Observer:
+        @iloci.hookimpl
+        def iloci_on_interaction(self, event):
+            pass
+
+    class Unmarked:
+        def iloci_on_interaction(self, event):
+            pass
+
+    one = Observer()
+    for plugins, said in (([Observer], "is the class .*Observer, not an instance of it"),
+                          ([one, one], "is given twice"),
+                          (one, "plugins must be a list of plugin objects"),
+                          ([Unmarked()], "has iloci_on_interaction without @iloci.hookimpl")):
+        with pytest.raises(PluginError, match=said):
+            get_plugin_manager(autoload=False, plugins=plugins)
+    assert get_plugin_manager(autoload=False, plugins=[one]).is_registered(one)
+    with pytest.raises(ConfigError, match="section names are strings, got 1"):
+        iloci.load_config({1: {}})
+    with pytest.raises(ConfigError, match=r"keys in \[learner\] are strings, got 2"):
+        iloci.load_config({"learner": {2: 3}})
+    with pytest.raises(InvalidInputError, match="plugin_manager must be a pluggy"):
+        iloci.build(SETTINGS, plugin_manager="x")

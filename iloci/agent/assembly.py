@@ -131,6 +131,10 @@ def assemble(config: Any = None, plugin_manager: pluggy.PluginManager | None = N
                           f"valid: {', '.join(COMPONENT_KINDS)}.")
     check_overrides({sec: obj for sec, obj in overrides.items()
                      if not isinstance(obj, NotLoaded)})
+    if plugin_manager is not None and not isinstance(plugin_manager, pluggy.PluginManager):
+        raise InvalidInputError(f"plugin_manager must be a pluggy.PluginManager (from "
+                                f"iloci.plugins.get_plugin_manager), got "
+                                f"{type(plugin_manager).__name__}.")
     pm = plugin_manager or get_plugin_manager()
     registry = get_registry(pm)
     cfg = load_config(config, registry=registry, supplied=overrides)

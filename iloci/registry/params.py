@@ -158,6 +158,9 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
     hints = typing.get_type_hints(cls)
     kwargs = {}
     for key, value in values.items():
+        if not isinstance(key, str):
+            raise ConfigError(f"keys in [{section}] are strings, got {key!r}; valid keys are "
+                              f"{', '.join(sorted(fields)) or '(none)'}.", source=source)
         if key not in fields:
             hint = misplaced(section, key, value, elsewhere) or did_you_mean(key, fields)
             raise ConfigError(
