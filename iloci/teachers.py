@@ -54,6 +54,13 @@ class OracleTeacher:
     def __init__(self, concepts: Mapping[str, str] | None = None) -> None:
         self.concepts = dict(concepts or {})
         self._seen: dict[str, str] = {}
+        self._recalled: dict[str, str] = {}
+
+    def recall(self, labels: Mapping[str, str]) -> None:
+        """Know the labels of demonstrations a memory learned before (in an earlier session:
+        :attr:`Memory.labels <iloci.concepts.memory.Memory.labels>`, by key), so answers
+        standing for them are judged as in the session that taught them."""
+        self._recalled.update(labels)
 
     def show(self, demo: Demonstration) -> None:
         """Record the true concept of a demonstration the robot is about to be shown.
@@ -66,10 +73,12 @@ class OracleTeacher:
         self.true_concept(demo)
 
     def concept_of_key(self, key: str) -> str | None:
-        """True concept of the demonstration ``"SHAPE/INDEX"`` shown before, else of its shape
-        in ``concepts``, else ``None``."""
+        """True concept of the demonstration ``"SHAPE/INDEX"`` shown before (or recalled from
+        a memory, :meth:`recall`), else of its shape in ``concepts``, else ``None``."""
         if key in self._seen:
             return self._seen[key]
+        if key in self._recalled:
+            return self._recalled[key]
         return self.concepts.get(key.rsplit("/", 1)[0])
 
     def true_concept(self, demo: Demonstration) -> str:

@@ -333,6 +333,21 @@ def test_restore_refuses_a_snapshot_of_an_agent_whose_memory_does_not_fit(taught
     assert entries_equal(agent.memory.entries, before.entries)
 
 
+def test_the_oracle_of_a_later_session_knows_what_the_memory_learned_before(taught):
+    """An audit: `iloci teach --memory m.npz GShape/0`, then `... GShape/2` in a second
+    command: the oracle had not seen GShape/0 in that session, said "no" to the right
+    guess and a duplicate concept was founded. The memory keeps the data's labels of what
+    it learned (Memory.labels), and the oracle of any later session recalls them."""
+    agent, path, demos, cfg = taught
+    later = iloci.Agent.load(path, cfg)
+    assert later.memory.labels == {"GShape/0": "GShape", "Angle/0": "Angle"}
+    gshape = agent.memory.entries[0].concept
+    outcome = later.learn(demos["GShape/1"])
+    assert outcome.concept == gshape and outcome.action != "new_concept"
+    assert outcome.feedbacks[-1] == 1 and later.memory.labels["GShape/1"] == "GShape"
+    assert len(later.memory.concepts()) == 2
+
+
 def test_cli_teach_then_recognize(taught, tmp_path, cli):
     _, _, _, cfg = taught
     memory = tmp_path / "robot.npz"

@@ -222,7 +222,8 @@ class Stepwise(AgentBase):
         """
         # the learner imports scipy: loaded when first used, so `import iloci` stays light
         from iloci.concepts.learner import run_turn
-        return run_turn(self.teacher, demo, lambda: self.observe(demo, motion))
+        return run_turn(self.teacher, demo, lambda: self.observe(demo, motion),
+                        self.memory.labels)
 
     def teach(self, demos: Iterable[Any], *,
               on_change: Callable[[Any], None] | None = None) -> TeachReport:

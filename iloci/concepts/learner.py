@@ -19,7 +19,7 @@ here (:class:`Answer`, :class:`LearnOutcome`, :func:`perform`,
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 import contextlib
 import threading
 from typing import Any
@@ -50,28 +50,36 @@ __all__ = ["ACTIONS", "Answer", "Learner", "LearnOutcome", "Phase", "Recognition
            "run_turn", "show_to_teacher"]
 
 
-def show_to_teacher(teacher: Any, demo: Demonstration) -> None:
+def show_to_teacher(teacher: Any, demo: Demonstration,
+                    labels: Mapping[str, str] | None = None) -> None:
     """Tell a teacher with a ``show(demo)`` method which demonstration the robot is shown.
 
     Called before the robot answers, so a teacher that judges answers by
     the demonstrations memory entries stand for (the oracle) knows the
     founding demonstration of each concept too, which is placed without a
-    question. Teachers without ``show`` are left alone.
+    question. ``labels``: the memory's :attr:`~iloci.concepts.memory.Memory.labels`,
+    given to a teacher with a ``recall(labels)`` method first (the oracle: the
+    demonstrations a memory learned in an earlier session). Teachers without
+    these methods are left alone.
     """
+    recall = getattr(teacher, "recall", None)
+    if labels and callable(recall):
+        recall(labels)
     show = getattr(teacher, "show", None)
     if callable(show) and isinstance(demo, Demonstration):  # others: observe's error
         show(demo)
 
 
-def run_turn(teacher: Teacher, demo: Demonstration, observe: Callable[[], Turn]
-             ) -> LearnOutcome:
+def run_turn(teacher: Teacher, demo: Demonstration, observe: Callable[[], Turn],
+             labels: Mapping[str, str] | None = None) -> LearnOutcome:
     """Learn ``demo`` with a teacher object: the one observe -> feedback loop.
 
     Every caller with a teacher object runs it (:meth:`Learner.learn
     <iloci.concepts.learner.Learner.learn>`, :meth:`Agent.learn
     <iloci.agent.Agent.learn>` and so :meth:`~iloci.agent.Agent.teach`,
     ``iloci teach`` with the console teacher, the evaluation): the teacher
-    is shown the demonstration (:func:`show_to_teacher`), ``observe()``
+    is shown the demonstration (:func:`show_to_teacher`; ``labels``: the
+    memory's, for a teacher that recalls them), ``observe()``
     starts the turn, and each answer is judged by ``teacher.feedback(demo,
     answer.response)``, whose checked value goes to :meth:`Turn.feedback`
     with the answer's id, as an event-driven caller (the web page, a ROS
@@ -85,7 +93,7 @@ def run_turn(teacher: Teacher, demo: Demonstration, observe: Callable[[], Turn]
     ObserverError
         See :meth:`Learner.learn <iloci.concepts.learner.Learner.learn>`.
     """
-    show_to_teacher(teacher, demo)
+    show_to_teacher(teacher, demo, labels)
     turn = observe()
     while turn.answer is not None:
         answer = turn.answer
@@ -377,7 +385,8 @@ class Learner(Recognizer):
             Every other observer received every event.
         """
         return run_turn(self.teacher, demo,
-                        lambda: self.observe(demo, sequence, start, dt, frame))
+                        lambda: self.observe(demo, sequence, start, dt, frame),
+                        self.memory.labels)
 
     def cluster(self, concept: str) -> tuple[list[Entry], int, float]:
         """The memory's entries with ``concept``'s valid clusters replaced by their medoids.

@@ -48,6 +48,13 @@ class Memory:
     demonstrations_seen : int
         Demonstrations learned from so far (the index of the next one in the
         learning stream).
+    labels : dict of str to str
+        The data's label (``Demonstration.true_concept``) of each
+        demonstration learned from that had one, by key: what a teacher that
+        judges answers by the demonstrations they stand for (the oracle)
+        needs in a later session (:func:`~iloci.concepts.learner.run_turn`
+        gives it to the teacher). The robot never reads them. Saved with the
+        memory; a file written before it was kept has none.
     learned : set of str
         :func:`demonstration_digest` of every demonstration learned from:
         one shown again (the same key and pen positions) is recognized
@@ -65,6 +72,7 @@ class Memory:
     demonstrations_seen: int = 0
     revision: int = field(default=0, repr=False)
     learned: set[str] = field(default_factory=set, repr=False)
+    labels: dict[str, str] = field(default_factory=dict, repr=False)
 
     # -- views ------------------------------------------------------------------
     def __len__(self) -> int:
@@ -228,14 +236,18 @@ class Memory:
             drop.update(idx[j] for j in members if j != med)
         return [e for i, e in enumerate(entries) if i not in drop], replaced, plan.d_cutoff
 
-    def placed(self, digest: str | None = None) -> None:
+    def placed(self, digest: str | None = None, key: str | None = None,
+               label: str | None = None) -> None:
         """One demonstration more was learned from (strengthened, exemplar or concept).
 
-        ``digest``: its :func:`demonstration_digest`, kept in :attr:`learned`.
+        ``digest``: its :func:`demonstration_digest`, kept in :attr:`learned`;
+        ``key``, ``label``: its key and the data's label, kept in :attr:`labels`.
         """
         self.demonstrations_seen += 1
         if digest is not None:
             self.learned.add(digest)
+        if key is not None and label is not None:
+            self.labels[key] = label
 
     def learned_concept(self, demo: Any) -> str | None:
         """The concept ``demo`` was learned into, if this very demonstration was learned.
@@ -312,13 +324,14 @@ class Memory:
         """What :meth:`rollback` puts back: copies of the entries, the counters and
         :attr:`learned`, and the revision (the encoder is not changed by learning)."""
         return ([e.copy() for e in self.entries], self.concept_count,
-                self.demonstrations_seen, set(self.learned), self.revision)
+                self.demonstrations_seen, set(self.learned), dict(self.labels), self.revision)
 
     def rollback(self, point: tuple[Any, ...]) -> None:
         """Put the memory back as :meth:`checkpoint` found it (a learning step that failed
         half-way: a clusterer that raised after a rehearsal installed its new exemplar)."""
-        entries, self.concept_count, self.demonstrations_seen, learned, self.revision = point
-        self.entries, self.learned = entries, learned
+        (entries, self.concept_count, self.demonstrations_seen, learned, labels,
+         self.revision) = point
+        self.entries, self.learned, self.labels = entries, learned, labels
 
     def copy(self) -> Memory:
         enc = None
@@ -327,7 +340,8 @@ class Memory:
         elif self.encoder is not None:
             enc = SensorimotorEncoder(self.encoder.limit)
         return Memory([e.copy() for e in self.entries], enc, self.concept_count,
-                      self.demonstrations_seen, learned=set(self.learned))
+                      self.demonstrations_seen, learned=set(self.learned),
+                      labels=dict(self.labels))
 
     def summary(self) -> str:
         """A header (entries, exemplars, prototypes, concepts) and one line per concept."""
@@ -381,6 +395,7 @@ class Memory:
             "concept_count": self.concept_count,
             "demonstrations_seen": self.demonstrations_seen,
             "learned": sorted(self.learned),
+            "labels": dict(sorted(self.labels.items())),
         }
         return arrays, meta
 
@@ -413,8 +428,9 @@ class Memory:
             enc_state = {k[4:]: v for k, v in arrays.items() if k.startswith("enc/")}
             encoder = SensorimotorEncoder.from_state(enc_state) if enc_state else None
             learned = {str(d) for d in meta.get("learned", ())}
+            labels = {str(k): str(v) for k, v in dict(meta.get("labels") or {}).items()}
             return cls(entries, encoder, int(meta["concept_count"]),
-                       int(meta["demonstrations_seen"]), learned=learned)
+                       int(meta["demonstrations_seen"]), learned=learned, labels=labels)
         except (KeyError, TypeError, ValueError, IndexError, InvalidInputError) as exc:
             what = f"it lacks {exc}" if isinstance(exc, KeyError) else str(exc)
             raise MemoryFileError(f"memory file content is inconsistent ({what}); it was not "

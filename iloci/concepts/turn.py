@@ -399,7 +399,7 @@ class Turn:
                     rehearsed.append(learner.rehearse("clustering", entries))
             self.rehearsals.extend(rehearsed)
         self.feedbacks.append(1)
-        mem.placed(demonstration_digest(self.demo))
+        mem.placed(demonstration_digest(self.demo), self.key, self.demo.true_concept)
         self._record(self._event(answer, 1, action, d_cutoff=extra.get("d_cutoff"),
                                  concept=guess, entries=len(mem), clustered=clustered))
         return self._finish(guess, action, clustered)
@@ -450,7 +450,7 @@ class Turn:
         except BaseException:
             undo()   # the label was not used
             raise
-        mem.placed(demonstration_digest(self.demo))
+        mem.placed(demonstration_digest(self.demo), self.key, self.demo.true_concept)
         extra: dict[str, Any] = {"concept": label, "entries": len(mem)}
         if novel is not None:
             extra["novel"] = novel
