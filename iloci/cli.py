@@ -12,6 +12,7 @@ Each subcommand lives in a module of :mod:`iloci.commands` with a
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import importlib
 import os
@@ -142,7 +143,16 @@ def _main(argv: Sequence[str] | None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:
-        return 0
+        # the reader of our output went away (`| head`): the command stopped where it was;
+        # say so where it can still be read, and exit as a shell's SIGPIPE would
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # no second error when Python flushes at exit
+        if getattr(args, "command", None) in ("teach", "evaluate", "sweep"):  # it learns
+            with contextlib.suppress(OSError):
+                print(f"stopped: the output of `iloci {args.command}` was closed (a pipe "
+                      "into head?), so it stopped where it was; what it saved is kept. Run "
+                      "it again without closing the pipe to go on.", file=sys.stderr)
+        return 141
     except Exception as exc:  # a failure, not a user error
         if show_tb:
             raise

@@ -1,0 +1,43 @@
+"""Mistakes a new user makes with the commands (an audit of teach, show, sweep, recognize,
+serve): each is now one error that says what to do, before any work, or a warning, never a
+silent wrong result or an exit 0 for a command that stopped half-way."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("pinocchio")
+
+FAST = """
+[perceptual_model]
+epochs = 60
+[learner]
+rehearsal_epochs = 60
+"""
+
+
+@pytest.fixture
+def fast(tmp_path):
+    path = tmp_path / "fast.toml"
+    path.write_text(FAST)
+    return path
+
+
+def test_teach_whose_output_is_closed_says_it_stopped_and_does_not_exit_0(fast, tmp_path):
+    """`iloci teach ... | head -1` stopped after the first demonstration and exited 0."""
+    memory = tmp_path / "m.npz"
+    proc = subprocess.Popen([sys.executable, "-m", "iloci", "teach", "--config", str(fast),
+                             "--memory", str(memory), "GShape/0", "Sine/0", "GShape/1",
+                             "Sine/1", "GShape/2"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline()
+    proc.stdout.close()                      # as `| head -1` does
+    stderr = proc.stderr.read()
+    assert proc.wait(timeout=600) == 141
+    assert "stopped: the output of `iloci teach` was closed" in stderr
+    assert "Traceback" not in stderr
+    assert memory.exists()
