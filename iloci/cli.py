@@ -77,7 +77,34 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
                               "clashes with another command; rename it, or block the "
                               "plugin with ILOCI_BLOCK_PLUGINS.") from exc.__cause__
         raise
+    _once(parser)
     return parser
+
+
+class _StoreOnce(argparse._StoreAction):
+    """A single-valued option given twice is an error, not "the last one wins" (which
+    silently ran with another config, memory or output than the one meant)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        seen = namespace.__dict__.setdefault("_given_once", {})
+        if self.dest in seen:
+            parser.error(f"{option_string or self.option_strings[0]} given twice "
+                         f"({seen[self.dest]!r} "
+                         f"and {values!r}); give it once.")
+        seen[self.dest] = values
+        super().__call__(parser, namespace, values, option_string)
+
+
+def _once(parser: argparse.ArgumentParser) -> None:
+    """Make every single-valued option of ``parser`` and its subcommands a :class:`_StoreOnce`."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in set(action.choices.values()):
+                _once(sub)
+        elif type(action) is argparse._StoreAction and action.option_strings and \
+                action.nargs in (None, "?"):
+            action.__class__ = _StoreOnce
 
 
 _shown: set[str] = set()

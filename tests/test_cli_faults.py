@@ -41,3 +41,17 @@ def test_teach_whose_output_is_closed_says_it_stopped_and_does_not_exit_0(fast, 
     assert "stopped: the output of `iloci teach` was closed" in stderr
     assert "Traceback" not in stderr
     assert memory.exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["teach", "--config", "a.toml", "--config", "b.toml", "GShape/0"],
+    ["teach", "--memory", "a.npz", "GShape/0", "--memory", "b.npz"],
+    ["show", "GShape/0", "--out", "a.png", "--out", "b.png"],
+    ["recognize", "--memory", "a.npz", "--memory", "b.npz", "GShape/0"],
+    ["evaluate", "--out", "a", "--out", "b"]])
+def test_a_single_valued_option_given_twice_is_an_error(argv, cli):
+    """The last one won silently: a teach ran with another config than the one meant."""
+    done = cli(*argv)
+    assert done.returncode == 2
+    option = argv[[i for i, a in enumerate(argv) if a.startswith("--")][0]]
+    assert f"error: {option} given twice" in done.stderr
