@@ -55,3 +55,20 @@ def test_a_single_valued_option_given_twice_is_an_error(argv, cli):
     assert done.returncode == 2
     option = argv[[i for i, a in enumerate(argv) if a.startswith("--")][0]]
     assert f"error: {option} given twice" in done.stderr
+
+
+def test_show_checks_the_image_name_before_any_work_and_recognize_json_is_json(fast, tmp_path,
+                                                                                  cli):
+    """show --out g.txt failed with matplotlib's "Format 'txt' is not supported" after all
+    the work (exit 1); recognize --json printed a bare NaN, which strict JSON readers
+    refuse (a memory of one concept has no familiarity)."""
+    done = cli("show", "GShape/2", "--out", str(tmp_path / "g.txt"))
+    assert done.returncode == 2 and "error: --out " in done.stderr
+    assert "an image's name ends in" in done.stderr and "g.png" in done.stderr
+    memory = tmp_path / "one.npz"
+    assert cli("teach", "--config", str(fast), "--memory", str(memory),
+               "GShape/0").returncode == 0
+    done = cli("recognize", "--memory", str(memory), "Sine/0", "--json")
+    assert done.returncode == 0, done.stderr
+    row = json.loads(done.stdout, parse_constant=lambda c: pytest.fail(f"{c} is not JSON"))
+    assert row["familiarity"] is None and row["concept"]

@@ -29,6 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _number(x: float) -> float | None:
+    """``x``, or None (JSON null) for NaN: ``NaN`` is not JSON, and strict readers refuse it."""
+    return None if x != x else x
+
+
 def run(args: argparse.Namespace) -> int:
     # recognition never clusters nor asks a teacher: their plugins need not be installed
     agent = Agent.load(args.memory, purpose="recognize")
@@ -39,10 +44,11 @@ def run(args: argparse.Namespace) -> int:
     for r in agent.recognize(demos):
         if args.json:
             print(json.dumps({"demo": r.demo, "concept": r.concept,
-                              "confidence": r.confidence, "distance": r.distance,
+                              "confidence": _number(r.confidence),
+                              "distance": _number(r.distance),
                               "source": r.source, "sources": list(r.sources),
-                              "familiarity": r.familiarity, "unknown": r.unknown,
-                              "tilt": r.tilt}))
+                              "familiarity": _number(r.familiarity),
+                              "unknown": r.unknown, "tilt": r.tilt}, allow_nan=False))
         else:
             answer = (f"unknown (nearest concept {r.concept}, familiarity "
                       f"{r.familiarity:.2f})" if r.unknown else f"concept {r.concept}")

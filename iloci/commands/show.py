@@ -78,10 +78,20 @@ def _components(config_file: str | None):
     return ik, cfg.sensorimotor, robot
 
 
+#: What ``--out`` may be: the formats matplotlib's Agg backend writes.
+IMAGE_SUFFIXES = frozenset({".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps", ".ps",
+                            ".tif", ".tiff", ".webp"})
+
+
 def run(args: argparse.Namespace) -> int:
     if Path(args.shape).suffix.lower() == ".npz":
         return _show_memory(args)
 
+    if args.out and Path(args.out).suffix.lower() not in IMAGE_SUFFIXES:
+        raise InvalidInputError(
+            f"--out {args.out}: an image's name ends in "
+            f"{', '.join(sorted(IMAGE_SUFFIXES))} (the format follows it), e.g. "
+            f"{Path(args.out).with_suffix('.png')}.")
     demo = _load_demo(args.shape, args.demo)
     out = writable_file(args.out if args.out else f"{demo.shape}-{demo.index}.png", "--out")
     ik, sm, robot = _components(args.config)
