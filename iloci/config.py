@@ -164,6 +164,10 @@ def _read_text(path: Path, what: str) -> str:
             # ASCII in UTF-16 without a mark: every other byte is zero
             raise ConfigError(f"{what} looks like UTF-16 text (every other byte is zero); "
                               "TOML files are UTF-8: save it as UTF-8.", source=str(path))
+        if raw.startswith(b"PK\x03\x04"):  # a zip: what an iloci memory (.npz) is
+            raise ConfigError(f"{what} {path.name} is a zip file (an iloci memory, .npz?), "
+                              "not TOML text: a memory goes to --memory, a config is a "
+                              ".toml file (`iloci config show` prints one).", source=str(path))
         # a UTF-8 byte-order mark (what Notepad and PowerShell write) is no content
         text = raw.decode("utf-8-sig")
     except FileNotFoundError:

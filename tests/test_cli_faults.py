@@ -72,3 +72,29 @@ def test_show_checks_the_image_name_before_any_work_and_recognize_json_is_json(f
     assert done.returncode == 0, done.stderr
     row = json.loads(done.stdout, parse_constant=lambda c: pytest.fail(f"{c} is not JSON"))
     assert row["familiarity"] is None and row["concept"]
+
+
+def test_a_memory_name_left_out_or_a_memory_given_as_config_is_said_so(fast, tmp_path, cli):
+    """`iloci teach --memory GShape/0 Sine/0` (the memory's name left out) made a folder
+    GShape/ and a memory file GShape/0, taught Sine/0 only, and from then on hid the LASA
+    name; `--memory new.csv` saved a zip as .csv; a memory given to --config was said not
+    to be UTF-8, with iconv advice."""
+    done = cli("teach", "--config", str(fast), "--memory", "GShape/0", "Sine/0", cwd=tmp_path)
+    assert done.returncode == 2
+    assert "--memory 'GShape/0' would be a new memory file, and a memory file's name ends " \
+        "in .npz" in done.stderr and "Did you leave out the memory's name?" in done.stderr
+    assert not (tmp_path / "GShape").exists()
+    done = cli("teach", "--config", str(fast), "--memory", "new.csv", "Sine/0", cwd=tmp_path)
+    assert done.returncode == 2 and not (tmp_path / "new.csv").exists()
+    memory = tmp_path / "m.npz"
+    assert cli("teach", "--config", str(fast), "--memory", str(memory),
+               "GShape/0").returncode == 0
+    renamed = memory.rename(tmp_path / "robot.mem")          # an existing memory: any name
+    done = cli("teach", "--config", str(fast), "--memory", str(renamed), "GShape/1")
+    assert done.returncode == 0, done.stderr
+    for argv in (("teach", "--config", str(renamed), "GShape/1"),
+                 ("config", "check", str(renamed))):
+        done = cli(*argv)
+        assert done.returncode == 2
+        assert "is a zip file (an iloci memory, .npz?), not TOML text" in done.stderr
+        assert "iconv" not in done.stderr

@@ -91,8 +91,10 @@ def check_memory_path(memory: str | os.PathLike[str], what: str = "--memory") ->
 
     A symbolic link is followed (the file it points to is the memory; its
     folder must take new files); a link that leads back to itself, or a
-    path that is a directory, is refused; the folder is created if missing
-    and must be writable (:func:`writable_file`).
+    path that is a directory, is refused; so is a new file whose name does
+    not end in ``.npz`` (``--memory GShape/0 Sine/0``: the memory's name left
+    out); the folder is created if missing and must be writable
+    (:func:`writable_file`).
 
     Returns
     -------
@@ -112,6 +114,14 @@ def check_memory_path(memory: str | os.PathLike[str], what: str = "--memory") ->
             raise InvalidInputError(
                 f"{what} {str(path)!r} is a symbolic link that leads back to itself (a loop); "
                 "give the memory file's own path. Nothing was done.") from None
+        if path.suffix.lower() != ".npz":  # a new memory: named as one, or a slip
+            looks = ("a demonstration (a LASA shape or a trajectory file)"
+                     if path.suffix.lower() in (".csv", ".npy", ".inkml", ".xml", ".txt", "")
+                     else f"a {path.suffix} file")
+            raise InvalidInputError(
+                f"{what} {str(path)!r} would be a new memory file, and a memory file's name "
+                f"ends in .npz; {str(path)!r} looks like {looks}. Did you leave out the "
+                f"memory's name? e.g. {what} memory.npz {path}. Nothing was done.")
     if os.path.islink(path):
         writable_file(os.path.realpath(path), f"{what} {str(path)!r} (a link to)")
     else:
