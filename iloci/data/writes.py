@@ -121,7 +121,7 @@ def check_memory_path(memory: str | os.PathLike[str], what: str = "--memory") ->
             raise InvalidInputError(
                 f"{what} {str(path)!r} would be a new memory file, and a memory file's name "
                 f"ends in .npz; {str(path)!r} looks like {looks}. Did you leave out the "
-                f"memory's name? e.g. {what} memory.npz {path}. Nothing was done.")
+                f"memory's name? e.g. {what} memory.npz {path}. Nothing was done.") from None
     if os.path.islink(path):
         writable_file(os.path.realpath(path), f"{what} {str(path)!r} (a link to)")
     else:
