@@ -118,3 +118,22 @@ def test_a_misspelt_file_or_a_folder_among_the_demonstrations_fails_before_learn
         assert done.returncode == 2, done.stderr
         assert re.search(said, done.stderr), done.stderr
         assert "Nothing was learned" in done.stderr and not memory.exists()
+
+
+def test_serve_on_a_busy_port_or_an_unknown_host_says_so_before_announcing_a_page(tmp_path,
+                                                                                    cli):
+    """uvicorn's "[Errno 98] address already in use" came after "teach the robot at
+    http://...", with exit code 3."""
+    import socket
+
+    pytest.importorskip("uvicorn")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        done = cli("serve", "--memory", str(tmp_path / "m.npz"), "--port", str(port))
+    assert done.returncode == 2
+    assert f"error: port {port} on 127.0.0.1 is in use" in done.stderr
+    assert "teach the robot at" not in done.stdout and not (tmp_path / "m.npz").exists()
+    done = cli("serve", "--memory", str(tmp_path / "m.npz"), "--host", "999.1.1.1")
+    assert done.returncode == 2 and "--host 999.1.1.1: no such host" in done.stderr

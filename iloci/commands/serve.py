@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import errno
 import logging
 import signal
+import socket
 import sys
 from pathlib import Path
 from typing import Any
@@ -111,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
                                   "pip install 'iloci[serve]'") from exc
     if not 0 < args.port < 65536:
         raise InvalidInputError(f"--port must be 1..65535, got {args.port}.")
+    check_can_listen(args.host, args.port)  # before the memory is opened and a URL shown
     classroom = build_classroom(args.memory, args.config, protocol=args.protocol)
     hosts = [args.host, *args.allow_host]
     app = create_app(classroom, hosts=hosts, on_shutdown=lambda: _stop_worker(classroom))
@@ -140,6 +143,37 @@ def run(args: argparse.Namespace) -> int:
         classroom.close()
         signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def check_can_listen(host: str, port: int) -> None:
+    """Raise InvalidInputError when ``host:port`` cannot be listened on: an unknown host,
+    a port in use (another server), a port this user may not open. uvicorn said so only
+    after the page's address was printed, in its own words, with exit code 3."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM,
+                                   flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise InvalidInputError(f"--host {host}: no such host or address here ({exc.strerror}"
+                                "); give an address of this machine, e.g. 127.0.0.1 (the "
+                                "default) or 0.0.0.0 (every interface).") from None
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                why = "is in use (another iloci serve, or another server)"
+            elif exc.errno in (errno.EACCES, errno.EPERM):
+                why = "may not be opened by this user (ports below 1024 need root)"
+            elif exc.errno == errno.EADDRNOTAVAIL:
+                raise InvalidInputError(f"--host {host}: not an address of this machine; "
+                                        "give one of its addresses, e.g. 127.0.0.1 (the "
+                                        "default) or 0.0.0.0.") from None
+            else:
+                why = f"cannot be opened ({exc.strerror})"
+            raise InvalidInputError(f"port {port} on {host} {why}: choose another --port. "
+                                    "Nothing was started.") from None
 
 
 def _exit_on_sigterm(signum: int, frame: Any) -> None:
