@@ -54,6 +54,11 @@ def write(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
     ("", '"learner.k_cutoff" = [nan]', "must be a finite number"),
     ("", '"learner.k_cutoff" = [[0.1, 0.2]]', "must be a number, got \\[0.1, 0.2\\]"),
     ("", '"learner.k_cutoff" = 0.5', "give a list of values"),
+    # an audit: the swept values silently replaced the fixed one; a value listed twice ran
+    # (and was reported) twice
+    ("", '"perceptual_model.epochs" = [60, 80]', r"perceptual_model.epochs is both fixed in "
+     r"\[config\] and swept in \[values\]"),
+    ("", '"learner.k_cutoff" = [0.5, 1.0, 0.5]', "learner.k_cutoff lists 0.5 more than once"),
     ("", f'"learner.k_cutoff" = {list(range(50))}\n"learner.num_threshold" = '
          f'{list(range(1, 51))}', "2,500 settings .50 x 50. x 1 seed.s.; a sweep spec names "
                                  "at most 2,000"),
@@ -62,6 +67,14 @@ def test_a_bad_spec_is_one_config_error_naming_what_is_wrong(tmp_path, top, valu
     text = top + "\n" + SMALL + ("[values]\n" + values + "\n" if values else "")
     with pytest.raises(ConfigError, match=match):
         load_spec(write(tmp_path, text))
+
+
+def test_a_data_set_that_does_not_exist_is_said_before_ray_starts(tmp_path):
+    """An audit: it started Ray, recorded every run as failed, and exited 1."""
+    spec = write(tmp_path, 'seeds = [0]\nfolds = [0]\n[config]\nperceptual_model = '
+                           '{ epochs = 60 }\n[values]\n"data.path" = ["no-such-folder"]\n')
+    with pytest.raises(ConfigError, match=r"\[data\] path 'no-such-folder' does not exist"):
+        load_spec(spec)
 
 
 def test_bad_spec_on_the_command_line_exits_2_without_traceback(tmp_path, cli):
@@ -387,3 +400,14 @@ def test_a_sweep_whose_file_names_are_not_utf8_runs_and_reports(tmp_path):
     assert len(list((out / "runs").glob("*.json"))) == 1
     assert (out / "report.md").read_bytes().startswith(b"# Sweep: ")
     assert b"sp\\xe9.toml" in (out / "report.md").read_bytes()
+
+
+def test_an_out_folder_with_another_specs_report_is_pointed_out(tmp_path):
+    """An audit: a second spec's sweep replaced the first one's report.md, results.csv and
+    summary.json in the same --out without a word (its stored runs were kept)."""
+    from iloci_ray.sweep import other_spec
+
+    assert other_spec(tmp_path, str(tmp_path / "a.toml")) is None          # no report yet
+    (tmp_path / "summary.json").write_text(json.dumps({"spec": str(tmp_path / "a.toml")}))
+    assert other_spec(tmp_path, str(tmp_path / "a.toml")) is None          # this spec's
+    assert other_spec(tmp_path, str(tmp_path / "b.toml")) == str(tmp_path / "a.toml")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+import warnings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
     from iloci.errors import InvalidInputError
     from iloci.display import Bars
     from iloci_ray.report import write_report
-    from iloci_ray.sweep import (RETRIES, check_out, load_spec, plan_runs, run_sweep,
-                                 summary_lines)
+    from iloci_ray.sweep import (RETRIES, check_out, load_spec, other_spec, plan_runs,
+                                 run_sweep, summary_lines)
 
     if args.jobs is not None and args.jobs < 1:
         raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}.")
@@ -45,6 +46,12 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--retries must be >= 0, got {retries}.")
     spec = load_spec(args.spec)
     out = check_out(args.out or f"runs/sweep-{Path(args.spec).stem}")
+    before = other_spec(out, spec.source)
+    if before:
+        warnings.warn(f"{out} holds the report of another sweep spec ({before}); this "
+                      "sweep's report replaces it. Its runs are kept: run that spec again "
+                      f"with --out {out} to write its report back, or give another --out.",
+                      stacklevel=1)
     total = len(plan_runs(spec))
     print(f"iloci sweep: {spec.source}, {total} runs, out {out}, Ray "
           f"{args.address or 'on this machine'}", file=sys.stderr)

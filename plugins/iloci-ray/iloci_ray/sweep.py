@@ -35,6 +35,7 @@ import hashlib
 import itertools
 import math
 import json
+import os
 from pathlib import Path
 import time
 from typing import Any
@@ -118,7 +119,8 @@ def load_spec(path: str | Path) -> SweepSpec:
         # read once, through the reader every config file goes through
         base = read_config_file((path.parent / str(raw["base"])).resolve())
         load_config(base)
-    for sec, value in dict(raw.get("config", {})).items():
+    fixed = dict(raw.get("config", {}))
+    for sec, value in fixed.items():
         if not isinstance(value, dict):
             raise _error(source, f"[config] {sec} must be a table of values.")
         _update(base, sec, value)
@@ -126,6 +128,17 @@ def load_spec(path: str | Path) -> SweepSpec:
     if not isinstance(values, dict) or not values:
         raise _error(source, "[values] must name at least one swept key, e.g. "
                      '"learner.k_cutoff" = [0.25, 0.5, 1.0].')
+    both = [key for key in values if key.count(".") == 1
+            and key.split(".")[1] in fixed.get(key.split(".")[0], {})]
+    if both:  # the swept values would silently replace the fixed one
+        raise _error(source, f"{', '.join(both)} is both fixed in [config] and swept in "
+                     "[values]; keep it in one of them.")
+    for key, v in values.items():
+        if isinstance(v, list):
+            twice = sorted({json.dumps(x) for x in v if v.count(x) > 1})
+            if twice:  # the same runs twice, counted as two in the report
+                raise _error(source, f"{key} lists {', '.join(twice)} more than once; give "
+                             "each value once.")
     search = raw.get("search", "grid")
     if search not in ("grid", "random"):
         raise _error(source, f"search must be 'grid' or 'random', got {search!r}.")
@@ -168,9 +181,14 @@ def load_spec(path: str | Path) -> SweepSpec:
                      folds=None if folds is None else tuple(folds), search=search,
                      samples=int(samples), random_seed=int(raw.get("random_seed", 0)),
                      source=source)
-    # every swept value must make a valid config: checked now, not run by run
+    # every swept value must make a valid config, and name data that exist: checked now,
+    # before Ray starts, not run by run
     for setting in settings(spec):
-        _resolve(spec, setting, spec.seeds[0])
+        data = _resolve(spec, setting, spec.seeds[0]).get("data", {}).get("path")
+        if data and not Path(data).exists():
+            raise _error(source, f"setting {dict(setting)}: [data] path {data!r} does not "
+                         f"exist (paths are read from the folder the sweep is started in, "
+                         f"{Path.cwd()}).")
     return spec
 
 
@@ -553,6 +571,18 @@ def summary_lines(info: dict[str, Any], records: list[dict[str, Any]], command: 
                      f"the {len(failed)} failed one(s) run again; one that fails the same "
                      "way every time needs its error fixed first.")
     return lines
+
+
+def other_spec(out: Path, source: str) -> str | None:
+    """The spec of the report ``out`` holds when it is not ``source`` (another sweep's),
+    else None (no report, or this spec's)."""
+    try:
+        said = json.loads((out / "summary.json").read_text(encoding="utf-8")).get("spec")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(said, str) or os.path.realpath(said) == os.path.realpath(source):
+        return None
+    return said
 
 
 def check_out(out: str | Path) -> Path:
