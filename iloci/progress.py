@@ -61,6 +61,12 @@ class MemoryLockedError(IlociError, RuntimeError):
     """Another process is teaching the same memory file."""
 
 
+#: A trajectory file larger than this (bytes) is digested by its size and first 64 kB:
+#: every reader refuses such a file (iloci.data.csvfile.MAX_BYTES is 512 MB) before
+#: reading it, so reading gigabytes to digest it would only delay that error.
+DIGEST_WHOLE_UP_TO = 1 << 30
+
+
 def item_digest(item: Any) -> str:
     """A digest (hex) of one stream item: a Demonstration, a trajectory file, or an array.
 
@@ -76,7 +82,13 @@ def item_digest(item: Any) -> str:
         key = getattr(item, "key", None) or Path(item).stem
         h.update(b"file\0" + str(key).encode("utf-8", "surrogatepass") + b"\0")
         try:
-            h.update(Path(os.fspath(item)).read_bytes())
+            with open(os.fspath(item), "rb") as fh:
+                size = os.fstat(fh.fileno()).st_size
+                if size > DIGEST_WHOLE_UP_TO:  # no drawing: its reader refuses it unread
+                    h.update(b"large\0" + str(size).encode() + b"\0" + fh.read(65536))
+                else:  # in pieces: a big file is never held whole for its digest
+                    for block in iter(lambda: fh.read(1 << 20), b""):
+                        h.update(block)
         except OSError as exc:
             h.update(f"unreadable: {type(exc).__name__}".encode())
     else:

@@ -137,3 +137,23 @@ def test_serve_on_a_busy_port_or_an_unknown_host_says_so_before_announcing_a_pag
     assert "teach the robot at" not in done.stdout and not (tmp_path / "m.npz").exists()
     done = cli("serve", "--memory", str(tmp_path / "m.npz"), "--host", "999.1.1.1")
     assert done.returncode == 2 and "--host 999.1.1.1: no such host" in done.stderr
+
+
+def test_a_huge_file_is_refused_from_its_first_bytes_and_its_size(tmp_path, cli, monkeypatch):
+    """`truncate -s 3G sparse.csv; iloci teach sparse.csv` read 3 GB (twice: for the
+    resume digest, then to parse) and took 4.8 GB of memory before refusing its first
+    byte."""
+    from iloci.data import csvfile
+    from iloci.errors import InvalidInputError
+
+    sparse = tmp_path / "sparse.csv"
+    with open(sparse, "wb") as fh:
+        fh.truncate(3 << 30)                      # 3 GiB of zeros, no disk used
+    done = cli("teach", "--memory", str(tmp_path / "m.npz"), str(sparse))
+    assert "sparse.csv is not a text CSV file: it holds binary data" in done.stderr
+    big = tmp_path / "big.csv"
+    big.write_text("x,y\n" + "0.5,0.25\n" * 20000)
+    monkeypatch.setattr(csvfile, "MAX_BYTES", 100_000)
+    with pytest.raises(InvalidInputError, match="big.csv is 0 MiB: more than a drawing of "
+                                                "at most 2,000,000 samples can be as text"):
+        csvfile.read_csv(big)

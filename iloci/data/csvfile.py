@@ -210,9 +210,27 @@ def _describe_dialect(delimiter: str | None, decimal_comma: bool, encoding: str)
             + (", decimal commas" if decimal_comma else ""))
 
 
+#: Bytes of a CSV file looked at before it is read whole (binary data is refused on them).
+_HEAD = 65536
+#: Largest CSV file read: :data:`~iloci.validation.MAX_POINTS` rows of 256 bytes (a row
+#: of a few numbers is 20 to 80).
+MAX_BYTES = validation.MAX_POINTS * 256
+
+
 def read_csv(p: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """Positions (N, 2) and times (N,) or None from a CSV file (see :func:`load_trajectory`)."""
     try:
+        size = p.stat().st_size
+        with p.open("rb") as fh:
+            head = fh.read(_HEAD)
+        if size > _HEAD:  # binary data or a file no drawing fills: said before it is read
+            decode_text(head, p.name)
+            if size > MAX_BYTES:
+                raise InvalidInputError(
+                    f"{p.name} is {size / 2**20:,.0f} MiB: more than a drawing of at most "
+                    f"{validation.MAX_POINTS:,} samples can be as text ({MAX_BYTES // 2**20} "
+                    "MiB); is it the right file? Downsample a long recording, or split one "
+                    "of several drawings into a file each.")
         raw = p.read_bytes()
     except OSError as exc:
         raise InvalidInputError(f"cannot read {str(p)!r}: {exc.strerror}.") from None
