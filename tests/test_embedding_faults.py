@@ -231,3 +231,19 @@ def test_plugins_and_configs_given_wrongly_in_code_are_said_as_such():
         iloci.load_config({"learner": {2: 3}})
     with pytest.raises(InvalidInputError, match="plugin_manager must be a pluggy"):
         iloci.build(SETTINGS, plugin_manager="x")
+
+
+def test_a_demonstrations_key_parts_are_checked():
+    """shape=None, index=None gave the key 'None/None'; index=1.5 the key 'demo/1.5'."""
+    t = np.linspace(0.0, 1.0, 50)
+    xy = np.column_stack([np.cos(3 * t), np.sin(3 * t)])
+    for kwargs, said in (({"shape": None}, "shape must be a non-empty str"),
+                         ({"shape": ""}, "shape must be a non-empty str"),
+                         ({"index": None}, "index must be an int >= 0"),
+                         ({"index": 1.5}, "index must be an int >= 0"),
+                         ({"index": -1}, "index must be an int >= 0"),
+                         ({"index": True}, "index must be an int >= 0"),
+                         ({"true_concept": 3}, "true_concept must be a str or None")):
+        with pytest.raises(InvalidDemonstrationError, match=said):
+            Demonstration(xy, t, **kwargs)
+    assert Demonstration(xy, t, shape="circle", index=np.int64(2)).key == "circle/2"

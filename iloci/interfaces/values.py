@@ -90,6 +90,17 @@ class Demonstration:
                           "(concept means the robot's concept label).", DeprecationWarning,
                           stacklevel=2)
             true_concept = concept
+        if not isinstance(shape, str) or not shape:
+            raise InvalidDemonstrationError(f"shape must be a non-empty str (the key is "
+                                            f"SHAPE/INDEX), got {shape!r}.")
+        if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)) \
+                or index < 0:
+            raise InvalidDemonstrationError(f"index must be an int >= 0 (the key is "
+                                            f"SHAPE/INDEX), got {index!r}.")
+        if true_concept is not None and not isinstance(true_concept, str):
+            raise InvalidDemonstrationError(f"true_concept must be a str or None, got "
+                                            f"{true_concept!r}.")
+        index = int(index)
         for name, value in (("positions", positions), ("times", times), ("shape", shape),
                             ("index", index), ("true_concept", true_concept)):
             object.__setattr__(self, name, value)
