@@ -247,3 +247,17 @@ def test_a_demonstrations_key_parts_are_checked():
         with pytest.raises(InvalidDemonstrationError, match=said):
             Demonstration(xy, t, **kwargs)
     assert Demonstration(xy, t, shape="circle", index=np.int64(2)).key == "circle/2"
+
+
+def test_a_failed_conformance_check_is_an_iloci_error_and_an_assertion():
+    """The guide says every error iloci raises on purpose derives from IlociError;
+    ConformanceError derived from AssertionError only."""
+    import pickle
+
+    from iloci.errors import IlociError
+    from iloci.testing import CheckResult, ConformanceError
+
+    error = ConformanceError("ik solver", [CheckResult("forward", False, "wrong shape")])
+    assert isinstance(error, IlociError) and isinstance(error, AssertionError)
+    again = pickle.loads(pickle.dumps(error))      # from a worker process, as itself
+    assert again.kind == "ik solver" and str(again) == str(error)

@@ -31,6 +31,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from iloci.errors import IlociError
 from iloci.plugins import get_registry
 from iloci.registry import validate_params
 from iloci.testing.checks import CHECKS, Factory
@@ -48,8 +49,12 @@ class CheckResult:
     message: str = ""
 
 
-class ConformanceError(AssertionError):
-    """One or more conformance checks failed; ``results`` lists every check."""
+class ConformanceError(IlociError, AssertionError):
+    """One or more conformance checks failed; ``results`` lists every check.
+
+    An :class:`~iloci.errors.IlociError` (as every error iloci raises on
+    purpose) and an ``AssertionError`` (a failed check in a test suite).
+    """
 
     def __init__(self, kind: str, results: Sequence[CheckResult]) -> None:
         self.kind = kind
