@@ -261,3 +261,20 @@ def test_a_failed_conformance_check_is_an_iloci_error_and_an_assertion():
     assert isinstance(error, IlociError) and isinstance(error, AssertionError)
     again = pickle.loads(pickle.dumps(error))      # from a worker process, as itself
     assert again.kind == "ik solver" and str(again) == str(error)
+
+
+def test_a_component_whose_method_cannot_be_called_as_its_kind_says_is_refused_at_build():
+    """A teacher with feedback(self, response) passed build, then every learn raised
+    Python's TypeError about a missing argument."""
+    class OneArgument:
+        def feedback(self, response):
+            return 1
+
+    class Flexible:
+        def feedback(self, demo, response, *more, **options):
+            return 1
+
+    with pytest.raises(InvalidInputError, match=r"teacher=.* is not a teacher: it lacks "
+                                                r"feedback taking \(demo, response\)"):
+        iloci.build(SETTINGS, teacher=OneArgument())
+    assert isinstance(iloci.build(SETTINGS, teacher=Flexible()).teacher, Flexible)

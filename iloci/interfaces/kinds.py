@@ -7,6 +7,8 @@ components but chosen outside the config's sections (fold executors, robots).
 
 from __future__ import annotations
 
+import inspect
+
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -98,7 +100,27 @@ def unmet_members(obj: Any, protocol: type) -> list[str]:
                if callable(v) and not n.startswith("_")} - optional
     out = [n for n in attributes - methods if not hasattr(obj, n)]
     out += [n for n in methods if not callable(getattr(obj, n, None))]
+    for n in methods:
+        if callable(getattr(obj, n, None)):
+            fault = _call_fault(n, vars(protocol)[n], getattr(obj, n))
+            if fault:
+                out.append(fault)
     return sorted(out)
+
+
+def _call_fault(name: str, spec: Any, method: Any) -> str:
+    """``""`` if ``method`` can be called as the protocol's ``spec`` is (its required
+    positional arguments), else what it lacks, e.g. ``"feedback taking (demo, response)"``."""
+    try:
+        wanted = [p for p in list(inspect.signature(spec).parameters.values())[1:]
+                  if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+                  and p.default is p.empty]
+        inspect.signature(method).bind(*[None] * len(wanted))
+    except (TypeError, ValueError) as exc:  # ValueError: no signature to read (a builtin)
+        if isinstance(exc, ValueError):
+            return ""
+        return f"{name} taking ({', '.join(p.name for p in wanted)})"
+    return ""
 
 
 #: Kinds registered like components but chosen outside the config's
