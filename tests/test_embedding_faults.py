@@ -278,3 +278,27 @@ def test_a_component_whose_method_cannot_be_called_as_its_kind_says_is_refused_a
                                                 r"feedback taking \(demo, response\)"):
         iloci.build(SETTINGS, teacher=OneArgument())
     assert isinstance(iloci.build(SETTINGS, teacher=Flexible()).teacher, Flexible)
+
+
+def test_an_ik_solver_whose_limits_do_not_describe_the_arm_is_refused_at_build():
+    """Limits with lower > upper, or 3 limits for 4 joints, were accepted by build; the
+    second failed at the first learning inside numpy."""
+    from iloci_pinocchio.ik import PinocchioIK
+
+    class Short(PinocchioIK):
+        def __init__(self):
+            super().__init__()
+            self.lower = self.lower[:3]
+
+    class Crossed(PinocchioIK):
+        def __init__(self):
+            super().__init__()
+            self.lower = self.lower.copy()
+            self.lower[1] = self.upper[1] + 1.0
+
+    with pytest.raises(InvalidInputError, match="with 3 lower and 4 upper limit.s., but "
+                                                "robot 'nao-v32-right-arm' has 4"):
+        iloci.build(SETTINGS, ik=Short())
+    with pytest.raises(InvalidInputError, match="joint 'RShoulderRoll' has lower limit .* "
+                                                "above its upper limit"):
+        iloci.build(SETTINGS, ik=Crossed())

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 import dataclasses
 from typing import Any, NamedTuple
 
+import numpy as np
 import pluggy
 
 from iloci.config import Config, load_config
@@ -154,6 +155,7 @@ def assemble(config: Any = None, plugin_manager: pluggy.PluginManager | None = N
 
     robot, ik = robot_and_ik(cfg.robot, lambda r: make("ik", r), plugin_manager=pm,
                              ik=overrides.get("ik"), before_placing=sized)
+    check_ik_limits(ik, robot)
     components: dict[str, Any] = {}
     for sec in COMPONENT_KINDS:
         if sec in overrides:
@@ -164,6 +166,39 @@ def assemble(config: Any = None, plugin_manager: pluggy.PluginManager | None = N
             components[sec] = make(sec, robot)
     components["robot"] = robot
     return Parts(cfg, components, pm, registry)
+
+
+def check_ik_limits(ik: Any, robot: Any) -> None:
+    """Refuse an IK solver whose joints and limits do not describe the robot's arm.
+
+    A caller's solver with 3 limits for 4 joints, or a lower limit above its
+    upper one, was taken by :func:`build` and failed at the first learning
+    inside numpy (or never kept its arm within limits).
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the solver and what is wrong.
+    """
+    who = f"the IK solver {type(ik).__qualname__}"
+    joints = len(robot.joint_names)
+    names = tuple(getattr(ik, "joint_names", ()) or ())
+    try:
+        lo = np.asarray(ik.lower, dtype=np.float64).reshape(-1)
+        hi = np.asarray(ik.upper, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError, AttributeError):
+        raise InvalidInputError(f"{who}: lower and upper must be arrays of numbers, one "
+                                f"per joint ({joints}).") from None
+    if names and len(names) != joints or len(lo) != joints or len(hi) != joints:
+        raise InvalidInputError(
+            f"{who} describes {len(names) or '?'} joint(s) with {len(lo)} lower and "
+            f"{len(hi)} upper limit(s), but robot {robot.name!r} has {joints} "
+            f"({', '.join(robot.joint_names)}): one name and one limit each per joint.")
+    bad = np.flatnonzero(~(lo <= hi))  # NaN too
+    if bad.size:
+        j = int(bad[0])
+        raise InvalidInputError(f"{who}: joint {robot.joint_names[j]!r} has lower limit "
+                                f"{lo[j]:g} above its upper limit {hi[j]:g} (rad or m).")
 
 
 def size_network(cfg: Config, robot: Any, overrides: Mapping[str, Any] | None = None
