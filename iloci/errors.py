@@ -31,6 +31,7 @@ __all__ = [
     "MemoryConfigError",
     "TimeUnitWarning",
     "DataSetWarning",
+    "ColumnsWarning",
 ]
 
 
@@ -291,6 +292,16 @@ class DataSetWarning(UserWarning):
     trajectory files, folders beside a manifest), or names that differ only
     in case or spaces: what the evaluation scores is not everything the
     user put there, so it says so once, before anything is learned.
+    """
+
+
+class ColumnsWarning(UserWarning):
+    """A trajectory file's columns may have been read as other columns than they are.
+
+    A CSV file without a header is read by the number of its columns (x, y
+    or t, x, y); when what comes out looks like another layout (a y that
+    takes only a few values: a pen's pressure), the file is read as it
+    says, and this warning names it and the header that would settle it.
     """
 
 

@@ -157,3 +157,29 @@ def test_a_huge_file_is_refused_from_its_first_bytes_and_its_size(tmp_path, cli,
     with pytest.raises(InvalidInputError, match="big.csv is 0 MiB: more than a drawing of "
                                                 "at most 2,000,000 samples can be as text"):
         csvfile.read_csv(big)
+
+
+def test_a_headerless_x_y_pressure_file_read_as_t_x_y_is_warned_of(tmp_path, cli):
+    """An audit: a headerless x, y, pressure CSV whose x increased was read as t, x, y (the
+    drawing taught was x against pressure) with exit 0 and no word."""
+    import warnings
+
+    import numpy as np
+
+    from iloci.data.files import load_trajectory
+    from iloci.errors import ColumnsWarning
+
+    u = np.linspace(0.0, 1.0, 60)
+    pressure = tmp_path / "wave.csv"
+    np.savetxt(pressure, np.c_[10 * u, np.sin(6 * u), np.where(u < 0.5, 0.8, 0.9)],
+               delimiter=",")
+    with pytest.warns(ColumnsWarning, match="wave.csv: no header, so its 3 columns were read "
+                                            "as t, x, y, but its y takes only 2 value"):
+        load_trajectory(pressure)
+    timed = tmp_path / "circle.csv"
+    np.savetxt(timed, np.c_[u, np.cos(6 * u), np.sin(6 * u)], delimiter=",")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_trajectory(timed)                    # a real t, x, y file: no warning
+    done = cli("show", str(pressure), "--out", str(tmp_path / "w.png"))
+    assert "warning: wave.csv: no header" in done.stderr

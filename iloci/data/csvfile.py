@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterable, Sequence
 import csv
 import io
 import math
+import warnings
 from pathlib import Path
 import re
 from typing import Any
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from iloci import validation
-from iloci.errors import InvalidDemonstrationError, InvalidInputError
+from iloci.errors import ColumnsWarning, InvalidDemonstrationError, InvalidInputError
 from iloci.progress import long_step
 
 __all__ = ["read_csv", "check_times", "decode_text"]
@@ -321,6 +322,16 @@ def _parse_csv(raw: bytes, p: Path, tell: Callable[[float], None]
                 f"{exc} The file has no header, so its 3 columns were read as t, x, y; if "
                 "they are x, y and another value (pressure, say), add a header line naming "
                 "them (x,y,pressure).") from None
+        levels = len(np.unique(positions[:, 1]))
+        if header is None and len(rows) >= 20 and levels <= 3:
+            # x happened to increase, so it passed as time: y is then the third column,
+            # which a drawing's y is not (a few values over the whole stroke) but a pen's
+            # pressure or button often is
+            warnings.warn(
+                f"{p.name}: no header, so its 3 columns were read as t, x, y, but its y "
+                f"takes only {levels} value(s) over {len(rows)} rows: are they x, y and "
+                "something else (pressure, a button)? Then add a header line naming them "
+                "(x,y,pressure).", ColumnsWarning, stacklevel=2)
     return positions, times
 
 
