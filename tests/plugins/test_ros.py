@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 from pathlib import Path
 import queue
 import shutil
@@ -241,3 +242,38 @@ def test_messages_convert_to_drawings():
     positions, times = polygon_to_drawing(poly)
     np.testing.assert_allclose(positions, xy)
     assert times is None
+
+
+def test_a_second_writer_and_bad_names_are_refused_before_the_node_starts(ros_env, memory,
+                                                                           tmp_path):
+    """An audit: two nodes (or a node and iloci teach) on one memory each saved over the
+    other's drawings; a --prefix or --node-name ROS refuses gave FATAL lines while the node
+    stayed up, or "report it to its authors"."""
+    path, _ = memory
+    taught = tmp_path / "robot.npz"
+    taught.write_bytes(Path(path).read_bytes())
+    node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(taught)],
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "robot.npz.lock.json").exists():
+            assert node.poll() is None, node.stderr.read()
+            assert time.monotonic() < deadline, "the node took no lock"
+            time.sleep(0.2)
+        for argv in (["ros", "--memory", str(taught), "--node-name", "second"],
+                     ["teach", "--memory", str(taught), "GShape/1"]):
+            done = subprocess.run([sys.executable, "-m", "iloci", *argv], env=ros_env,
+                                  capture_output=True, text=True, timeout=300)
+            assert done.returncode == 2, done.stderr
+            assert "is being taught by another process or session: iloci ros" in done.stderr
+    finally:
+        os.killpg(node.pid, signal.SIGINT)
+        node.wait(timeout=60)
+    for argv, said in ((["--prefix", "bad name!"], "--prefix 'bad name!' is not a ROS name"),
+                       (["--prefix", ""], "--prefix '' is not a ROS name"),
+                       (["--node-name", "a/b"], "--node-name 'a/b' is not a ROS node name")):
+        done = subprocess.run([sys.executable, "-m", "iloci", "ros", "--memory",
+                               str(tmp_path / "new.npz"), *argv], env=ros_env,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 2 and said in done.stderr, done.stderr

@@ -123,3 +123,21 @@ def test_a_drawing_delivered_twice_or_late_is_not_learned_twice(lasa, small_agen
     assert (len(memory.entries), memory.demonstrations_seen,
             [e.num_samples for e in memory.entries]) == counts
     assert sum(e.sources.count("drawing/1002") for e in memory.entries) == 1
+
+
+def test_a_save_that_fails_says_so_with_the_drawing_learned(lasa, small_agent, tmp_path):
+    """An audit: a memory path that could not be written gave the node's callback a raw
+    traceback and no reply; the drawing was learned in the session only, without a word."""
+    blocker = tmp_path / "afile"
+    blocker.write_text("a file, where a folder was meant")
+    session = TeachingSession(small_agent(), save_to=blocker / "m.npz")
+    out = session.drawing(lasa["GShape/0"].positions, key="GShape/0")
+    assert isinstance(out, Placed) and out.action == "new_concept"
+    assert out.save_error and "could not save the memory to" in out.save_error
+    assert "GShape/0 is learned in this session but not saved" in out.save_error
+    assert out.to_dict()["save_error"] == out.save_error
+    session.save_to = tmp_path / "m.npz"                   # the next placed drawing saves
+    out = session.drawing(lasa["Angle/0"].positions, key="Angle/0")
+    while isinstance(out, Guess):
+        out = session.feedback(out.answer_id, -1)
+    assert out.save_error is None and len(load_memory(tmp_path / "m.npz")[0]) == 2

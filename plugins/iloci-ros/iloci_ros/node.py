@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 import sys
 from typing import Any
@@ -143,7 +144,7 @@ class RosNode:
         try:
             data = json.loads(msg.data)
             answer_id, value = data["answer_id"], data["value"]
-        except (ValueError, TypeError, KeyError):
+        except (ValueError, TypeError, KeyError, RecursionError):  # Recursion: "[[[..."
             self._send(self.pub_result, {
                 "answer_id": None, "accepted": False,
                 "error": f"feedback must be JSON {{\"answer_id\": ID, \"value\": 1 | -1}}, "
@@ -166,6 +167,9 @@ class RosNode:
     def _publish(self, result: Guess | Placed) -> None:
         if isinstance(result, Placed):
             self._send(self.pub_outcome, result.to_dict())
+            if result.save_error:
+                self.rospy.logerr(f"iloci: {result.save_error}")
+                self._send(self.pub_error, {"error": result.save_error})
             return
         stamp = self.rospy.Time.now()
         self._send(self.pub_guess, {**result.to_dict(), "stamp": stamp.to_sec()})
@@ -210,23 +214,41 @@ def run(args: argparse.Namespace) -> int:
     import iloci
     from iloci_ros.rospath import import_rospy
 
+    from iloci.data.writes import check_memory_path
     from iloci.errors import InvalidInputError
+    from iloci.progress import acquire_memory_lock
     bad = [r for r in args.remappings if ":=" not in r]
     if bad:
         raise InvalidInputError(f"iloci ros: unexpected argument(s) {bad}; only ROS "
                                 "remappings NAME:=VALUE may follow the options.")
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*", args.prefix.strip("/")):
+        raise InvalidInputError(f"--prefix {args.prefix!r} is not a ROS name: letters, digits "
+                                "and _, starting with a letter, parts joined by / (e.g. "
+                                "iloci or robot1/iloci).")
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", args.node_name):
+        raise InvalidInputError(f"--node-name {args.node_name!r} is not a ROS node name: "
+                                "letters, digits and _, starting with a letter (e.g. iloci).")
     rospy = import_rospy()
     path = Path(args.memory)
-    agent = iloci.Agent.load(path, args.config) if path.exists() else iloci.build(args.config)
-    if args.worker:
-        agent.start_worker()
-    session = TeachingSession(agent, save_to=path)
-    rospy.init_node(args.node_name, anonymous=False, disable_signals=False)
-    RosNode(session, rospy, prefix=args.prefix)
-    print(f"iloci ros: node {rospy.get_name()} on /{args.prefix.strip('/')}/*, memory {path} "
-          f"({len(agent.memory)} entries)", file=sys.stderr, flush=True)
+    check_memory_path(path)  # a folder, a loop, a folder that takes no file: said now
+    # one writer per memory, as iloci teach and iloci serve (two nodes on one file lost
+    # each other's drawings)
+    release = acquire_memory_lock(path, "iloci ros")
     try:
-        rospy.spin()
+        agent = (iloci.Agent.load(path, args.config) if path.exists()
+                 else iloci.build(args.config))
+        if args.worker:
+            agent.start_worker()
+        session = TeachingSession(agent, save_to=path)
+        rospy.init_node(args.node_name, anonymous=False, disable_signals=False)
+        RosNode(session, rospy, prefix=args.prefix)
+        print(f"iloci ros: node {rospy.get_name()} on /{args.prefix.strip('/')}/*, memory "
+              f"{path} ({len(agent.memory)} entries, robot {agent.robot.name})",
+              file=sys.stderr, flush=True)
+        try:
+            rospy.spin()
+        finally:
+            agent.close()
     finally:
-        agent.close()
+        release()
     return 0

@@ -38,7 +38,8 @@ from typing import Any
 import numpy as np
 
 from iloci import errors
-from iloci.errors import InvalidInputError
+from iloci.errors import IlociError, InvalidInputError
+from iloci.progress import why_not_saved
 
 __all__ = ["Guess", "Placed", "StaleAnswerError", "TeachingSession"]
 
@@ -108,6 +109,10 @@ class Placed:
     feedbacks : tuple of int
     entries : int
         Entries in the memory now.
+    save_error : str or None
+        Why the memory could not be saved (a full disk, the file taken by
+        another writer): the drawing is learned in this session, not in
+        the file, and the next drawing placed tries to save again.
     """
 
     demo: str
@@ -115,11 +120,12 @@ class Placed:
     action: str
     feedbacks: tuple[int, ...]
     entries: int
+    save_error: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": "placed", "demo": self.demo, "concept": self.concept,
                 "action": self.action, "feedbacks": list(self.feedbacks),
-                "entries": self.entries}
+                "entries": self.entries, "save_error": self.save_error}
 
 
 class TeachingSession:
@@ -252,10 +258,17 @@ class TeachingSession:
             self.pending = None
             self._turn = None
             out = turn.outcome
+            failed = None
             if self.save_to is not None:
-                self.agent.save(self.save_to)
+                try:
+                    self.agent.save(self.save_to)
+                except (OSError, IlociError) as exc:  # learned; the file could not follow
+                    failed = (why_not_saved(self.save_to, exc) if isinstance(exc, OSError)
+                              and not isinstance(exc, IlociError) else str(exc))
+                    failed += (f" {out.demo} is learned in this session but not saved; "
+                               "the next drawing placed saves again.")
             return Placed(out.demo, out.concept, out.action, tuple(out.feedbacks),
-                          len(self.agent.memory))
+                          len(self.agent.memory), failed)
         a = turn.answer
         self.pending = Guess(
             answer_id=f"{self._nonce}-{next(self._ids)}", demo=a.demo, concept=a.concept,
