@@ -136,14 +136,20 @@ def _wait_for_subscribers(pub, timeout=30.0):
         time.sleep(0.1)
 
 
-def test_drawing_guess_feedback_over_a_real_roscore(ros_env, memory, tmp_path):
-    from nav_msgs.msg import Path as PathMsg
-    path, demos = memory
+def _start_node(ros_env, memory_file, tmp_path):
+    """A copy of the taught memory and an `iloci ros` node teaching it (its own session)."""
     taught = tmp_path / "robot.npz"
-    taught.write_bytes(Path(path).read_bytes())
+    taught.write_bytes(Path(memory_file).read_bytes())
     node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(taught)],
                             env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True)
+    return taught, node
+
+
+def test_drawing_guess_feedback_over_a_real_roscore(ros_env, memory, tmp_path):
+    from nav_msgs.msg import Path as PathMsg
+    path, demos = memory
+    taught, node = _start_node(ros_env, path, tmp_path)
     try:
         rospy.init_node("iloci_test", anonymous=True, disable_signals=True)
         listen = Listener()
@@ -250,11 +256,7 @@ def test_a_second_writer_and_bad_names_are_refused_before_the_node_starts(ros_en
     other's drawings; a --prefix or --node-name ROS refuses gave FATAL lines while the node
     stayed up, or "report it to its authors"."""
     path, _ = memory
-    taught = tmp_path / "robot.npz"
-    taught.write_bytes(Path(path).read_bytes())
-    node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(taught)],
-                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    taught, node = _start_node(ros_env, path, tmp_path)
     try:
         deadline = time.monotonic() + 120
         while not (tmp_path / "robot.npz.lock.json").exists():
