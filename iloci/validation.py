@@ -9,13 +9,13 @@ numeric, wrong shape, NaN or inf (with the first bad row).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
 from iloci.errors import InvalidDemonstrationError, InvalidInputError
 
-__all__ = ["MAX_POINTS", "check_array", "check_size", "shape_text"]
+__all__ = ["MAX_POINTS", "check_array", "check_size", "is_integer", "shape_text"]
 
 #: Most samples one demonstration may have: 2,000,000 (a pen sampled at 1 kHz for
 #: 33 minutes). Reading a drawing takes time linear in its samples, about 3 s per
@@ -25,6 +25,11 @@ __all__ = ["MAX_POINTS", "check_array", "check_size", "shape_text"]
 #: data layer may not import the sensorimotor one); also importable from
 #: :mod:`iloci.sensorimotor.preprocess`.
 MAX_POINTS = 2_000_000
+
+
+def is_integer(value: Any) -> TypeGuard[int | np.integer]:
+    """Whether ``value`` is an integer: a Python or numpy int, not a bool (nor numpy's)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
 def check_size(n: int, what: str) -> None:

@@ -24,6 +24,7 @@ from iloci.concepts.perform import ik_joint_limits, perform
 from iloci.config import memory_conflicts
 from iloci.errors import InvalidInputError
 from iloci.sensorimotor.frames import TeacherFrame
+from iloci.validation import is_integer
 
 if TYPE_CHECKING:
     from iloci.interfaces import Demonstration
@@ -106,9 +107,9 @@ class Controls(Persistence):
             raise InvalidInputError(f"restore takes a Snapshot (agent.snapshot()), got "
                                     f"{type(snapshot).__name__}.")
         if snapshot.agent:
-            theirs, mine = snapshot.agent, robot_record(self.robot)
+            theirs, mine = snapshot.agent, self._whose()["robot"]
             differ = memory_conflicts(theirs["config"], self.config)
-            if theirs["robot"] != json.loads(json.dumps(mine, default=str)):
+            if theirs["robot"] != mine:
                 differ.insert(0, f"robot = {theirs['robot']['name']!r} with "
                                  f"{len(theirs['robot']['joints'])} joints "
                                  f"(kinematics {theirs['robot'].get('kinematics')}), here "
@@ -153,7 +154,7 @@ class Controls(Persistence):
         InvalidInputError
             ``index`` is not an int, or not an entry of the memory; nothing changes.
         """
-        if not isinstance(index, (int, np.integer)) or isinstance(index, (bool, np.bool_)):
+        if not is_integer(index):
             raise InvalidInputError(f"forget_entry takes an entry's index (an int, 0-based in "
                                     f"memory.entries), got {index!r}.")
         index = int(index)
@@ -222,8 +223,7 @@ class Controls(Persistence):
                                     f"are {', '.join(self.memory.concepts()) or 'none'}.")
         if entry is None:
             index = self.memory.performer_of(concept)
-        elif (isinstance(entry, (int, np.integer)) and not isinstance(entry, (bool, np.bool_))
-                and int(entry) in mine):
+        elif is_integer(entry) and int(entry) in mine:
             index = int(entry)
         else:
             raise InvalidInputError(f"entry {entry!r} is not an entry of {concept!r}: give one "

@@ -21,6 +21,7 @@ from iloci.data.concepts import GroundTruth
 from iloci.data.datasets import writer_folds
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
+from iloci.validation import is_integer
 
 __all__ = ["fold_memory_name", "fold_plan", "lasa_folds", "untaught_concepts"]
 
@@ -51,9 +52,9 @@ def lasa_folds(demos: Sequence[Demonstration], folds: int = 5, seed: int = 0
         No demonstrations, ``folds < 2``, or a shape with fewer
         demonstrations than folds (some fold would not learn it).
     """
-    if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 2:
+    if not is_integer(folds) or folds < 2:
         raise InvalidInputError(f"folds must be an integer >= 2, got {folds!r}.")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+    if not is_integer(seed):
         raise InvalidInputError(f"seed must be an integer, got {seed!r}.")
     demos = list(demos)
     if not demos:

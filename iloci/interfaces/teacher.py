@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
-import numpy as np
-
 from iloci.errors import FeedbackError
 from iloci.interfaces.values import Demonstration, Response
+from iloci.validation import is_integer
 
 __all__ = ["Teacher", "check_feedback"]
 
@@ -38,8 +37,7 @@ def check_feedback(value: object, teacher: object) -> int:
         names the teacher's class, or ``teacher`` itself when it is a string
         naming where the feedback came from (e.g. ``"Turn.feedback()"``).
     """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
-            or int(value) not in (1, -1):
+    if not is_integer(value) or int(value) not in (1, -1):
         if isinstance(teacher, str):
             raise FeedbackError(f"{teacher} got {value!r}; feedback must be +1 (reward) or "
                                 "-1 (punishment).")

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from iloci.errors import InvalidDemonstrationError, TimeUnitWarning
-from iloci.validation import check_array
+from iloci.validation import check_array, is_integer
 
 __all__ = ["Demonstration", "Execution", "Response", "LONGEST_STROKE_S", "MAX_POSITION"]
 
@@ -93,8 +93,7 @@ class Demonstration:
         if not isinstance(shape, str) or not shape:
             raise InvalidDemonstrationError(f"shape must be a non-empty str (the key is "
                                             f"SHAPE/INDEX), got {shape!r}.")
-        if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)) \
-                or index < 0:
+        if not is_integer(index) or index < 0:
             raise InvalidDemonstrationError(f"index must be an int >= 0 (the key is "
                                             f"SHAPE/INDEX), got {index!r}.")
         if true_concept is not None and not isinstance(true_concept, str):

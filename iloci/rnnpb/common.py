@@ -56,6 +56,7 @@ from iloci.rnnpb.inputs import (bucket, check_generate_args, check_pbs, check_se
                                 pad_sequences)
 from iloci.rnnpb.state import (FORMAT, FORMAT_VERSION, WEIGHT_NAMES, make_state, pb_to_u,
                                read_state, u_to_pb, weight_shapes)
+from iloci.validation import is_integer
 
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "WEIGHT_NAMES", "make_params", "weight_shapes", "init_weights",
@@ -186,7 +187,7 @@ class RNNPBBase:
     score_chunk = 8192
 
     def __init__(self, *, seed: int = 0, **params: Any) -> None:
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        if not is_integer(seed):
             raise InvalidInputError(f"seed must be an integer, got {seed!r}.")
         self.params = make_params(**params)
         self.seed = int(seed)
@@ -322,7 +323,7 @@ class RNNPBBase:
         else:
             pbs0 = check_pbs(pbs_init, b, self.pb_size, "pbs_init")
         n = self.params.epochs if epochs is None else epochs
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        if not is_integer(n) or n < 0:
             raise InvalidInputError(f"epochs must be an integer >= 0, got {epochs!r}.")
         params = self.params
         if learning_rate is not None:

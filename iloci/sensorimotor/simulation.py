@@ -33,6 +33,7 @@ from iloci.linalg import matmul
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Execution
 from iloci.sensorimotor.robots import DrawingPlane, Robot
+from iloci.validation import is_integer
 
 __all__ = [
     "FRAME_RADIUS", "FRAME_RGBA", "MAX_IMAGE_SIZE", "PEN_RADIUS", "PEN_RGBA", "START_RADIUS",
@@ -233,8 +234,7 @@ def check_image_size(width: int, height: int,
     """Validate an image size in pixels; returns ``(width, height)`` as ints."""
     out = []
     for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or \
-                not 1 <= int(v) <= largest:
+        if not is_integer(v) or not 1 <= int(v) <= largest:
             raise InvalidInputError(
                 f"image {name} must be an integer number of pixels in 1..{largest}, "
                 f"got {v!r}.")
