@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 pytest.importorskip("pinocchio")
@@ -118,6 +119,22 @@ def test_a_misspelt_file_or_a_folder_among_the_demonstrations_fails_before_learn
         assert done.returncode == 2, done.stderr
         assert re.search(said, done.stderr), done.stderr
         assert "Nothing was learned" in done.stderr and not memory.exists()
+
+
+def test_teach_refuses_files_of_mixed_position_units_before_learning(fast, tmp_path, cli):
+    """`iloci evaluate --data` refused a data set of x_mm and x_px files; `iloci teach` took
+    the same files without a word."""
+    circle = np.stack([np.cos(np.linspace(0, 6, 40)), np.sin(np.linspace(0, 6, 40))], axis=1)
+    mm, px = tmp_path / "circle_mm.csv", tmp_path / "circle_px.csv"
+    mm.write_text("x_mm,y_mm\n" + "".join(f"{x},{y}\n" for x, y in 30 * circle))
+    px.write_text("x_px,y_px\n" + "".join(f"{x},{y}\n" for x, y in 100 * circle))
+    memory = tmp_path / "m.npz"
+    done = cli("teach", "--config", str(fast), "--memory", str(memory), str(mm), str(px))
+    assert done.returncode == 2, done.stderr
+    assert re.search(r"the files mix position units: mm: 1 file\(s\), e\.g\. .*circle_mm\.csv; "
+                     r"px: 1 file", done.stderr), done.stderr
+    assert "Nothing was learned" in done.stderr and not memory.exists()
+    assert "Traceback" not in done.stderr
 
 
 def test_serve_on_a_busy_port_or_an_unknown_host_says_so_before_announcing_a_page(tmp_path,

