@@ -191,6 +191,26 @@ def test_preprocess_demo(robot, demos):
         preprocess(np.zeros((5, 2)), plane=robot.plane)
 
 
+def test_an_untimed_drawing_is_paced_by_its_path_not_a_second_per_sample(robot):
+    """A 1000-sample CSV without times took 17 minutes to draw (dt 20 s per step): its
+    sample numbers were read as seconds. Now its path sets the time, at LASA's pace."""
+    from iloci.interfaces import Demonstration
+    from iloci.sensorimotor.pipeline import motion_dt, preprocessed
+
+    t = np.linspace(0, 1.8 * np.pi, 1000)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1)
+
+    def seconds(demo):
+        points = preprocessed(demo, None, robot)
+        return motion_dt(demo, points, robot.plane.height) * (len(points) - 1)
+    dense, sparse = Demonstration(circle), Demonstration(circle[::10])
+    assert not dense.timed and not sparse.timed
+    assert 2 < seconds(dense) < 15                                # not 999 s
+    assert seconds(sparse) == pytest.approx(seconds(dense), rel=0.02)  # not the sample count
+    timed = Demonstration(circle, times=np.linspace(0, 3.0, 1000))
+    assert timed.timed and seconds(timed) == pytest.approx(3.0)
+
+
 def test_config_rejects_even_smoothing_window():
     with pytest.raises(ConfigError, match="odd"):
         load_config({"sensorimotor": {"smoothing_window": 30}},

@@ -463,7 +463,7 @@ def check_times(times: np.ndarray, rows: Sequence[str], name: str) -> np.ndarray
     if not len(rise):
         raise InvalidDemonstrationError(
             f"{name}: every time stamp is {times[0]:g}; they say nothing of the pace. "
-            "Leave the time column out (the samples are then counted as steps).")
+            "Leave the time column out (the robot then draws at a default pace).")
     start = np.flatnonzero(np.r_[True, step > 0])  # first row of each run of equal stamps
     stop = np.r_[start[1:], len(times)]
     nxt = np.r_[times[start[1:]], times[start[-1]] + float(np.median(rise))]

@@ -617,8 +617,7 @@ def load_dataset(path: str | os.PathLike[str]) -> DataSet:
                     f"reads, one drawing: {TRAJECTORY_FORMATS}.")
     if timed[True] and timed[False]:
         raise _fail(f"data set {p} mixes units of time: {len(timed[True])} file(s) have time "
-                    f"stamps and {len(timed[False])} have none (their samples are counted "
-                    "as steps), e.g.:",
+                    f"stamps and {len(timed[False])} have none, e.g.:",
                     [f"with times: {root / timed[True][0]}",
                      f"without: {root / timed[False][0]}"],
                     "Give every file time stamps (a CSV time column, InkML's T channel, a "

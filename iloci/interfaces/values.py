@@ -52,7 +52,11 @@ class Demonstration:
         Pen positions in the teacher's frame (any unit; only the shape
         matters, it is scaled into the robot's drawing plane). ``N >= 3``.
     times : array_like, shape (N,), optional
-        Time stamps (s), strictly increasing. Defaults to ``0, 1, ..., N-1``.
+        Time stamps (s), strictly increasing. Defaults to ``0, 1, ..., N-1``
+        (sample numbers: the order, not a pace); :attr:`timed` is then
+        False, and the robot draws its answer at a default pace
+        (:data:`iloci.sensorimotor.pipeline.UNTIMED_PACE`), not one second
+        per sample.
     shape : str
         Name of the drawn shape (e.g. ``"GShape"``), or a file name.
     index : int
@@ -100,6 +104,7 @@ class Demonstration:
             raise InvalidDemonstrationError(f"true_concept must be a str or None, got "
                                             f"{true_concept!r}.")
         index = int(index)
+        object.__setattr__(self, "_timed", times is not None)
         for name, value in (("positions", positions), ("times", times), ("shape", shape),
                             ("index", index), ("true_concept", true_concept)):
             object.__setattr__(self, name, value)
@@ -167,6 +172,11 @@ class Demonstration:
         t.flags.writeable = False
         object.__setattr__(self, "positions", pos)
         object.__setattr__(self, "times", t)
+
+    @property
+    def timed(self) -> bool:
+        """Whether time stamps were given (False: :attr:`times` are sample numbers)."""
+        return bool(getattr(self, "_timed", True))
 
     @property
     def key(self) -> str:

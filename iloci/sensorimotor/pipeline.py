@@ -23,7 +23,8 @@ from iloci.interfaces import Demonstration, IKSolver
 from iloci.sensorimotor.preprocess import fit_to_plane, preprocess
 from iloci.sensorimotor.robots import Robot, get_robot
 
-__all__ = ["Motion", "MotionCache", "preprocessed", "tilted", "to_motion", "to_motions"]
+__all__ = ["UNTIMED_PACE", "Motion", "MotionCache", "motion_dt", "preprocessed", "tilted",
+           "to_motion", "to_motions"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,10 +137,40 @@ def to_motion(demo: Demonstration, config: SensorimotorConfig | Config | None,
     """
     cfg = _sensorimotor(config)
     robot = _robot(ik, robot)
+    points = preprocessed(demo, cfg, robot)
+    return _solved(demo.key, points, motion_dt(demo, points, robot.plane.height), ik, robot)
+
+
+#: The pace of a drawing given without time stamps, in heights of the robot's drawing
+#: plane per second along the pen's path: LASA's median (measured over its 182
+#: demonstrations in the Nao's plane, 0.1 m high: 0.045 m/s; 10th-90th percentile
+#: 0.029-0.065 m/s), so an untimed drawing takes about as long as a recorded one of its
+#: size and length, on any robot (a LASA G: 5 s).
+UNTIMED_PACE = 0.45
+
+
+def motion_dt(demo: Demonstration, points: np.ndarray, plane_height: float) -> float:
+    """The time step (s) of the motion of ``demo``, whose path in the plane is ``points``.
+
+    Timed (:attr:`~iloci.interfaces.Demonstration.timed`): its duration spread
+    over the steps. Untimed (sample numbers only): the path's length in the
+    plane drawn at :data:`UNTIMED_PACE` (before, one second per sample: a
+    1000-sample CSV without times took 17 minutes to draw).
+
+    Parameters
+    ----------
+    points : ndarray, shape (steps, 2)
+        Plane points (m), as :func:`preprocessed` gives them.
+    plane_height : float
+        The drawing plane's height (m).
+    """
+    steps = len(points)
     times = demo.times
     assert times is not None  # Demonstration fills in times when none are given
-    dt = float(times[-1] - times[0]) / (cfg.steps - 1)
-    return _solved(demo.key, preprocessed(demo, cfg, robot), dt, ik, robot)
+    if demo.timed:
+        return float(times[-1] - times[0]) / (steps - 1)
+    length = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+    return length / (UNTIMED_PACE * plane_height) / (steps - 1)
 
 
 def _robot(ik: IKSolver, robot: Robot | None) -> Robot:
@@ -266,7 +297,7 @@ class MotionCache:
     A cache holds motions for ONE conversion setting: its owner keeps it
     for one config (sensorimotor section, robot, IK solver) and never
     shares it between configs. Entries are keyed by the demonstration's key
-    and a BLAKE2b digest of its positions and times, so a changed or
+    and a BLAKE2b digest of its positions, times and whether they were given, so a changed or
     perturbed demonstration under the same key is converted anew, never
     answered with another's motion.
 
@@ -295,6 +326,7 @@ class MotionCache:
             a = np.ascontiguousarray(a, dtype=np.float64)
             h.update(repr(a.shape).encode())
             h.update(a.tobytes())
+        h.update(b"timed" if demo.timed else b"untimed")   # the same times, another pace
         return demo.key, h.digest()
 
     def get(self, demo: Demonstration, convert: Callable[[Demonstration], Motion]) -> Motion:
