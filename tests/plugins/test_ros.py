@@ -279,3 +279,73 @@ def test_a_second_writer_and_bad_names_are_refused_before_the_node_starts(ros_en
                                str(tmp_path / "new.npz"), *argv], env=ros_env,
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 2 and said in done.stderr, done.stderr
+
+
+def _init_test_node():
+    if not rospy.core.is_initialized():
+        rospy.init_node("iloci_test", anonymous=True, disable_signals=True)
+
+
+def test_a_burst_of_feedback_while_a_drawing_is_handled_is_answered_message_for_message(
+        ros_env, memory, tmp_path):
+    """An audit: the node's subscribers kept 10 messages; feedback that arrived while a
+    drawing was being handled was dropped past the 10th, without a word (a teacher's
+    judgement lost)."""
+    from nav_msgs.msg import Path as PathMsg
+    from std_msgs.msg import String
+    path, demos = memory
+    taught, node = _start_node(ros_env, path, tmp_path)
+    try:
+        _init_test_node()
+        listen = Listener()
+        pub = rospy.Publisher("/iloci/drawing", PathMsg, queue_size=100)
+        feedback = rospy.Publisher("/iloci/feedback", String, queue_size=100)
+        _wait_for_subscribers(pub, timeout=120)
+        _wait_for_subscribers(feedback)
+        time.sleep(1.0)
+        pub.publish(_path_msg(demos["Angle/3"].positions))
+        time.sleep(0.02)                       # the drawing first: it holds the session
+        for i in range(40):
+            feedback.publish(String(data=json.dumps({"answer_id": f"burst-{i}", "value": 1})))
+        listen.get("guess")
+        answered = [listen.get("feedback_result", timeout=60)[1] for _ in range(40)]
+        assert sorted(r["answer_id"] for r in answered) == sorted(f"burst-{i}"
+                                                                 for i in range(40))
+        assert not any(r["accepted"] for r in answered)
+    finally:
+        os.killpg(node.pid, signal.SIGINT)
+        node.wait(timeout=60)
+
+
+def test_ctrl_c_while_a_drawing_is_learned_lets_it_be_learned_and_saved(ros_env, memory,
+                                                                        tmp_path):
+    """An audit: Ctrl-C while the node trained on a drawing ended the process under the
+    training: the drawing was lost and nothing said so."""
+    from nav_msgs.msg import Path as PathMsg
+    import iloci
+    _, demos = memory
+    slow = tmp_path / "slow.toml"
+    slow.write_text("[perceptual_model]\nepochs = 200000\n")   # about 5 s of training
+    new = tmp_path / "new.npz"
+    node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(new),
+                             "--config", str(slow), "--prefix", "slow"], env=ros_env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        _init_test_node()
+        pub = rospy.Publisher("/slow/drawing", PathMsg, queue_size=10)
+        _wait_for_subscribers(pub, timeout=120)
+        time.sleep(1.0)
+        # the first drawing founds the first concept: the node trains on it at once
+        pub.publish(_path_msg(demos["GShape/0"].positions))
+        time.sleep(1.5)
+        assert not new.exists()
+        os.killpg(node.pid, signal.SIGINT)
+        _, err = node.communicate(timeout=120)
+    finally:
+        if node.poll() is None:
+            os.killpg(node.pid, 9)
+            node.communicate()
+    assert "stopping once the drawing in progress is learned and saved" in err, err
+    assert new.exists(), err
+    assert len(iloci.Agent.load(new).memory) == 1

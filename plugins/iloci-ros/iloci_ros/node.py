@@ -10,7 +10,8 @@ topic                     type                                 what
                                                                stamps as time stamps when
                                                                strictly increasing
 ``/PREFIX/polygon``       ``geometry_msgs/PolygonStamped``     a drawing without times
-                          (in)
+                          (in)                                 (answered at
+                                                               ``UNTIMED_PACE``)
 ``/PREFIX/feedback``      ``std_msgs/String`` (in)             JSON ``{"answer_id": ID,
                                                                "value": 1 | -1}``
 ``/PREFIX/guess``         ``std_msgs/String`` (out)            JSON: ``kind: "guess"``,
@@ -45,6 +46,8 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import signal
+import threading
 from pathlib import Path
 import sys
 from typing import Any
@@ -106,10 +109,14 @@ class RosNode:
         self.pub_outcome = pub(f"{p}/outcome", String, queue_size=10)
         self.pub_result = pub(f"{p}/feedback_result", String, queue_size=10)
         self.pub_error = pub(f"{p}/error", String, queue_size=10)
+        # no bound on the incoming queues (queue_size=None): a drawing is learned for
+        # seconds while messages wait, and a bounded queue drops the oldest without a
+        # word (10 feedbacks sent during a rehearsal lost the 11th's teacher judgement)
         self.subs = [
-            rospy.Subscriber(f"{p}/drawing", PathMsg, self._on_path, queue_size=10),
-            rospy.Subscriber(f"{p}/polygon", PolygonStamped, self._on_polygon, queue_size=10),
-            rospy.Subscriber(f"{p}/feedback", String, self._on_feedback, queue_size=10),
+            rospy.Subscriber(f"{p}/drawing", PathMsg, self._on_path, queue_size=None),
+            rospy.Subscriber(f"{p}/polygon", PolygonStamped, self._on_polygon,
+                             queue_size=None),
+            rospy.Subscriber(f"{p}/feedback", String, self._on_feedback, queue_size=None),
         ]
 
     # -- in ------------------------------------------------------------------------
@@ -184,6 +191,29 @@ class RosNode:
         self.pub_path.publish(traj)
 
 
+def _finish(session: TeachingSession) -> None:
+    """On the way out (Ctrl-C, rosnode kill): let the drawing in progress be learned and
+    saved, and say what is left unlearned (before, the process ended under it)."""
+    if threading.current_thread() is threading.main_thread():
+        # rospy's handler only shuts down again: a second Ctrl-C must reach us
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if session.busy:
+        print("iloci ros: stopping once the drawing in progress is learned and saved "
+              "(Ctrl-C again abandons it) ...", file=sys.stderr, flush=True)
+        try:
+            session.finish()
+        except KeyboardInterrupt:
+            print("iloci ros: abandoned: the drawing in progress is not learned; the memory "
+                  "file holds what was saved before it.", file=sys.stderr, flush=True)
+            return
+    pending = session.pending
+    if pending is not None:
+        print(f"iloci ros: drawing {pending.demo} was not learned: its answer "
+              f"{pending.answer_id} was never judged.", file=sys.stderr, flush=True)
+    else:
+        print("iloci ros: stopped; no drawing was in progress.", file=sys.stderr, flush=True)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "ros", help="run the robot as a ROS 1 node: drawings in, guesses and joint paths out",
@@ -248,6 +278,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             rospy.spin()
         finally:
+            _finish(session)
             agent.close()
     finally:
         release()

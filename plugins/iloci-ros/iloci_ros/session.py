@@ -252,6 +252,33 @@ class TeachingSession:
         self.last_seconds = self._clock() - t0
         return result
 
+    @property
+    def busy(self) -> bool:
+        """Whether a drawing or a feedback is being handled now (recognized, learned, saved)."""
+        return self._lock.locked()
+
+    def finish(self, timeout: float | None = None) -> bool:
+        """Wait until the drawing or feedback being handled is done (learned and saved).
+
+        A node that stops (Ctrl-C) calls this before it closes the agent, so a
+        drawing whose feedback was accepted is not lost half-way through its
+        rehearsal.
+
+        Parameters
+        ----------
+        timeout : float, optional
+            Seconds to wait at most (default: as long as it takes).
+
+        Returns
+        -------
+        bool
+            True when nothing is in progress any more.
+        """
+        if not self._lock.acquire(timeout=-1 if timeout is None else timeout):
+            return False
+        self._lock.release()
+        return True
+
     def _after(self, turn: Any) -> Guess | Placed:
         """The turn's pending answer as a Guess, or its outcome as Placed (memory saved)."""
         if turn.done:
