@@ -141,3 +141,28 @@ def test_a_save_that_fails_says_so_with_the_drawing_learned(lasa, small_agent, t
     while isinstance(out, Guess):
         out = session.feedback(out.answer_id, -1)
     assert out.save_error is None and len(load_memory(tmp_path / "m.npz")[0]) == 2
+
+
+def test_a_memory_file_replaced_under_the_session_is_not_saved_over(lasa, small_agent,
+                                                                    tmp_path):
+    """An audit: a memory file copied over while the node ran (another memory put in its
+    place) was overwritten at the next drawing placed, without a word."""
+    save = tmp_path / "m.npz"
+    session = TeachingSession(small_agent(), save_to=save)
+    assert session.drawing(lasa["GShape/0"].positions, key="GShape/0").save_error is None
+    theirs = b"another memory, put here by hand"
+    save.write_bytes(theirs)
+    out = session.drawing(lasa["Angle/0"].positions, key="Angle/0")
+    while isinstance(out, Guess):
+        out = session.feedback(out.answer_id, -1)
+    assert out.save_error and f"the memory file {save} was changed on disk" in out.save_error
+    assert save.read_bytes() == theirs
+    beside = [p for p in tmp_path.iterdir() if p.name.startswith("m.session-")]
+    assert len(beside) == 1 and str(beside[0]) in out.save_error
+    assert len(load_memory(beside[0])[0]) == 2
+    # the session goes on saving there, and never over the file it left
+    out = session.drawing(lasa["GShape/1"].positions, key="GShape/1")
+    while isinstance(out, Guess):
+        out = session.feedback(out.answer_id, 1 if out.concept == "c1" else -1)
+    assert out.save_error is None and save.read_bytes() == theirs
+    assert load_memory(beside[0])[0].demonstrations_seen == 3

@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 import itertools
 import os
+from pathlib import Path
 import secrets
 import threading
 import time
@@ -128,6 +129,18 @@ class Placed:
                 "entries": self.entries, "save_error": self.save_error}
 
 
+def _identity(path: str | os.PathLike[str] | None) -> tuple[int, int, int, int] | None:
+    """The file at ``path`` as the file system tells one version from another: (device,
+    inode, size, modification time in ns); None when there is none."""
+    if path is None:
+        return None
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
 class TeachingSession:
     """An agent taught by drawings and yes/no events, each answer named by an id.
 
@@ -135,7 +148,10 @@ class TeachingSession:
     ----------
     agent : iloci.Agent
     save_to : path-like, optional
-        Saved (atomically) after each turn that changed the memory.
+        Saved (atomically) after each turn that changed the memory. A file
+        changed on disk by something else since the session read or saved
+        it is not saved over (:meth:`_save`: the memory goes beside it, and
+        :attr:`Placed.save_error` says where).
     shape : str
         Demonstration keys are ``"{shape}/{n}"``, ``n`` counting the
         drawings the memory has seen.
@@ -155,6 +171,9 @@ class TeachingSession:
                  clock: Callable[[], float] = time.perf_counter) -> None:
         self.agent = agent
         self.save_to = save_to
+        #: What the memory file was when this session last read or wrote it
+        #: (:func:`_identity`): a file changed since by something else is not saved over.
+        self._on_disk = _identity(save_to)
         self.shape = shape
         self._clock = clock
         self._lock = threading.Lock()
@@ -279,6 +298,38 @@ class TeachingSession:
         self._lock.release()
         return True
 
+    def _save(self, demo: str) -> str | None:
+        """Save the memory after ``demo`` was placed; why it could not be, or None.
+
+        A memory file changed on disk since this session read or wrote it
+        (copied over, replaced by another memory) is not saved over: the
+        session's memory goes to a file beside it, named in the message, and
+        so do the later saves of this session.
+        """
+        assert self.save_to is not None
+        diverted = None
+        now = _identity(self.save_to)
+        if now is not None and now != self._on_disk:
+            original = Path(self.save_to)
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            self.save_to = diverted = original.with_name(
+                f"{original.stem}.session-{stamp}-{self._nonce}{original.suffix}")
+        try:
+            self.agent.save(self.save_to)
+        except (OSError, IlociError) as exc:  # learned; the file could not follow
+            failed = (why_not_saved(self.save_to, exc) if isinstance(exc, OSError)
+                      and not isinstance(exc, IlociError) else str(exc))
+            return failed + (f" {demo} is learned in this session but not saved; "
+                             "the next drawing placed saves again.")
+        self._on_disk = _identity(self.save_to)
+        if diverted is not None:
+            return (f"the memory file {original} was changed on disk since this session "
+                    "read or saved it (replaced or copied over by something else); it was "
+                    f"not overwritten. This session's memory, with {demo}, is saved to "
+                    f"{diverted}, and so are its next drawings. Keep one of the two files, "
+                    "and restart the node on it.")
+        return None
+
     def _after(self, turn: Any) -> Guess | Placed:
         """The turn's pending answer as a Guess, or its outcome as Placed (memory saved)."""
         if turn.done:
@@ -287,13 +338,7 @@ class TeachingSession:
             out = turn.outcome
             failed = None
             if self.save_to is not None:
-                try:
-                    self.agent.save(self.save_to)
-                except (OSError, IlociError) as exc:  # learned; the file could not follow
-                    failed = (why_not_saved(self.save_to, exc) if isinstance(exc, OSError)
-                              and not isinstance(exc, IlociError) else str(exc))
-                    failed += (f" {out.demo} is learned in this session but not saved; "
-                               "the next drawing placed saves again.")
+                failed = self._save(out.demo)
             return Placed(out.demo, out.concept, out.action, tuple(out.feedbacks),
                           len(self.agent.memory), failed)
         a = turn.answer
