@@ -349,3 +349,78 @@ def test_ctrl_c_while_a_drawing_is_learned_lets_it_be_learned_and_saved(ros_env,
     assert "stopping once the drawing in progress is learned and saved" in err, err
     assert new.exists(), err
     assert len(iloci.Agent.load(new).memory) == 1
+
+
+def _topics(env) -> str:
+    return subprocess.run(["rostopic", "list"], env=env, capture_output=True, text=True,
+                          timeout=60).stdout
+
+
+def test_the_topics_follow_the_nodes_namespace(ros_env, memory, tmp_path):
+    """An audit: the topics were absolute (/iloci/...), so ROS_NAMESPACE or a launch file's
+    <group ns="robot1"> did not move them, and two robots' nodes shared one set."""
+    path, _ = memory
+    taught = tmp_path / "robot.npz"
+    taught.write_bytes(Path(path).read_bytes())
+    node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(taught)],
+                            env={**ros_env, "ROS_NAMESPACE": "robot1"}, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while "/robot1/iloci/drawing" not in _topics(ros_env):
+            assert node.poll() is None, node.stderr.read()
+            assert time.monotonic() < deadline, _topics(ros_env)
+            time.sleep(0.5)
+        assert "/iloci/drawing" not in _topics(ros_env).split()
+    finally:
+        os.killpg(node.pid, signal.SIGINT)
+        _, err = node.communicate(timeout=60)
+    assert "on /robot1/iloci/*" in err, err
+
+
+def test_a_restarted_roscore_stops_the_node_with_a_message_not_a_deaf_node(memory, tmp_path):
+    """An audit: after roscore was restarted, the node stayed up registered with the old
+    master, deaf to every drawing and feedback, and said nothing."""
+    path, _ = memory
+    home = tmp_path / "home"
+    port = _free_port()
+    env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(home),
+           "ROS_LOG_DIR": str(home / "log"), "ROS_HOSTNAME": "127.0.0.1"}
+
+    def core():
+        proc = subprocess.Popen(["roscore", "-p", str(port)], env=env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True)
+        deadline = time.monotonic() + 60
+        while subprocess.run(["rostopic", "list"], env=env, capture_output=True).returncode:
+            assert time.monotonic() < deadline and proc.poll() is None, "no roscore"
+            time.sleep(0.5)
+        return proc
+
+    first = core()
+    taught = tmp_path / "robot.npz"
+    taught.write_bytes(Path(path).read_bytes())
+    node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(taught)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    second = None
+    try:
+        deadline = time.monotonic() + 120
+        while "/iloci/drawing" not in _topics(env):
+            assert node.poll() is None, node.stderr.read()
+            assert time.monotonic() < deadline
+            time.sleep(0.5)
+        os.killpg(first.pid, signal.SIGINT)
+        first.wait(timeout=30)
+        second = core()
+        _, err = node.communicate(timeout=60)
+        assert node.returncode == 1, err
+        assert "the ROS master was restarted" in err and "start the node again" in err
+    finally:
+        if node.poll() is None:
+            os.killpg(node.pid, 9)
+            node.communicate()
+        for proc in (first, second):
+            if proc is not None and proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGINT)
+                proc.wait(timeout=30)

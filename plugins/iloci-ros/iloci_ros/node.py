@@ -88,10 +88,21 @@ class RosNode:
     rospy : module
         From :func:`iloci_ros.rospath.import_rospy`, after ``rospy.init_node``.
     prefix : str
-        Topic namespace.
+        Topic namespace: relative (``iloci``: resolved in the node's
+        namespace, so ``ROS_NAMESPACE=robot1`` or a launch file's ``<group
+        ns="robot1">`` gives ``/robot1/iloci/drawing``), or absolute
+        (``/iloci``).
+    watch_master : float
+        Seconds between checks that the ROS master is the one the node
+        registered with (0: none). A roscore restarted under a rospy node
+        leaves it registered nowhere, deaf to every topic, without a word;
+        on a new master (its ``/run_id`` changed) the node stops
+        (:attr:`master_restarted`), so that it can be started again (by
+        hand or by ``respawn="true"``).
     """
 
-    def __init__(self, session: TeachingSession, rospy: Any, prefix: str = "iloci") -> None:
+    def __init__(self, session: TeachingSession, rospy: Any, prefix: str = "iloci",
+                 watch_master: float = 2.0) -> None:
         from geometry_msgs.msg import PolygonStamped
         from nav_msgs.msg import Path as PathMsg
         from std_msgs.msg import String
@@ -102,7 +113,14 @@ class RosNode:
         self._String = String
         self._JointTrajectory = JointTrajectory
         self._Point = JointTrajectoryPoint
-        p = "/" + prefix.strip("/")
+        # a relative prefix resolves in the node's namespace (ROS_NAMESPACE, <group ns>)
+        p = "/" + prefix.strip("/") if prefix.startswith("/") else prefix.strip("/")
+        #: The topics' namespace as resolved (``/iloci``, ``/robot1/iloci``).
+        self.topics = rospy.resolve_name(p)
+        #: True once the node stopped because its ROS master was replaced.
+        self.master_restarted = False
+        self._master_lost = False
+        self._run_id = self._master_run_id()
         pub = rospy.Publisher
         self.pub_guess = pub(f"{p}/guess", String, queue_size=10)
         self.pub_path = pub(f"{p}/joint_path", JointTrajectory, queue_size=10)
@@ -118,6 +136,29 @@ class RosNode:
                              queue_size=None),
             rospy.Subscriber(f"{p}/feedback", String, self._on_feedback, queue_size=None),
         ]
+
+        if watch_master > 0 and self._run_id is not None:
+            self._watch = rospy.Timer(rospy.Duration(watch_master), self._check_master)
+
+    # -- the master ------------------------------------------------------------------
+    def _master_run_id(self) -> str | None:
+        try:
+            return str(self.rospy.get_param("/run_id"))
+        except Exception:          # noqa: BLE001  (no master, no /run_id: socket or KeyError)
+            return None
+
+    def _check_master(self, _event: Any = None) -> None:
+        run_id = self._master_run_id()
+        if run_id is None:
+            if not self._master_lost:
+                self._master_lost = True
+                self.rospy.logwarn("iloci: the ROS master does not answer; waiting for it")
+            return
+        self._master_lost = False
+        if run_id != self._run_id:
+            self.master_restarted = True
+            self.rospy.logerr("iloci: the ROS master was restarted; stopping")
+            self.rospy.signal_shutdown("the ROS master was restarted")
 
     # -- in ------------------------------------------------------------------------
     def _on_path(self, msg: Any) -> None:
@@ -251,10 +292,11 @@ def run(args: argparse.Namespace) -> int:
     if bad:
         raise InvalidInputError(f"iloci ros: unexpected argument(s) {bad}; only ROS "
                                 "remappings NAME:=VALUE may follow the options.")
-    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*", args.prefix.strip("/")):
+    if not re.fullmatch(r"/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*/?", args.prefix):
         raise InvalidInputError(f"--prefix {args.prefix!r} is not a ROS name: letters, digits "
                                 "and _, starting with a letter, parts joined by / (e.g. "
-                                "iloci or robot1/iloci).")
+                                "iloci or robot1/iloci; a leading / makes it absolute, "
+                                "outside the node's namespace).")
     if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", args.node_name):
         raise InvalidInputError(f"--node-name {args.node_name!r} is not a ROS node name: "
                                 "letters, digits and _, starting with a letter (e.g. iloci).")
@@ -271,8 +313,8 @@ def run(args: argparse.Namespace) -> int:
             agent.start_worker()
         session = TeachingSession(agent, save_to=path)
         rospy.init_node(args.node_name, anonymous=False, disable_signals=False)
-        RosNode(session, rospy, prefix=args.prefix)
-        print(f"iloci ros: node {rospy.get_name()} on /{args.prefix.strip('/')}/*, memory "
+        node = RosNode(session, rospy, prefix=args.prefix)
+        print(f"iloci ros: node {rospy.get_name()} on {node.topics}/*, memory "
               f"{path} ({len(agent.memory)} entries, robot {agent.robot.name})",
               file=sys.stderr, flush=True)
         try:
@@ -282,4 +324,10 @@ def run(args: argparse.Namespace) -> int:
             agent.close()
     finally:
         release()
+    if node.master_restarted:
+        print("iloci ros: the ROS master was restarted (its /run_id changed): this node's "
+              "topics were registered with the old one, and no message would have reached "
+              "it. Stopped, with the memory saved; start the node again (in a launch file, "
+              "respawn=\"true\" does).", file=sys.stderr, flush=True)
+        return 1
     return 0
