@@ -200,3 +200,25 @@ def test_a_headerless_x_y_pressure_file_read_as_t_x_y_is_warned_of(tmp_path, cli
         load_trajectory(timed)                    # a real t, x, y file: no warning
     done = cli("show", str(pressure), "--out", str(tmp_path / "w.png"))
     assert "warning: wave.csv: no header" in done.stderr
+
+
+def test_show_draws_a_screen_coordinate_pen_path_the_way_it_was_drawn(tmp_path, monkeypatch):
+    """A fresh user's report: with [sensorimotor] y_axis = "down", `iloci show` drew the
+    robot's fitted path upright and the pen path beside it upside down."""
+    import matplotlib.pyplot as plt
+
+    import iloci
+    from iloci.commands.show import plot_motion
+    shown = []
+    monkeypatch.setattr(plt, "close", lambda fig=None: shown.append(fig))
+    agent = iloci.build({"sensorimotor": {"y_axis": "down"}})
+    t = np.linspace(0, 1, 40)
+    demo = iloci.Demonstration(np.stack([t, t ** 2], axis=1))
+    motion = agent.motion(demo)
+    reached = np.asarray(agent.ik_solver.forward(motion.joint_path))
+    for y_axis, inverted in (("down", True), ("up", False)):
+        plot_motion(demo, motion, reached, agent.robot, tmp_path / f"{y_axis}.png",
+                    y_axis=y_axis)
+        pen = shown[-1].axes[0]
+        assert bool(pen.yaxis_inverted()) is inverted
+        assert pen.get_ylabel() == f"y (teacher, pointing {y_axis})"

@@ -374,6 +374,8 @@ def test_iloci_evaluate_data_runs_the_protocol_on_a_users_folder(tmp_path, cli):
         assert set(f["true_concepts"]) == {"circle", "line", "square"}
     report = (out / "report.md").read_text()
     assert "on shapes (writer-disjoint folds)" in report and ds.checksum in report
+    # the reading that decides whether a screen-coordinate set is learned upside down
+    assert "read with their y axis pointing up (`[sensorimotor] y_axis`" in report
     # each fold names the writers it was taught and those it recognized ...
     plan = writer_folds(ds.samples, len(folds), seed=metrics["config"]["evaluation"]["seed"])
     for row, (learn, test) in zip(metrics["folds"], plan):

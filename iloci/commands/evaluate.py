@@ -168,7 +168,11 @@ def _run_folds(args: argparse.Namespace, config) -> int:
     else:
         what = "LASA"
     split = ", writer-disjoint" if config.evaluation.split == "writers" else ""
-    print(f"iloci evaluate: {config.evaluation.folds}-fold {what}{split}, seed {config.seed}, "
+    k = config.evaluation.folds
+    run = (f"{k}-fold {what}" if not args.folds else
+           f"fold{'s' if len(args.folds) > 1 else ''} {', '.join(map(str, args.folds))} of "
+           f"{k} folds of {what}")
+    print(f"iloci evaluate: {run}{split}, seed {config.seed}, "
           f"perceptual model {config.perceptual_model.name}, clusterer "
           f"{config.clusterer.name}, teacher {config.teacher.name}, "
           f"jobs {_jobs(args, config)}, executor {args.executor}",

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     motion = to_motion(demo, sm, ik, robot)
     reached = np.asarray(ik.forward(motion.joint_path))
     err = np.linalg.norm(reached - motion.targets, axis=1)
-    plot_motion(demo, motion, reached, robot, out)
+    plot_motion(demo, motion, reached, robot, out, y_axis=sm.y_axis)
     q = motion.joint_path
     inside = bool(np.all((q >= ik.lower) & (q <= ik.upper)))
     print(f"{demo.key}: {len(demo)} pen points -> {len(motion)} steps, dt {motion.dt:.3f} s; "
@@ -122,7 +122,8 @@ def _show_memory(args: argparse.Namespace) -> int:
     return 0
 
 
-def plot_motion(demo, motion, reached: np.ndarray, robot: Any, out: str | Path) -> Path:
+def plot_motion(demo, motion, reached: np.ndarray, robot: Any, out: str | Path,
+                y_axis: str = "up") -> Path:
     """Draw the three panels of ``iloci show`` and write them atomically to ``out``.
 
     Parameters
@@ -136,6 +137,10 @@ def plot_motion(demo, motion, reached: np.ndarray, robot: Any, out: str | Path) 
         automatic search's margins when it placed the plane.
     out : path
         Image file; the format follows its suffix (``.png`` by default).
+    y_axis : str
+        The teacher's y axis, as ``[sensorimotor] y_axis`` reads it: ``"down"``
+        (screen coordinates) draws the pen path with y growing downwards, as
+        it was drawn, not upside down.
 
     Returns
     -------
@@ -162,8 +167,10 @@ def plot_motion(demo, motion, reached: np.ndarray, robot: Any, out: str | Path) 
     ax.plot(*p[-1], "s", color="tab:red", label="end")
     ax.set_title(f"pen path {demo.key} ({len(p)} points)")
     ax.set_xlabel("x (teacher)")
-    ax.set_ylabel("y (teacher)")
+    ax.set_ylabel(f"y (teacher, pointing {'down' if y_axis == 'down' else 'up'})")
     ax.set_aspect("equal", adjustable="datalim")
+    if y_axis == "down":
+        ax.invert_yaxis()
     ax.legend(fontsize=8)
 
     ax = axes[1]

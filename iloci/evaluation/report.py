@@ -326,7 +326,10 @@ def _write_outputs(out_dir: str | Path, metrics: dict[str, Any],
         "recognized without feedback. Seed "
         f"{m['seed']}; back ends: "
         + ", ".join(f"{k} = {v['name']}" for k, v in m["config"].items() if "name" in v)
-        + ".",
+        + ". The drawings were read with their y axis pointing "
+        + ((m["config"].get("sensorimotor") or {}).get("y_axis", "up"))
+        + " (`[sensorimotor] y_axis`: `down` for screen and tablet coordinates, or every "
+          "shape is learned upside down).",
         "",
         "## Headline",
         "",
