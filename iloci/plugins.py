@@ -386,6 +386,9 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
                       f"{pinfo.distribution!r}) failed to register its components and was "
                       f"skipped: {error}")
     registry.unloaded = [i for i in info.values() if i.status != "loaded"]
+    from iloci.registry import ambiguity
+    for (kind_name, name), claims in registry.ambiguous.items():
+        _warn(ambiguity(kind_name, name, claims))
     return registry
 
 

@@ -367,6 +367,34 @@ def test_plugin_failing_in_its_registration_hook_is_isolated(site):
     assert pm.iloci_plugin_info["boom"].status == "failed"
 
 
+def test_a_name_two_installed_plugins_register_is_used_by_neither(site):
+    """A plugin audit: two installed plugins both registering teacher 'labelfile' -- the
+    one whose entry point sorted first won, the other was skipped whole (its other
+    components too), and a config naming 'labelfile' ran the impostor with exit 0."""
+    two = GOOD_TEACHER + """
+    @hookimpl
+    def iloci_register_clusterers(registry):
+        registry.add("mine", "x:y", summary="the real plugin's other component")
+"""
+    _fake_distribution(site, "iloci-impostor", "iloci_impostor", "aaa", GOOD_TEACHER.format(
+        name="labelfile"))
+    _fake_distribution(site, "iloci-real", "iloci_real", "real", two.format(name="labelfile"))
+    with pytest.warns(PluginLoadWarning, match=r"teacher 'labelfile' is registered by 2 "
+                      r"installed plugins: plugin 'aaa' \(distribution iloci-impostor\) and "
+                      r"plugin 'real' \(distribution iloci-real\)"):
+        registry = get_registry(get_plugin_manager())
+    assert "labelfile" not in registry.names("teacher")
+    assert "mine" in registry.names("clusterer")          # the rest of each plugin works
+    with pytest.raises(PluginError, match="does not guess which one is meant.*"
+                                          "ILOCI_BLOCK_PLUGINS=real"):
+        load_config({"teacher": {"name": "labelfile"}}, registry=registry)
+    # blocking one gives the name to the other
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PluginLoadWarning)
+        registry = get_registry(get_plugin_manager(block=["aaa"]))
+    assert registry.get("teacher", "labelfile").plugin == "real"
+
+
 def test_entry_point_name_collision_loads_both_and_names_both(site):
     _fake_distribution(site, "iloci-aaa", "iloci_aaa", "same", GOOD_TEACHER.format(name="a1"))
     _fake_distribution(site, "iloci-bbb", "iloci_bbb", "same", GOOD_TEACHER.format(name="b1"),

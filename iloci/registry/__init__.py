@@ -159,12 +159,22 @@ class Registry:
         #: :func:`~iloci.plugins.get_registry`, so a config naming one of
         #: their components is told why it is missing.
         self.unloaded: list[Any] = []
+        #: Names two installed plugins both register: (kind, name) -> their specs. Neither
+        #: is used; asking for the name is an error naming both (:meth:`get`).
+        self.ambiguous: dict[tuple[str, str], list[ComponentSpec]] = {}
 
     def remove_plugin(self, plugin: str) -> None:
         """Forget every component registered by ``plugin``."""
         for specs in self._specs.values():
             for name in [n for n, s in specs.items() if s.plugin == plugin]:
                 del specs[name]
+        for key, claims in list(self.ambiguous.items()):
+            left = [c for c in claims if c.plugin != plugin]
+            if len(left) == 1:            # the one claimant left has the name to itself
+                del self.ambiguous[key]
+                self._specs[key[0]][key[1]] = left[0]
+            elif len(left) < len(claims):
+                self.ambiguous[key] = left
 
     def add(self, kind: str, name: str, factory: str | Callable[..., Any], *,
             params: type | None = None, requires: Iterable[str] = (),
@@ -186,12 +196,18 @@ class Registry:
             raise PluginError(f"plugin {plugin!r}: params of {kind} {name!r} must be "
                               "a dataclass type.")
         old = self._specs[kind].get(name)
-        if old is not None:
-            def who(p: str, d: str | None) -> str:
-                return f"plugin {p!r}" + (f" (distribution {d})" if d else "")
+        claims = self.ambiguous.get((kind, name))
+        if old is not None and old.plugin == plugin:
+            raise PluginError(f"{_who(plugin, distribution)} registers {_label(kind)} {name!r} "
+                              "twice: register each name once.")
+        installed = distribution not in (None, "iloci")
+        if claims is None and old is not None and not (
+                installed and old.distribution not in (None, "iloci")):
+            # a built-in's name taken, or a collision among plugin objects the caller
+            # passed (their code): refused now
             raise PluginError(
                 f"{_label(kind)} {name!r} is registered twice: by "
-                f"{who(old.plugin, old.distribution)} and by {who(plugin, distribution)}. "
+                f"{_who(old.plugin, old.distribution)} and by {_who(plugin, distribution)}. "
                 "Uninstall one, or block one with ILOCI_BLOCK_PLUGINS."
             )
         if describe and ":" not in describe:
@@ -207,6 +223,12 @@ class Registry:
         spec = ComponentSpec(kind, name, factory, params, tuple(requires),
                              install or "", summary, plugin, distribution, version, describe,
                              tuple((k, facts[k]) for k in needed))
+        if claims is not None or old is not None:
+            # two installed plugins claim one name: iloci does not pick one by the
+            # order they load in (the other's component would run under that name)
+            self.ambiguous[(kind, name)] = [*(claims or [old]), spec]
+            self._specs[kind].pop(name, None)
+            return spec
         self._specs[kind][name] = spec
         return spec
 
@@ -227,12 +249,16 @@ class Registry:
         return [self._specs[k][n] for k in kinds for n in sorted(self._specs[k])]
 
     def get(self, kind: str, name: str) -> ComponentSpec:
-        """The spec of ``name``; :class:`UnknownComponentError` if none."""
+        """The spec of ``name``; :class:`UnknownComponentError` if none, :class:`PluginError`
+        if two installed plugins register it (:attr:`ambiguous`)."""
         _check_kind(kind)
         try:
             return self._specs[kind][name]
         except KeyError:
             pass
+        claims = self.ambiguous.get((kind, name))
+        if claims:
+            raise PluginError(ambiguity(kind, name, claims))
         dist = FIRST_PARTY.get((kind, name))
         if dist is not None:
             for info in self.unloaded:
@@ -329,6 +355,20 @@ class Registry:
                 f"raised {type(exc).__name__}: {exc}. Fix or update the plugin, or block it "
                 f"with ILOCI_BLOCK_PLUGINS={spec.plugin}.") from exc
         return check_built(spec, built)
+
+
+def _who(plugin: str, distribution: str | None) -> str:
+    return f"plugin {plugin!r}" + (f" (distribution {distribution})" if distribution else "")
+
+
+def ambiguity(kind: str, name: str, claims: Iterable[ComponentSpec]) -> str:
+    """The message for a name several installed plugins register (:attr:`Registry.ambiguous`)."""
+    claims = list(claims)
+    return (f"{_label(kind)} {name!r} is registered by {len(claims)} installed plugins: "
+            + " and ".join(_who(c.plugin, c.distribution) for c in claims)
+            + "; iloci does not guess which one is meant, so neither is used under that "
+            "name. Uninstall one, or block one with ILOCI_BLOCK_PLUGINS="
+            + claims[-1].plugin + ".")
 
 
 def _first_party(spec: ComponentSpec) -> bool:
