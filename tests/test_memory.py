@@ -63,6 +63,41 @@ def test_close_pair_of_exemplars_is_a_valid_cluster(clusterer):
     assert 0.05 < plan.d_cutoff < 1.4
 
 
+class _Returns:
+    """A clusterer plugin with a fault: returns ``labels`` whatever it is asked."""
+
+    def __init__(self, labels):
+        self.labels = labels
+
+    def cluster(self, points, distance_threshold):
+        return self.labels
+
+
+@pytest.mark.parametrize("labels, said", [
+    ([np.nan, 0, 1, 1, 2], r"returned label nan \(point 0\); labels are whole numbers"),
+    ([0.5, 0, 1, 1, 2], r"returned label 0.5 \(point 0\)"),
+    ([-1, -1, 0, 0, 1], r"returned a negative label \(-1\)"),
+    ([True, True, False, False, True], "returned labels of dtype bool, not integers"),
+    (["a", "a", "b", "b", "c"], "returned labels of dtype <U1, not integers"),
+    ([0, 0, 0, 0, 0], r"put points 2\.\d+ apart into one cluster, over the cut"),
+    ([0, 0, 1], r"returned labels of shape \(3,\) for 5 points"),
+    ([0, 1, 2, 3, 4], r"kept apart two clusters \(points \[0\] and \[1\]\) whose farthest "
+                      r"pair is 0.05 apart, within the cut"),
+])
+def test_a_clusterers_labels_are_checked_not_cast(labels, said):
+    """A plugin audit: NaN labels were cast to a huge int, 0.5 to 0, and a cluster wider
+    than the cut was taken: other prototypes were learned, with exit 0."""
+    pbs = np.array([[0.0, 0.0], [0.05, 0.0], [1.0, 1.0], [1.0, 1.05], [-1.0, 1.0]])
+    with pytest.raises(InvalidInputError, match=f"clusterer _Returns {said}"):
+        plan_clusters(pbs, [2, 2, 2, 2, 1], [True] * 5, clusterer=_Returns(labels),
+                      k_cutoff=0.5, num_threshold=3)
+    # labels in another order, or numbered with gaps, are fine: they only group
+    plan = plan_clusters(pbs, [2, 2, 2, 2, 1], [True] * 5,
+                         clusterer=_Returns(np.array([7.0, 7.0, 3.0, 3.0, 9.0])),
+                         k_cutoff=0.5, num_threshold=3)
+    assert plan.valid == ((0, 1), (2, 3))
+
+
 def test_cluster_needs_num_samples_above_threshold(clusterer):
     pbs = np.array([[0.0, 0.0], [0.05, 0.0], [1.0, 1.0], [1.0, 1.05], [-1.0, 1.0]])
     plan = plan_clusters(pbs, [1, 2, 2, 2, 1], [True] * 5, clusterer=clusterer,

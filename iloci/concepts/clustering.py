@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial.distance import pdist, squareform
@@ -117,6 +118,66 @@ class ClusterPlan:
     medoids: tuple[int, ...]
 
 
+def checked_labels(clusterer: Any, returned: Any, x: np.ndarray, cut: float) -> np.ndarray:
+    """What ``clusterer.cluster(x, cut)`` returned, checked as the interface promises.
+
+    :class:`~iloci.interfaces.Clusterer`: one label per point, integers
+    from 0, and the complete-link partition: no cluster wider than the cut,
+    and no two clusters whose farthest pair lies within it (complete link
+    would merge them). A cast to int would read
+    NaN as a huge number, and 0.5 as 0: a clusterer plugin's fault then
+    became a memory of other prototypes, with exit 0 (a plugin audit).
+
+    Returns
+    -------
+    ndarray of int64, shape (M,)
+
+    Raises
+    ------
+    InvalidInputError
+        Naming the clusterer and what is wrong.
+    """
+    name = type(clusterer).__name__
+    m = len(x)
+
+    def fault(what: str) -> InvalidInputError:
+        return InvalidInputError(f"clusterer {name} {what}; nothing was changed. Fix the "
+                                 "clusterer (iloci.testing.check_component checks it), or "
+                                 "choose another with [clusterer] name.")
+    try:
+        raw = np.asarray(returned)
+    except Exception:  # noqa: BLE001  (an object numpy cannot read)
+        raise fault(f"returned {type(returned).__name__}, not an array of labels") from None
+    if raw.shape != (m,):
+        raise fault(f"returned labels of shape {raw.shape} for {m} points")
+    if raw.dtype == bool or not np.issubdtype(raw.dtype, np.number) or np.iscomplexobj(raw):
+        raise fault(f"returned labels of dtype {raw.dtype}, not integers")
+    as_float = raw.astype(np.float64)
+    if not np.all(np.isfinite(as_float)) or np.any(as_float != np.round(as_float)):
+        bad = int(np.flatnonzero(~np.isfinite(as_float) | (as_float != np.round(as_float)))[0])
+        raise fault(f"returned label {raw[bad].item()!r} (point {bad}); labels are whole numbers")
+    if np.any(as_float < 0):
+        raise fault(f"returned a negative label ({int(as_float.min())}); labels count from 0")
+    labels = as_float.astype(np.int64)
+    dist = squareform(_pdist(x))
+    groups = [np.flatnonzero(labels == lab) for lab in np.unique(labels)]
+    tol = cut * 1e-9
+    for members in groups:
+        wide = float(dist[np.ix_(members, members)].max())
+        if wide > cut + tol:
+            raise fault(f"put points {wide:.4g} apart into one cluster, over the cut "
+                        f"{cut:.4g} (D_cutoff); complete-link clusters are never wider "
+                        "than the cut")
+    for i, a in enumerate(groups):
+        for b in groups[i + 1:]:
+            link = float(dist[np.ix_(a, b)].max())
+            if link <= cut - tol:
+                raise fault(f"kept apart two clusters (points {a.tolist()} and {b.tolist()}) "
+                            f"whose farthest pair is {link:.4g} apart, within the cut "
+                            f"{cut:.4g}: complete link merges them")
+    return labels
+
+
 def plan_clusters(pbs: np.ndarray, num_samples: Sequence[int], exemplar: Sequence[bool], *,
                   clusterer: Clusterer, k_cutoff: float, num_threshold: int) -> ClusterPlan:
     """Cluster one concept's entries and pick the valid clusters and their medoids.
@@ -148,10 +209,7 @@ def plan_clusters(pbs: np.ndarray, num_samples: Sequence[int], exemplar: Sequenc
     # a cut at or below 0 cannot group distinct PB vectors
     if m < 2 or not np.isfinite(cut) or cut <= 0:
         return none
-    labels = np.asarray(clusterer.cluster(x, cut), dtype=np.int64)
-    if labels.shape != (m,):
-        raise InvalidInputError(f"clusterer {type(clusterer).__name__} returned labels of "
-                                f"shape {labels.shape} for {m} points.")
+    labels = checked_labels(clusterer, clusterer.cluster(x, cut), x, cut)
     valid: list[tuple[int, ...]] = []
     medoids: list[int] = []
     for lab in dict.fromkeys(labels.tolist()):
