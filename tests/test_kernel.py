@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
 import subprocess
 import sys
 import textwrap
+from typing import Literal
 
 import pytest
 
@@ -404,3 +407,46 @@ def test_preload_imports_the_configured_back_ends_and_nothing_is_built():
                                   "teacher=oracle,ik=pinocchio"]
     with pytest.raises(ConfigError):
         iloci.preload({"learner": {"k_cutoff": "high"}})
+
+
+@dataclasses.dataclass(frozen=True)
+class WithPath:
+    file: Path = Path("labels.csv")
+
+
+@dataclasses.dataclass(frozen=True)
+class BadDefault:
+    ratio: float = "0.5"  # type: ignore[assignment]
+
+
+@dataclasses.dataclass(frozen=True)
+class WithMode:
+    mode: Literal["strict", "lenient"] = "strict"
+
+
+def test_a_plugins_settings_must_be_what_a_toml_config_can_give():
+    """A plugin audit: a settings field typed pathlib.Path could never be set from TOML, and
+    its default failed to be written to metrics.json after the whole run (a traceback from
+    json) and to the memory after a teach (its learning lost); a Literal field took any
+    string; a float field defaulting to "0.5" reached the teacher unchecked."""
+    def plugin_with(params):
+        class Plugin:
+            @hookimpl
+            def iloci_register_teachers(self, registry):
+                registry.add("typed", OracleTeacher, params=params)
+        return Plugin()
+
+    for params, said in ((WithPath, r"file: Path is not a type a TOML config can give"),
+                         (BadDefault, r"ratio: the default '0.5' is not a number")):
+        pm = get_plugin_manager(autoload=False, plugins=[plugin_with(params)])
+        with pytest.raises(PluginError, match=r"the settings of teacher 'typed' \("
+                           + params.__qualname__ + r"\) cannot be a \[teacher\] section: "
+                           + said):
+            get_registry(pm)
+
+    registry = get_registry(get_plugin_manager(plugins=[plugin_with(WithMode)]))
+    with pytest.raises(ConfigError, match=r"teacher.mode must be one of 'strict', 'lenient', "
+                                          r"got 'bogus'"):
+        load_config({"teacher": {"name": "typed", "mode": "bogus"}}, registry=registry)
+    config = load_config({"teacher": {"name": "typed", "mode": "lenient"}}, registry=registry)
+    assert config.teacher.params.mode == "lenient"

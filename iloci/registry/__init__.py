@@ -195,6 +195,14 @@ class Registry:
         if params is not None and not dataclasses.is_dataclass(params):
             raise PluginError(f"plugin {plugin!r}: params of {kind} {name!r} must be "
                               "a dataclass type.")
+        if params is not None:
+            from iloci.registry.params import schema_problems
+            problems = schema_problems(params)  # type: ignore[arg-type]
+            if problems:
+                raise PluginError(
+                    f"plugin {plugin!r}: the settings of {_label(kind)} {name!r} "
+                    f"({getattr(params, '__qualname__', params)}) cannot be a [{kind}] "
+                    "section: " + "; ".join(problems) + ".")
         old = self._specs[kind].get(name)
         claims = self.ambiguous.get((kind, name))
         if old is not None and old.plugin == plugin:

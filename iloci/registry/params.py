@@ -18,7 +18,7 @@ from typing import Any, Union
 from iloci.constraints import violations
 from iloci.errors import ConfigError, PluginError, did_you_mean
 
-__all__ = ["params_to_dict", "validate_dataclass"]
+__all__ = ["params_to_dict", "schema_problems", "validate_dataclass"]
 
 
 def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
@@ -32,6 +32,8 @@ def _type_ok(value: Any, tp: Any) -> tuple[bool, Any]:
     if tp is Any:
         return True, value
     origin = typing.get_origin(tp)
+    if origin is typing.Literal:   # the value must be one of them (a bool is not 1)
+        return any(value == a and type(value) is type(a) for a in typing.get_args(tp)), value
     if origin in (Union, types.UnionType):
         for arg in typing.get_args(tp):
             ok, v = _type_ok(value, arg)
@@ -86,6 +88,8 @@ def _type_name(tp: Any) -> str:
     if tp in _SINGULAR:
         return _SINGULAR[tp]
     origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is typing.Literal:
+        return "one of " + ", ".join(repr(a) for a in args)
     if origin is typing.Union or isinstance(tp, types.UnionType):
         return " or ".join(_type_name(a) for a in args if a is not type(None))
     if origin in (tuple, list) or tp in (tuple, list):
@@ -210,6 +214,55 @@ def validate_dataclass(cls: type, values: Mapping[str, Any], *, section: str,
             "it to its authors, or leave the plugin out with ILOCI_BLOCK_PLUGINS "
             "(docs/hooks.md).") from exc
     return obj
+
+
+def _tomlable(tp: Any) -> bool:
+    """Whether a TOML file can give a value of annotation ``tp`` (and a memory's JSON
+    header hold it): str, int, float, bool, Any, a Literal of those, Optional, lists and
+    tuples of those, a table of str keys."""
+    if tp is Any or tp in _SINGULAR or tp is type(None):
+        return True
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is typing.Literal:
+        return all(_scalar(a) is not None for a in args)
+    if origin in (Union, types.UnionType):
+        return all(_tomlable(a) for a in args)
+    if origin in (tuple, list) or tp in (tuple, list):
+        return all(a is Ellipsis or _tomlable(a) for a in args)
+    if origin is dict or tp is dict:
+        return not args or (args[0] is str and _tomlable(args[1]))
+    return False
+
+
+def schema_problems(cls: type) -> list[str]:
+    """What is wrong with a settings dataclass as a schema of TOML keys, one line each.
+
+    Every field a config can set must have a type TOML can give (a
+    ``pathlib.Path`` cannot: the config can never set it, and its default
+    cannot be written to ``metrics.json`` or a memory's header, which failed
+    at the end of a run), and a default of that type, when it has one (a
+    ``float`` field defaulting to ``"0.5"`` reached the component unchecked).
+    """
+    try:
+        hints = typing.get_type_hints(cls)
+    except Exception as exc:  # noqa: BLE001  (a name the annotations use is not importable)
+        return [f"its annotations cannot be read ({type(exc).__name__}: {exc})"]
+    problems = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        tp = hints.get(f.name, Any)
+        if not _tomlable(tp):
+            problems.append(f"{f.name}: {_type_name(tp)} is not a type a TOML config can "
+                            "give (str, int, float, bool, a Literal of them, lists and "
+                            "tables of them; a path is a str)")
+            continue
+        default = (f.default if f.default is not dataclasses.MISSING else
+                   f.default_factory() if f.default_factory is not dataclasses.MISSING
+                   else dataclasses.MISSING)
+        if default is not dataclasses.MISSING and not _type_ok(default, tp)[0]:
+            problems.append(f"{f.name}: the default {default!r} is not {_type_name(tp)}")
+    return problems
 
 
 def _all_finite(value: Any) -> bool:
