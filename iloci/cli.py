@@ -23,7 +23,7 @@ from typing import Any
 
 from iloci._version import __version__
 from iloci.errors import IlociError, PluginError
-from iloci.plugins import get_plugin_manager, hook_results
+from iloci.plugins import PluginLoadWarning, get_plugin_manager, hook_results
 from iloci.progress import FULL_ERRNOS, progress_sink, why_not_written
 
 __all__ = ["main"]
@@ -68,17 +68,31 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     for mod in COMMAND_MODULES:
         importlib.import_module(mod).register(sub)
     pm = plugin_manager or get_plugin_manager()
-    try:  # one plugin at a time, so that a failure names the plugin
-        for _ in hook_results(pm, "iloci_add_commands", subparsers=sub):
-            pass
-    except PluginError as exc:
-        if isinstance(exc.__cause__, argparse.ArgumentError):  # a name taken twice
-            raise PluginError(f"{exc.args[0].partition('. Fix')[0]}: a plugin's command "
-                              "clashes with another command; rename it, or block the "
-                              "plugin with ILOCI_BLOCK_PLUGINS.") from exc.__cause__
-        raise
+    info = getattr(pm, "iloci_plugin_info", {}) or {}
+    for impl in reversed(pm.hook.iloci_add_commands.get_hookimpls()):
+        # one plugin at a time, so that a failure names the plugin
+        try:
+            for _ in hook_results(pm, "iloci_add_commands", only=impl.plugin_name,
+                                  subparsers=sub):
+                pass
+        except PluginError as exc:
+            error = exc
+            if isinstance(exc.__cause__, argparse.ArgumentError):  # a name taken twice
+                error = PluginError(f"{exc.args[0].partition('. Fix')[0]}: a plugin's "
+                                    "command clashes with another command; rename it, or "
+                                    "block the plugin with ILOCI_BLOCK_PLUGINS.")
+                error.__cause__ = exc.__cause__
+            dist = getattr(info.get(impl.plugin_name), "distribution", None)
+            if dist is None or dist == "iloci":   # the caller's plugin object, or iloci's
+                raise error from error.__cause__
+            # an installed plugin: its commands are left out, every other command works
+            # (one raising iloci_add_commands made every iloci command fail)
+            warnings.warn(f"iloci plugin {impl.plugin_name!r} (distribution {dist!r}) "
+                          f"could not add its commands, which are left out: {error}",
+                          PluginLoadWarning, stacklevel=2)
     _once(parser)
     return parser
+
 
 
 class _StoreOnce(argparse._StoreAction):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import importlib
 import importlib.metadata as md
 import os
+import types
 import warnings
 from typing import Any
 
@@ -229,7 +230,8 @@ def get_plugin_manager(*, autoload: bool | str | None = None,
             continue
         try:
             plugin = ep.load()
-        except Exception as exc:  # a broken plugin must not break iloci
+        except (Exception, SystemExit) as exc:  # a broken plugin must not break iloci
+            # (a module that calls sys.exit() on import ended every command, no name said)
             msg = f"{type(exc).__name__}: {exc}"
             info[name] = PluginInfo(name, dist_name, dist_version, msg, "failed")
             _warn(f"iloci plugin {name!r} (distribution {dist_name!r}) failed to "
@@ -248,6 +250,12 @@ def get_plugin_manager(*, autoload: bool | str | None = None,
                   "names against `iloci.hookspecs`.")
             continue
         info[name] = PluginInfo(name, dist_name, dist_version)
+        unmarked = _unmarked(pm, plugin)
+        if unmarked:  # pluggy passes them over: never called, without a word
+            _warn(f"iloci plugin {name!r} (distribution {dist_name!r}) defines "
+                  f"{', '.join(unmarked)} without @iloci.hookimpl: iloci never calls "
+                  f"{'it' if len(unmarked) == 1 else 'them'}. Mark each hook with "
+                  "@iloci.hookimpl (docs/hooks.md).")
     if isinstance(plugins, (str, bytes)) or not isinstance(plugins, Iterable):
         raise PluginError(f"plugins must be a list of plugin objects (modules or instances "
                           f"with @iloci.hookimpl methods), got {type(plugins).__name__}: "
@@ -261,9 +269,7 @@ def get_plugin_manager(*, autoload: bool | str | None = None,
         if pm.is_registered(plugin):
             raise PluginError(f"plugins[{i}] ({_short_repr(plugin)}) is given twice (or is "
                               "a plugin already registered); give each plugin once.")
-        unmarked = [a for a in dir(plugin) if a.startswith("iloci_")
-                    and callable(getattr(plugin, a, None))
-                    and pm.parse_hookimpl_opts(plugin, a) is None]
+        unmarked = _unmarked(pm, plugin)
         if unmarked:  # pluggy would pass them over: never called, without a word
             raise PluginError(f"plugins[{i}] ({_short_repr(plugin)}) has "
                               f"{', '.join(unmarked)} without @iloci.hookimpl: iloci would "
@@ -280,6 +286,22 @@ def get_plugin_manager(*, autoload: bool | str | None = None,
         info[name] = PluginInfo(name, None, None)
     pm.iloci_plugin_info = info  # type: ignore[attr-defined]
     return pm
+
+
+def _unmarked(pm: pluggy.PluginManager, plugin: object) -> list[str]:
+    """The ``iloci_*`` callables of ``plugin`` that pluggy does not take for hooks (no
+    ``@iloci.hookimpl``); in a module, only those it defines (not ones it imports)."""
+    module = getattr(plugin, "__name__", None) if isinstance(plugin, types.ModuleType) else None
+    out = []
+    for a in dir(plugin):
+        obj = getattr(plugin, a, None)
+        if not a.startswith("iloci_") or not callable(obj) or isinstance(obj, type):
+            continue
+        if module is not None and getattr(obj, "__module__", module) != module:
+            continue
+        if pm.parse_hookimpl_opts(plugin, a) is None:
+            out.append(a)
+    return out
 
 
 def _short_repr(obj: object) -> str:
@@ -299,10 +321,11 @@ def plugin_infos(pm: pluggy.PluginManager) -> dict[str, PluginInfo]:
     return dict(getattr(pm, "iloci_plugin_info", {}))
 
 
-def hook_results(pm: pluggy.PluginManager, hook: str, **kwargs: Any
-                 ) -> Iterator[tuple[Any, str, str | None]]:
+def hook_results(pm: pluggy.PluginManager, hook: str, *, only: str | None = None,
+                 **kwargs: Any) -> Iterator[tuple[Any, str, str | None]]:
     """Call hook ``hook`` one implementation at a time, in pluggy's order (the last
     registered first); yield ``(result, plugin, distribution)`` for each non-None result.
+    ``only``: call only that plugin's implementation.
 
     For hooks whose result iloci uses (``iloci_make_executor``) or that act
     (``iloci_add_commands``): a result of the wrong type can then be refused naming
@@ -317,6 +340,8 @@ def hook_results(pm: pluggy.PluginManager, hook: str, **kwargs: Any
     info = getattr(pm, "iloci_plugin_info", {}) or {}
     caller = getattr(pm.hook, hook)
     for impl in reversed(caller.get_hookimpls()):
+        if only is not None and impl.plugin_name != only:
+            continue
         pinfo = info.get(impl.plugin_name)
         dist = getattr(pinfo, "distribution", None)
         try:

@@ -197,7 +197,7 @@ class Registry:
                               "a dataclass type.")
         if params is not None:
             from iloci.registry.params import schema_problems
-            problems = schema_problems(params)  # type: ignore[arg-type]
+            problems = schema_problems(params)
             if problems:
                 raise PluginError(
                     f"plugin {plugin!r}: the settings of {_label(kind)} {name!r} "
@@ -234,7 +234,8 @@ class Registry:
         if claims is not None or old is not None:
             # two installed plugins claim one name: iloci does not pick one by the
             # order they load in (the other's component would run under that name)
-            self.ambiguous[(kind, name)] = [*(claims or [old]), spec]
+            earlier = claims if claims is not None else [old] if old is not None else []
+            self.ambiguous[(kind, name)] = [*earlier, spec]
             self._specs[kind].pop(name, None)
             return spec
         self._specs[kind][name] = spec
