@@ -201,8 +201,8 @@ def _main(argv: Sequence[str] | None) -> int:
         if said:
             print(f"error: {said}", file=sys.stderr)
             return 1
-        print(f"failed: {type(exc).__name__}: {exc}{_whose(args)}\n(run with --traceback "
-              "for details)", file=sys.stderr)
+        print(f"failed: {type(exc).__name__}: {exc}{_whose(args) or _raised_in_plugin(exc)}"
+              "\n(run with --traceback for details)", file=sys.stderr)
         return 1
 
 
@@ -217,6 +217,41 @@ def _machine_refused(exc: BaseException) -> str:
     if exc.errno in (errno.EACCES, errno.EPERM):
         return (f"permission denied: {exc.filename}. Fix its permissions (or use another "
                 "file) and run the command again.")
+    return ""
+
+
+def _raised_in_plugin(exc: BaseException) -> str:
+    """``""``, or which installed plugin's code raised ``exc`` (the innermost frame of the
+    traceback in a module of a third-party plugin: a teacher's feedback, a clusterer), to
+    report the failure to or block. A plugin audit: a teacher that raised inside
+    feedback() gave "failed: RuntimeError: ..." naming no plugin."""
+    from importlib.metadata import entry_points
+
+    from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
+
+    owners = {}
+    for ep in entry_points(group="iloci"):
+        dist = getattr(ep.dist, "name", None)
+        if dist not in FIRST_PARTY_DISTRIBUTIONS:
+            owners.setdefault(ep.module.partition(".")[0], (ep.name, dist))
+    if not owners:
+        return ""
+    frames = []
+    tb = exc.__traceback__
+    while tb is not None:
+        frames.append(tb)
+        tb = tb.tb_next
+    for tb in reversed(frames):  # the innermost first
+        module = str(tb.tb_frame.f_globals.get("__name__", ""))
+        owner = owners.get(module.partition(".")[0])
+        if owner is not None:
+            name, dist = owner
+            code = tb.tb_frame.f_code
+            return (f"\nraised in plugin {name!r}"
+                    + (f" ({dist})" if dist else "")
+                    + f", {module}.{code.co_name} line {tb.tb_lineno}, not in iloci: report "
+                      f"it to its authors, or leave the plugin out with "
+                      f"ILOCI_BLOCK_PLUGINS={name} (docs/hooks.md)")
     return ""
 
 

@@ -9,6 +9,7 @@ plugin hooks that return the wrong type.
 from __future__ import annotations
 
 from pathlib import Path
+import re
 
 import numpy as np
 import pytest
@@ -676,3 +677,25 @@ def test_an_installed_plugins_unmarked_hook_and_exit_at_import_are_said(tmp_path
     assert "helper" not in out.stderr
     assert ("iloci plugin 'quits' (distribution 'iloci-quits') failed to import and was "
             "skipped: SystemExit: no licence server") in out.stderr
+
+
+@pytest.mark.usefixtures("default_back_ends")
+def test_a_plugin_component_that_raises_at_work_is_named(tmp_path, cli):
+    """A plugin audit: a teacher that raised inside feedback() gave "failed: RuntimeError:
+    serial port closed" and no word of which plugin's code it was."""
+    site = tmp_path / "site"
+    _installed(site, "flaky", (
+        "class Flaky:\n"
+        "    def feedback(self, demo, response):\n"
+        "        raise RuntimeError('serial port closed')\n\n"
+        "@hookimpl\n"
+        "def iloci_register_teachers(registry):\n"
+        "    registry.add('flaky', Flaky, summary='raises')\n"))
+    fast = tmp_path / "fast.toml"
+    fast.write_text("[perceptual_model]\nepochs = 30\n[learner]\nrehearsal_epochs = 30\n")
+    out = cli("teach", "--config", str(fast), "--teacher", "flaky", "--memory",
+              str(tmp_path / "m.npz"), "GShape/0", "Sine/0", env={"PYTHONPATH": str(site)})
+    assert out.returncode == 1 and "Traceback" not in out.stderr, out.stderr
+    assert "failed: RuntimeError: serial port closed" in out.stderr
+    assert re.search(r"raised in plugin 'flaky' \(iloci-flaky\), flaky_plugin\.feedback line 5, "
+                     r"not in iloci: .*ILOCI_BLOCK_PLUGINS=flaky", out.stderr), out.stderr
