@@ -185,13 +185,19 @@ class ObserverError(PluginError):
     """
 
     def __init__(self, hook: str, plugin: str, error: BaseException, outcome: Any,
-                 faults: int = 1) -> None:
+                 faults: int = 1, context: str = "") -> None:
         self.hook = hook
         self.plugin = plugin
         self.error = error
         self.outcome = outcome
         more = f" ({faults - 1} more observer fault(s) in this step)" if faults > 1 else ""
         demo = getattr(outcome, "demo", "?")
+        if context:   # an evaluation: the fold stops, there is nothing to teach again
+            super().__init__(
+                f"observer hook {hook} of plugin {plugin!r} raised {type(error).__name__}: "
+                f"{error} in {context} (at {demo!r}); the evaluation stopped there. Fix or "
+                f"block the plugin (ILOCI_BLOCK_PLUGINS={plugin}) and run it again.")
+            return
         super().__init__(
             f"observer hook {hook} of plugin {plugin!r} raised {type(error).__name__}: "
             f"{error}{more}. The demonstration {demo!r} was learned (the memory is "

@@ -325,6 +325,23 @@ def test_observer_fault_leaves_learning_committed_and_names_hook_and_plugin():
     assert [o.demo for o in report.outcomes] == [d.key for d in demos[1:3]]
 
 
+def test_an_observer_fault_in_an_evaluation_says_the_evaluation_stopped():
+    """A plugin audit: in `iloci evaluate` the fault's advice was the teach's ("do not teach
+    it again"), which means nothing there: the evaluation stops."""
+    from iloci.data import load_lasa
+    from iloci.errors import ObserverError
+    from iloci.evaluation.fold import run_fold
+
+    pm = get_plugin_manager(autoload=False, plugins=[Recorder(), FaultyObserver()])
+    demos = load_lasa(["GShape", "Sine"])
+    with pytest.raises(ObserverError, match=r"observer hook iloci_on_interaction of plugin "
+                       r"'extra-1' raised RuntimeError: observer broke in fold 3's learning "
+                       r"\(at 'GShape/0'\); the evaluation stopped there\.") as e:
+        run_fold(CONFIG, 3, demos[:2], demos[2:4], baseline=False, details=False,
+                 plugin_manager=pm)
+    assert "do not teach it again" not in str(e.value)
+
+
 def test_events_of_a_step_that_fails_are_not_sent():
     """A teacher fault leaves the memory as it was, and observers hear nothing of it."""
     from iloci.data import load_lasa

@@ -22,7 +22,7 @@ import numpy as np
 from iloci.agent import Agent, build
 from iloci.config import Config, load_config
 from iloci.data.concepts import GroundTruth, majority_names
-from iloci.errors import InvalidInputError
+from iloci.errors import InvalidInputError, ObserverError
 from iloci.evaluation.folds import fold_memory_name
 from iloci.evaluation.metrics import matched_names, purity
 from iloci.evaluation.results import Answer, FoldResult, memory_counts
@@ -270,7 +270,13 @@ def learn_fold(config: Config | dict, fold: int, learn: Sequence[Any], test: Seq
     try:
         agent = build(config, plugin_manager=pm, **(overrides or {}))
         agent.motion_cache = motion_cache
-        report = agent.teach(learn)
+        try:
+            report = agent.teach(learn)
+        except ObserverError as exc:
+            # the teach's advice (the demonstration is learned: do not teach it again)
+            # means nothing here: the fold, and with it the evaluation, stops
+            raise ObserverError(exc.hook, exc.plugin, exc.error, exc.outcome,
+                                context=f"fold {fold}'s learning") from exc.error
     finally:
         if observer is not None:
             pm.unregister(observer)
