@@ -229,7 +229,7 @@ def _raised_in_plugin(exc: BaseException) -> str:
 
     from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
 
-    owners = {}
+    owners: dict[str, tuple[str, str | None]] = {}
     for ep in entry_points(group="iloci"):
         dist = getattr(ep.dist, "name", None)
         if dist not in FIRST_PARTY_DISTRIBUTIONS:
