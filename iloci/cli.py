@@ -23,7 +23,8 @@ from typing import Any
 
 from iloci._version import __version__
 from iloci.errors import IlociError, PluginError
-from iloci.plugins import PluginLoadWarning, get_plugin_manager, hook_results
+from iloci.plugins import (FIRST_PARTY_DISTRIBUTIONS, PluginLoadWarning, get_plugin_manager,
+                           hook_results)
 from iloci.progress import FULL_ERRNOS, progress_sink, why_not_written
 
 __all__ = ["main"]
@@ -226,8 +227,6 @@ def _raised_in_plugin(exc: BaseException) -> str:
     report the failure to or block. A plugin audit: a teacher that raised inside
     feedback() gave "failed: RuntimeError: ..." naming no plugin."""
     from importlib.metadata import entry_points
-
-    from iloci.plugins import FIRST_PARTY_DISTRIBUTIONS
 
     owners: dict[str, tuple[str, str | None]] = {}
     for ep in entry_points(group="iloci"):

@@ -31,7 +31,7 @@ import pluggy
 from iloci import hookspecs
 from iloci.errors import IlociError, PluginError
 from iloci.interfaces import ALL_KINDS
-from iloci.registry import FIRST_PARTY, Registry
+from iloci.registry import FIRST_PARTY, Registry, ambiguity
 
 __all__ = [
     "DEFAULT_PLUGINS",
@@ -411,7 +411,6 @@ def get_registry(pm: pluggy.PluginManager | None = None) -> Registry:
                       f"{pinfo.distribution!r}) failed to register its components and was "
                       f"skipped: {error}")
     registry.unloaded = [i for i in info.values() if i.status != "loaded"]
-    from iloci.registry import ambiguity
     for (kind_name, name), claims in registry.ambiguous.items():
         _warn(ambiguity(kind_name, name, claims))
     return registry

@@ -21,7 +21,8 @@ from typing import Any
 from iloci.errors import (ConfigError, IlociError, InvalidInputError, MissingBackendError,
                           PluginError, PluginNotLoadedError, UnknownComponentError, did_you_mean)
 from iloci.interfaces import ALL_KINDS, COMPONENT_KINDS, unmet_members
-from iloci.registry.params import misplaced, params_to_dict, validate_dataclass
+from iloci.registry.params import (misplaced, params_to_dict, schema_problems,
+                                   validate_dataclass)
 
 __all__ = ["ComponentSpec", "Registry", "KindRegistry", "params_to_dict", "validate_dataclass",
            "validate_params"]
@@ -196,7 +197,6 @@ class Registry:
             raise PluginError(f"plugin {plugin!r}: params of {kind} {name!r} must be "
                               "a dataclass type.")
         if params is not None:
-            from iloci.registry.params import schema_problems
             problems = schema_problems(params)
             if problems:
                 raise PluginError(
