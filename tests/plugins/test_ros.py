@@ -325,7 +325,7 @@ def test_ctrl_c_while_a_drawing_is_learned_lets_it_be_learned_and_saved(ros_env,
     import iloci
     _, demos = memory
     slow = tmp_path / "slow.toml"
-    slow.write_text("[perceptual_model]\nepochs = 200000\n")   # about 5 s of training
+    slow.write_text("[perceptual_model]\nepochs = 600000\n")   # about 14 s of training here
     new = tmp_path / "new.npz"
     node = subprocess.Popen([sys.executable, "-m", "iloci", "ros", "--memory", str(new),
                              "--config", str(slow), "--prefix", "slow"], env=ros_env,
