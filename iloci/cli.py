@@ -15,7 +15,9 @@ import argparse
 import contextlib
 import errno
 import importlib
+import importlib.util
 import os
+import re
 import sys
 import warnings
 from collections.abc import Sequence
@@ -240,18 +242,53 @@ def _raised_in_plugin(exc: BaseException) -> str:
     while tb is not None:
         frames.append(tb)
         tb = tb.tb_next
+    found = None
     for tb in reversed(frames):  # the innermost first
         module = str(tb.tb_frame.f_globals.get("__name__", ""))
-        owner = owners.get(module.partition(".")[0])
-        if owner is not None:
-            name, dist = owner
-            code = tb.tb_frame.f_code
-            return (f"\nraised in plugin {name!r}"
-                    + (f" ({dist})" if dist else "")
-                    + f", {module}.{code.co_name} line {tb.tb_lineno}, not in iloci: report "
-                      f"it to its authors, or leave the plugin out with "
-                      f"ILOCI_BLOCK_PLUGINS={name} (docs/hooks.md)")
-    return ""
+        if module.partition(".")[0] in owners:
+            found = (module, tb.tb_frame.f_code.co_name, tb.tb_lineno)
+            break
+    if found is None:  # raised in a worker process: its traceback came as text
+        found = _in_remote_traceback(exc, owners)
+    if found is None:
+        return ""
+    module, function, line = found
+    name, dist = owners[module.partition(".")[0]]
+    return (f"\nraised in plugin {name!r}" + (f" ({dist})" if dist else "")
+            + f", {module}.{function} line {line}, not in iloci: report it to its authors, "
+              f"or leave the plugin out with ILOCI_BLOCK_PLUGINS={name} (docs/hooks.md)")
+
+
+def _in_remote_traceback(exc: BaseException, owners: dict[str, Any]
+                         ) -> tuple[str, str, int] | None:
+    """(module, function, line) of the innermost frame in a plugin's module of a worker's
+    traceback (joblib's loky attaches it as the cause, as text), or None."""
+    text = ""
+    cause = exc.__cause__
+    while cause is not None and not text:
+        if type(cause).__name__ == "_RemoteTraceback":
+            text = str(cause)
+        cause = cause.__cause__
+    if not text:
+        return None
+    places: dict[str, str] = {}      # a plugin module's file or folder -> its top module
+    for top in owners:
+        try:
+            spec = importlib.util.find_spec(top)
+        except (ImportError, ValueError):
+            continue
+        if spec is not None and spec.origin:
+            where = os.path.dirname(spec.origin) if spec.submodule_search_locations \
+                else spec.origin
+            places[where] = top
+    for path, line, function in reversed(re.findall(r'File "([^"]+)", line (\d+), in (\S+)',
+                                                    text)):
+        for where, top in places.items():
+            if path == where or path.startswith(where + os.sep):
+                rest = os.path.splitext(os.path.relpath(path, os.path.dirname(where)))[0]
+                module = rest.replace(os.sep, ".") if where != path else top
+                return module.removesuffix(".__init__"), function, int(line)
+    return None
 
 
 def _whose(args: argparse.Namespace) -> str:

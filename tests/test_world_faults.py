@@ -699,3 +699,12 @@ def test_a_plugin_component_that_raises_at_work_is_named(tmp_path, cli):
     assert "failed: RuntimeError: serial port closed" in out.stderr
     assert re.search(r"raised in plugin 'flaky' \(iloci-flaky\), flaky_plugin\.feedback line 5, "
                      r"not in iloci: .*ILOCI_BLOCK_PLUGINS=flaky", out.stderr), out.stderr
+    # in an evaluation's worker processes too, whose traceback comes back as text
+    fast.write_text(fast.read_text() + "[teacher]\nname = 'flaky'\n"
+                    "[data]\nshapes = ['GShape', 'Sine']\n")
+    out = cli("evaluate", "--config", str(fast), "--jobs", "2",
+              "--folds", "0", "1", "--no-baseline", "--quiet", "--out", str(tmp_path / "ev"),
+              env={"PYTHONPATH": str(site)})
+    assert out.returncode == 1 and "Traceback" not in out.stderr, out.stderr
+    assert re.search(r"raised in plugin 'flaky' \(iloci-flaky\), flaky_plugin\.feedback line 5",
+                     out.stderr), out.stderr
