@@ -547,3 +547,39 @@ def test_a_guess_like_nothing_taught_says_unsure_on_the_page(tmp_path, browser):
         expect(page.locator("#guess")).to_contain_text("Unsure", timeout=WAIT)
         expect(page.locator("#guess")).to_contain_text("familiarity 0.")
         assert "confidence" not in page.locator("#guess").inner_text()
+
+
+def test_a_dot_is_refused_and_a_long_slow_stroke_is_thinned_not_lost(tmp_path, browser):
+    """What a person met (a browser audit): a 5 px scribble was taken for a shape and
+    guessed with confidence (and "yes" would have taught it); a stroke drawn slowly for
+    100 s had more points than the server takes and was thrown away."""
+    from iloci.web.schemas import MAX_POINTS
+
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    expect = sync_api.expect
+    with serving(tmp_path / "m.npz") as (url, classroom):
+        page = browser.new_page(viewport={"width": 1000, "height": 900})
+        page.goto(url)
+        teach_first(page, lasa)
+        seen = classroom.agent.memory.demonstrations_seen
+        box = page.locator("#pad").bounding_box()
+        x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.mouse.move(x, y)
+        page.mouse.down()
+        for i in range(8):                        # a tremor of 4 px
+            page.mouse.move(x + (i % 3) * 2, y + (i % 2) * 4)
+            time.sleep(0.01)
+        page.mouse.up()
+        expect(page.locator("#error")).to_contain_text("too small to be a shape",
+                                                       timeout=WAIT)
+        page.wait_for_timeout(500)
+        expect(page.locator("#judge")).to_be_hidden()
+        assert classroom.agent.memory.demonstrations_seen == seen
+        # the page's limit is the server's, and a longer stroke keeps its ends and order
+        assert page.evaluate("MAX_POINTS") == MAX_POINTS
+        kept = page.evaluate("""() => { const pts = Array.from({length: 12345},
+            (_, i) => [i, 2 * i, i / 100]); return thinned(pts, MAX_POINTS); }""")
+        assert len(kept) == MAX_POINTS and kept[0] == [0, 0, 0]
+        assert kept[-1] == [12344, 24688, 123.44]
+        assert all(a[2] < b[2] for a, b in zip(kept, kept[1:]))
+        assert page.evaluate("thinned([[0, 0, 0], [1, 1, 1]], 5).length") == 2

@@ -12,6 +12,10 @@ let drawing = false;
 let pointer = null;       // the pointerId that started the stroke: the only one drawn
 let pending = null;       // the guess waiting for yes / no
 let busy = false;
+// the most points the server takes in one stroke (iloci.web.schemas.MAX_POINTS)
+const MAX_POINTS = 5000;
+// a stroke spanning less than this share of the pad's shorter side is a dot, not a shape
+const MIN_SPAN = 0.03;
 let animation = null;
 // the server's token (a new one each start): every write carries it
 const TOKEN = document.querySelector('meta[name="iloci-token"]').content;
@@ -97,7 +101,11 @@ function addPoint(e) {
 pad.addEventListener("pointerdown", (e) => {
   e.preventDefault();
   if (drawing) return;                       // another pointer is drawing: ignored
-  if (busy) { say("Wait a moment: the robot is still learning (the bar shows how far)."); return; }
+  if (busy) {   // kept on screen until the next stroke: the robot's answer does not hide it
+    showError("Wait a moment: the robot is still busy with your last drawing or answer " +
+              "(the bar shows how far). This stroke was not taken: draw it again when it has answered.");
+    return;
+  }
   if (e.pointerType === "mouse" && e.button !== 0) return;
   pointer = e.pointerId;
   try { pad.setPointerCapture(e.pointerId); } catch (err) { /* not capturable */ }
@@ -122,7 +130,23 @@ function penUp(e) {
   drawing = false; pointer = null;
   addPoint(e);
   if (stroke.length < 5) { showError("The stroke is too short: draw a shape in one stroke (press, draw, lift)."); return; }
+  // a dot or a tap with a tremor is no shape: the robot would learn it as one
+  const xs = stroke.map((p) => p[0]), ys = stroke.map((p) => p[1]);
+  const span = Math.max(Math.max(...xs) - Math.min(...xs), Math.max(...ys) - Math.min(...ys));
+  if (span < MIN_SPAN * Math.min(pad.width, pad.height)) {
+    showError("The stroke is too small to be a shape (a dot?): draw it larger, across the pad.");
+    return;
+  }
+  // a long slow stroke has more points than the server takes: keep evenly spaced ones
+  // (first and last included, times kept) rather than lose the drawing
+  stroke = thinned(stroke, MAX_POINTS);
   if (mode() === "teach") observe(); else recognize();
+}
+// at most `most` of `points`, evenly spaced by index, the first and the last kept
+function thinned(points, most) {
+  const n = points.length;
+  if (n <= most) return points;
+  return Array.from({length: most}, (_, i) => points[Math.round(i * (n - 1) / (most - 1))]);
 }
 function abandon(e) {
   if (!drawing || e.pointerId !== pointer) return;
