@@ -583,3 +583,25 @@ def test_a_dot_is_refused_and_a_long_slow_stroke_is_thinned_not_lost(tmp_path, b
         assert kept[-1] == [12344, 24688, 123.44]
         assert all(a[2] < b[2] for a, b in zip(kept, kept[1:]))
         assert page.evaluate("thinned([[0, 0, 0], [1, 1, 1]], 5).length") == 2
+
+
+def test_a_reload_while_a_drawing_is_handled_waits_for_its_guess(tmp_path, browser):
+    """A browser audit: a reload right after lifting the pen cancelled the page's request,
+    not the server's work; the reloaded page showed no guess and no word of it, and a
+    person drew again."""
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    expect = sync_api.expect
+    with serving(tmp_path / "m.npz") as (url, classroom):
+        page = browser.new_page(viewport={"width": 1000, "height": 900})
+        page.goto(url)
+        teach_first(page, lasa)
+        client = page.evaluate("CLIENT")
+        classroom.working[client] = 1             # as while its drawing is handled
+        page.reload()
+        expect(page.locator("#message")).to_contain_text("still working on your last "
+                                                         "drawing", timeout=WAIT)
+        expect(page.locator("#progress")).to_be_visible()
+        del classroom.working[client]
+        expect(page.locator("#message")).to_contain_text("has finished with your last",
+                                                         timeout=WAIT)
+        expect(page.locator("#progress")).to_be_hidden()

@@ -19,8 +19,10 @@ tab changed it since):
 ``GET /api/state?client=ID``
     The memory (concepts, entries with thumbnails), the client's pending
     guess with the drawing it answers (``points``), the rehearsal in
-    progress, whether the last save failed (``save_error``), whether a
-    step can be undone.
+    progress, whether a drawing or an answer of this client is being
+    handled now (``working``: a tab reloaded meanwhile waits for it),
+    whether the last save failed (``save_error``), whether a step can be
+    undone.
 ``POST /api/observe`` ``{"points": [[x, y, t], ...], "client": ID}``
     A demonstration: the robot's guess (``answer``), or, with an empty
     memory, the ``outcome`` (a new concept). The client's own guess still

@@ -78,6 +78,9 @@ class Classroom:
         self.gone: dict[int, str] = {}
         self.lock = asyncio.Lock()
         self.progress: dict[str, Any] | None = None
+        #: Drawings and answers being handled, per tab (client id): a tab reloaded while
+        #: its request is handled is told to wait for it (its page had shown nothing)
+        self.working: dict[str, int] = {}
         self.history = History(agent, self.memory_path)
         self._thumbs: tuple[Any, int, int, list] | None = None
         self._thumb_lock = threading.Lock()
@@ -217,7 +220,19 @@ class Classroom:
                 pending = {**self.answer_json(rec.turn.answer, tid), "points": rec.points}
                 break
         return {"memory": self.memory_json(), "pending": pending,
-                "progress": self.progress, "simulator": self.agent.simulator is not None}
+                "progress": self.progress, "working": self.working.get(client, 0) > 0,
+                "simulator": self.agent.simulator is not None}
+
+    @contextlib.contextmanager
+    def _working(self, client: str) -> Any:
+        """Count a request of tab ``client`` as being handled while it is (:attr:`working`)."""
+        self.working[client] = self.working.get(client, 0) + 1
+        try:
+            yield
+        finally:
+            self.working[client] -= 1
+            if not self.working[client]:
+                del self.working[client]
 
 
     def _outcome(self, outcome: Any, what: str) -> dict[str, Any]:
@@ -248,12 +263,18 @@ class Classroom:
     async def observe(self, body: Any) -> dict[str, Any]:
         positions, times = parse_points(body)
         client = client_id(body)
-        async with self.lock:
-            demo = self._demo(positions, times)
-            return await self._observe(demo, body["points"], client)
+        with self._working(client):
+            async with self.lock:
+                demo = self._demo(positions, times)
+                return await self._observe(demo, body["points"], client)
 
     async def feedback(self, body: Any) -> dict[str, Any]:
         value, turn_id, answer_id = parse_feedback(body)
+        with self._working(client_id(body)):
+            return await self._feedback(body, value, turn_id, answer_id)
+
+    async def _feedback(self, body: Any, value: int | str, turn_id: int,
+                        answer_id: str) -> dict[str, Any]:
         async with self.lock:
             rec = self.turns.get(turn_id)
             if rec is None or rec.turn.answer is None:

@@ -487,7 +487,24 @@ async function start() {
     }
     // a reload while the robot learns: say so, and show the memory once it has learned
     if (state.progress) await stillLearning();
+    // a reload while this tab's drawing or answer is still being handled (the reload
+    // cancelled the page's request, not the server's work): wait for it, then show it
+    else if (state.working && !state.pending) await stillWorking();
   } catch (err) { showError(err.message); }
+}
+
+async function stillWorking() {
+  say("The robot is still working on your last drawing or answer...");
+  await withProgress((async () => {
+    for (;;) {
+      await new Promise((r) => setTimeout(r, 300));
+      const s = await api(`/api/state?client=${encodeURIComponent(CLIENT)}`);
+      if (!s.working) return;
+    }
+  })());
+  say("");
+  await start();
+  if (!pending) say("The robot has finished with your last drawing or answer. Draw the next one.");
 }
 
 async function stillLearning() {
