@@ -514,6 +514,26 @@ def test_errors_are_in_a_persons_words(served, lasa):
     assert client.get("/api/state").json()["memory"]["saved"] is True
 
 
+def test_a_guess_answered_already_in_a_duplicated_tab_is_said_in_a_persons_words(served,
+                                                                                 lasa):
+    """A browser audit: a duplicated tab (one client id) answering a guess the other had
+    answered got "answer '6110a15f-1' is not waiting for a feedback ... Send feedback with
+    the id of the answer shown (Answer.id)": library words, for a person."""
+    client, classroom, _ = served
+    client.post("/api/observe", json={"points": stroke(lasa["GShape/0"]), "client": "tab"})
+    a = client.post("/api/observe", json={"points": stroke(lasa["Angle/0"]),
+                                          "client": "tab"}).json()["answer"]
+    judge(client, a, "new")                                      # a second concept
+    first = client.post("/api/observe", json={"points": stroke(lasa["Angle/1"]),
+                                              "client": "tab"}).json()["answer"]
+    assert judge(client, first, -1).json()["answer"]["id"] != first["id"]   # the next guess
+    r = judge(client, first, -1)                                 # the other tab, late
+    assert r.status_code == 409, r.text
+    said = r.json()["error"]
+    assert said.startswith("This guess was answered already (in another window or tab")
+    assert "Answer.id" not in said and "nothing changed" in said
+
+
 def test_something_new_founds_a_concept_in_one_click(served, lasa):
     client, _, _ = served
     client.post("/api/observe", json={"points": stroke(lasa["GShape/0"])})

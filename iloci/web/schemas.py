@@ -169,6 +169,10 @@ def plain_words(message: str) -> str:
         return "The stroke does not move: draw a shape, not a dot."
     if "unreachable" in low or "cannot reach" in low:
         return "The robot's arm cannot draw that: draw it smaller or nearer the middle."
+    if "is not waiting for a feedback" in low:   # StaleAnswerError: Answer.id is not for people
+        return ("This guess was answered already (in another window or tab showing this "
+                "drawing?); nothing changed. Reload the page to see what the robot waits "
+                "for now.")
     if "learned nothing yet" in low:
         return ("The robot has learned nothing yet: teach it a first drawing (Teach mode), "
                 "then it can recognize.")

@@ -298,7 +298,7 @@ async function judge(value) {
     else learned(data);
   } catch (err) {
     say(""); showError(err.message);
-    if (/no such guess/.test(err.message)) { pending = null; clearAnswer(); }
+    if (/no such guess|answered already/.test(err.message)) { pending = null; clearAnswer(); }
     else if (pending) $("judge").hidden = false;
   }
 }
