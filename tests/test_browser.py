@@ -549,18 +549,25 @@ def test_a_guess_like_nothing_taught_says_unsure_on_the_page(tmp_path, browser):
         assert "confidence" not in page.locator("#guess").inner_text()
 
 
+@contextlib.contextmanager
+def taught_page(tmp_path, browser):
+    """A server on a new memory, a page on it, and GShape/0 taught as its first concept."""
+    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
+    with serving(tmp_path / "m.npz") as (url, classroom):
+        page = browser.new_page(viewport={"width": 1000, "height": 900})
+        page.goto(url)
+        teach_first(page, lasa)
+        yield page, classroom
+
+
 def test_a_dot_is_refused_and_a_long_slow_stroke_is_thinned_not_lost(tmp_path, browser):
     """What a person met (a browser audit): a 5 px scribble was taken for a shape and
     guessed with confidence (and "yes" would have taught it); a stroke drawn slowly for
     100 s had more points than the server takes and was thrown away."""
     from iloci.web.schemas import MAX_POINTS
 
-    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
     expect = sync_api.expect
-    with serving(tmp_path / "m.npz") as (url, classroom):
-        page = browser.new_page(viewport={"width": 1000, "height": 900})
-        page.goto(url)
-        teach_first(page, lasa)
+    with taught_page(tmp_path, browser) as (page, classroom):
         seen = classroom.agent.memory.demonstrations_seen
         box = page.locator("#pad").bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
@@ -589,12 +596,8 @@ def test_a_reload_while_a_drawing_is_handled_waits_for_its_guess(tmp_path, brows
     """A browser audit: a reload right after lifting the pen cancelled the page's request,
     not the server's work; the reloaded page showed no guess and no word of it, and a
     person drew again."""
-    lasa = {d.key: d for d in load_lasa(["GShape", "Angle"])}
     expect = sync_api.expect
-    with serving(tmp_path / "m.npz") as (url, classroom):
-        page = browser.new_page(viewport={"width": 1000, "height": 900})
-        page.goto(url)
-        teach_first(page, lasa)
+    with taught_page(tmp_path, browser) as (page, classroom):
         client = page.evaluate("CLIENT")
         classroom.working[client] = 1             # as while its drawing is handled
         page.reload()
