@@ -97,7 +97,6 @@ def make_parser(plugin_manager: Any = None) -> argparse.ArgumentParser:
     return parser
 
 
-
 class _StoreOnce(argparse._StoreAction):
     """A single-valued option given twice is an error, not "the last one wins" (which
     silently ran with another config, memory or output than the one meant)."""
@@ -228,13 +227,8 @@ def _raised_in_plugin(exc: BaseException) -> str:
     traceback in a module of a third-party plugin: a teacher's feedback, a clusterer), to
     report the failure to or block. A plugin audit: a teacher that raised inside
     feedback() gave "failed: RuntimeError: ..." naming no plugin."""
-    from importlib.metadata import entry_points
-
-    owners: dict[str, tuple[str, str | None]] = {}
-    for ep in entry_points(group="iloci"):
-        dist = getattr(ep.dist, "name", None)
-        if dist not in FIRST_PARTY_DISTRIBUTIONS:
-            owners.setdefault(ep.module.partition(".")[0], (ep.name, dist))
+    owners = {top: (name, dist) for top, (name, dist) in _plugin_packages().items()
+              if dist not in FIRST_PARTY_DISTRIBUTIONS}
     if not owners:
         return ""
     frames = []
@@ -291,6 +285,17 @@ def _in_remote_traceback(exc: BaseException, owners: dict[str, Any]
     return None
 
 
+def _plugin_packages() -> dict[str, tuple[str, str | None]]:
+    """Top-level package of each installed ``iloci`` entry point -> (plugin name, its
+    distribution); the first entry point of a package names it."""
+    from importlib.metadata import entry_points
+
+    out: dict[str, tuple[str, str | None]] = {}
+    for ep in entry_points(group="iloci"):
+        out.setdefault(ep.module.partition(".")[0], (ep.name, getattr(ep.dist, "name", None)))
+    return out
+
+
 def _whose(args: argparse.Namespace) -> str:
     """``""`` for iloci's own commands; for a plugin's, which plugin's it is (to report
     the failure to, or block)."""
@@ -298,17 +303,12 @@ def _whose(args: argparse.Namespace) -> str:
     top = module.partition(".")[0]
     if not top or top == "iloci":
         return ""
-    from importlib.metadata import entry_points
-
-    ours = [ep for ep in entry_points(group="iloci")
-            if ep.module == module or module.startswith(ep.module + ".")
-            or ep.module.partition(".")[0] == top]
-    if ours:
-        ep = ours[0]
-        dist = getattr(ep.dist, "name", None)
-        who = f"plugin {ep.name!r}" + (f" ({dist}, module {module})" if dist else
-                                       f" (module {module})")
-        block = f"ILOCI_BLOCK_PLUGINS={ep.name}"
+    owner = _plugin_packages().get(top)
+    if owner is not None:
+        name, dist = owner
+        who = f"plugin {name!r}" + (f" ({dist}, module {module})" if dist else
+                                    f" (module {module})")
+        block = f"ILOCI_BLOCK_PLUGINS={name}"
     else:
         who, block = f"module {module}", "ILOCI_BLOCK_PLUGINS"
     return (f"\nin `iloci {args.command}`, a command of {who}, not of iloci: report it to its "
