@@ -153,8 +153,9 @@ def checked_labels(clusterer: Any, returned: Any, x: np.ndarray, cut: float) -> 
     if raw.dtype == bool or not np.issubdtype(raw.dtype, np.number) or np.iscomplexobj(raw):
         raise fault(f"returned labels of dtype {raw.dtype}, not integers")
     as_float = raw.astype(np.float64)
-    if not np.all(np.isfinite(as_float)) or np.any(as_float != np.round(as_float)):
-        bad = int(np.flatnonzero(~np.isfinite(as_float) | (as_float != np.round(as_float)))[0])
+    whole = np.isfinite(as_float) & (as_float == np.round(as_float))
+    if not whole.all():
+        bad = int(np.flatnonzero(~whole)[0])
         raise fault(f"returned label {raw[bad].item()!r} (point {bad}); labels are whole numbers")
     if np.any(as_float < 0):
         raise fault(f"returned a negative label ({int(as_float.min())}); labels count from 0")
